@@ -1,0 +1,60 @@
+"""The on-disk layout of a city: tiles, vector ground truth and a small metadata file.
+
+::
+
+    CITY/
+      city.json            metadata (source, seed/split or tile id, CRS, GSD, tile list, notes)
+      tiles/*.tif          4-band uint8 GeoTIFF tiles on one pixel grid
+      ground_truth.gpkg    road boundaries as LineStrings, layer ``road_boundaries``
+
+Both the synthetic city and imported Topo-boundary tiles are written in this layout, so every
+later command takes a city directory (or plain rasters plus a ground-truth file).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from csboundary.data.atomic import atomic_path
+from csboundary.errors import InputError
+
+META_FILE = "city.json"
+TILES_DIR = "tiles"
+GROUND_TRUTH_FILE = "ground_truth.gpkg"
+
+
+def tile_name(row: int, col: int) -> str:
+    """File name of the tile at grid position (row, col) of a city."""
+    return f"tile_r{row:02d}_c{col:02d}.tif"
+
+
+def write_meta(city_dir: str | Path, meta: dict[str, Any]) -> Path:
+    """Write ``city.json`` atomically (written last, so its presence marks a finished city)."""
+    path = Path(city_dir) / META_FILE
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    return path
+
+
+def read_meta(city_dir: str | Path) -> dict[str, Any]:
+    path = Path(city_dir) / META_FILE
+    if not path.exists():
+        raise InputError(city_dir, f"not a city directory (no {META_FILE})")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"invalid JSON ({exc})") from exc
+
+
+def is_city_dir(path: str | Path) -> bool:
+    return (Path(path) / META_FILE).is_file()
+
+
+def ground_truth_path(city_dir: str | Path) -> Path:
+    return Path(city_dir) / GROUND_TRUTH_FILE
+
+
+def tiles_dir(city_dir: str | Path) -> Path:
+    return Path(city_dir) / TILES_DIR

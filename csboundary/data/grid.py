@@ -1,0 +1,155 @@
+"""The city-wide patch grid (paper Section IV-A).
+
+One global grid of ``core x core`` patches (default 1000 px) covers the whole mosaic, not each
+tile, so patches straddle tile borders freely. Each patch is expanded by ``margin`` px on every
+side (default 50 -> 1100x1100) so that neighbours overlap by ``2 * margin`` px; those overlaps are
+where keypoint maps are averaged and patch graphs are stitched (paper IV-E).
+
+Cores at the right and bottom edge are clipped to the mosaic so the cores cover every mosaic
+pixel exactly once; expanded windows always have the full size and are read padded.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterator
+
+from affine import Affine
+
+from csboundary.data.windows import PixelWindow, pixel_to_world, window_transform, world_to_pixel
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """Core patch size and the margin added on every side (paper: 1000 and 50)."""
+
+    core: int = 1000
+    margin: int = 50
+
+    def __post_init__(self) -> None:
+        if self.core <= 0 or self.margin < 0:
+            raise ValueError(f"core must be > 0 and margin >= 0, got core={self.core}, margin={self.margin}")
+
+    @property
+    def size(self) -> int:
+        """Side of an expanded patch."""
+        return self.core + 2 * self.margin
+
+
+@dataclass(frozen=True)
+class Patch:
+    """One grid cell: its core (clipped to the mosaic) and its expanded window, in mosaic pixels."""
+
+    row: int
+    col: int
+    core: PixelWindow
+    expanded: PixelWindow
+    transform: Affine  # world transform of the expanded window's pixel (0, 0)
+
+    @property
+    def index(self) -> tuple[int, int]:
+        return self.row, self.col
+
+    @property
+    def core_local(self) -> PixelWindow:
+        """The core in the expanded patch's own pixel coordinates."""
+        return self.core.relative_to(self.expanded)
+
+    def to_local(self, cols, rows):
+        """Mosaic pixel coordinates -> this patch's pixel coordinates."""
+        return cols - self.expanded.col_off, rows - self.expanded.row_off
+
+    def to_global(self, cols, rows):
+        """This patch's pixel coordinates -> mosaic pixel coordinates."""
+        return cols + self.expanded.col_off, rows + self.expanded.row_off
+
+    def pixel_to_world(self, cols, rows):
+        """Patch-local continuous pixel coordinates -> world coordinates."""
+        return pixel_to_world(self.transform, cols, rows)
+
+    def world_to_pixel(self, xs, ys):
+        """World coordinates -> patch-local continuous pixel coordinates."""
+        return world_to_pixel(self.transform, xs, ys)
+
+
+class PatchGrid:
+    """The global grid of patches over a ``width x height`` mosaic with affine ``transform``."""
+
+    def __init__(self, width: int, height: int, transform: Affine = Affine.identity(), config: GridConfig = GridConfig()):
+        if width <= 0 or height <= 0:
+            raise ValueError(f"mosaic must have pixels, got {width}x{height}")
+        self.width = width
+        self.height = height
+        self.transform = transform
+        self.config = config
+        self.n_rows = math.ceil(height / config.core)
+        self.n_cols = math.ceil(width / config.core)
+
+    @classmethod
+    def for_mosaic(cls, mosaic, config: GridConfig = GridConfig()) -> "PatchGrid":
+        return cls(mosaic.width, mosaic.height, mosaic.transform, config)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.n_rows, self.n_cols
+
+    def __len__(self) -> int:
+        return self.n_rows * self.n_cols
+
+    def __iter__(self) -> Iterator[Patch]:
+        """Patches in row-major order (the order a streaming pass visits them)."""
+        for row in range(self.n_rows):
+            for col in range(self.n_cols):
+                yield self.patch(row, col)
+
+    def __contains__(self, index: tuple[int, int]) -> bool:
+        row, col = index
+        return 0 <= row < self.n_rows and 0 <= col < self.n_cols
+
+    def patch(self, row: int, col: int) -> Patch:
+        if (row, col) not in self:
+            raise IndexError(f"patch ({row}, {col}) outside grid of {self.n_rows}x{self.n_cols}")
+        c, m = self.config.core, self.config.margin
+        c0, r0 = col * c, row * c
+        core = PixelWindow(c0, r0, min(c, self.width - c0), min(c, self.height - r0))
+        expanded = PixelWindow(c0 - m, r0 - m, c + 2 * m, c + 2 * m)
+        return Patch(row, col, core, expanded, window_transform(self.transform, expanded))
+
+    def neighbours(self, patch: Patch) -> list[Patch]:
+        """The up to 8 patches whose expanded windows overlap ``patch``'s."""
+        out = []
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                index = (patch.row + dr, patch.col + dc)
+                if (dr or dc) and index in self:
+                    out.append(self.patch(*index))
+        return out
+
+    def overlap(self, a: Patch, b: Patch) -> PixelWindow | None:
+        """Mosaic pixels shared by the expanded windows of ``a`` and ``b`` (None if disjoint)."""
+        return a.expanded.intersection(b.expanded)
+
+    def overlap_regions(self, patch: Patch) -> dict[tuple[int, int], PixelWindow]:
+        """For each neighbour index, the part of ``patch``'s expanded window it also covers."""
+        regions = {}
+        for other in self.neighbours(patch):
+            shared = self.overlap(patch, other)
+            if shared is not None:
+                regions[other.index] = shared
+        return regions
+
+    def patch_of_pixel(self, col: float, row: float) -> Patch:
+        """The patch whose core holds mosaic pixel (col, row)."""
+        c = self.config.core
+        return self.patch(int(row // c), int(col // c))
+
+    def patches_covering(self, col: float, row: float) -> list[Patch]:
+        """Every patch whose expanded window holds mosaic pixel (col, row)."""
+        home = self.patch_of_pixel(col, row)
+        candidates = [home, *self.neighbours(home)]
+        return [
+            p
+            for p in candidates
+            if p.expanded.col_off <= col < p.expanded.col_end and p.expanded.row_off <= row < p.expanded.row_end
+        ]

@@ -1,0 +1,59 @@
+"""Vector ground truth: road boundaries as LineStrings in a projected CRS, one GeoPackage per city.
+
+This geometry is the single source for every training label and for evaluation.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import geopandas as gpd
+import pyogrio
+import shapely
+from shapely.geometry import LineString, MultiLineString
+
+from csboundary.data.atomic import atomic_path
+from csboundary.errors import InputError
+
+LAYER = "road_boundaries"
+
+
+def as_linestrings(geometry) -> list[LineString]:
+    """Flatten any (multi)line or collection geometry into its non-empty LineStrings."""
+    if geometry is None or geometry.is_empty:
+        return []
+    if isinstance(geometry, LineString):
+        return [geometry] if geometry.length > 0 else []
+    if isinstance(geometry, MultiLineString) or hasattr(geometry, "geoms"):
+        out: list[LineString] = []
+        for part in geometry.geoms:
+            out.extend(as_linestrings(part))
+        return out
+    if geometry.geom_type in ("Polygon", "MultiPolygon", "LinearRing"):
+        return as_linestrings(shapely.line_merge(geometry.boundary))
+    return []
+
+
+def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame) -> Path:
+    """Write a GeoDataFrame of boundary LineStrings to a GeoPackage layer, atomically."""
+    with atomic_path(path) as tmp:
+        frame.to_file(tmp, layer=LAYER, driver="GPKG", engine="pyogrio")
+    return Path(path)
+
+
+def read_ground_truth(path: str | Path) -> gpd.GeoDataFrame:
+    """Read boundary LineStrings (GeoPackage, GeoJSON or anything OGR reads), exploded to parts."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file not found")
+    try:
+        layers = [name for name, _ in pyogrio.list_layers(path)]
+        layer = LAYER if LAYER in layers else None
+        frame = gpd.read_file(path, layer=layer, engine="pyogrio")
+    except Exception as exc:  # pyogrio raises several unrelated types for unreadable files
+        raise InputError(path, f"not a readable vector file ({type(exc).__name__}: {exc})".splitlines()[0]) from exc
+    frame = frame.explode(index_parts=False, ignore_index=True)
+    bad = ~frame.geometry.geom_type.isin(["LineString", "LinearRing"])
+    if bad.any():
+        raise InputError(path, f"{int(bad.sum())} geometries are not LineStrings (road boundaries are lines)")
+    return frame

@@ -1,0 +1,232 @@
+"""Open one GeoTIFF, several tiles, or a directory of tiles as one mosaic and read any window.
+
+Tiles must share one CRS, one pixel size and one pixel grid (tile origins a whole number of
+pixels apart); windows may cross tile borders and the mosaic's edge, and come back padded with
+zeros and a validity mask. Every problem with an input file is an :class:`InputError` naming it.
+
+Band rule: bands 1-4 are R, G, B, NIR. A 3-band RGB file is accepted with a warning and its NIR
+is filled with the green band (:data:`NIR_FILL_BAND`): green is the visible band whose
+reflectance tracks vegetation most closely, so the NIR-based cue "vegetation is bright" survives
+in weakened form. Extra bands beyond 4 are ignored with a warning.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+import rasterio
+from affine import Affine
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+from rasterio.windows import Window
+
+from csboundary.data.windows import PixelWindow, pixel_to_world, window_from_bounds, world_to_pixel
+from csboundary.errors import InputError, InputWarning
+
+BANDS = 4
+NIR_FILL_BAND = 1  # 0-based index of the band copied into NIR for 3-band input (green)
+RASTER_SUFFIXES = (".tif", ".tiff", ".vrt", ".jp2", ".img")
+
+
+@dataclass(frozen=True)
+class Tile:
+    """One source file placed in the mosaic."""
+
+    path: Path
+    window: PixelWindow  # where the file lies, in mosaic pixels
+    band_count: int
+    dtype: str
+
+
+@dataclass
+class WindowRead:
+    """Pixels of a window: ``data`` (4, h, w) with invalid pixels set to 0, ``valid`` (h, w) bool."""
+
+    window: PixelWindow
+    data: np.ndarray
+    valid: np.ndarray
+
+
+def find_rasters(source: str | Path | Sequence[str | Path]) -> list[Path]:
+    """Expand a file, a list of files, or a directory (searched recursively) into raster paths."""
+    if isinstance(source, (str, Path)):
+        source = [source]
+    paths: list[Path] = []
+    for item in source:
+        item = Path(item)
+        if item.is_dir():
+            found = sorted(p for p in item.rglob("*") if p.suffix.lower() in RASTER_SUFFIXES and not p.name.startswith("."))
+            if not found:
+                raise InputError(item, "directory holds no raster files (*.tif, *.tiff, *.vrt)")
+            paths.extend(found)
+        elif item.exists():
+            paths.append(item)
+        else:
+            raise InputError(item, "file not found")
+    if not paths:
+        raise InputError("<input>", "no input rasters given")
+    return paths
+
+
+def _inspect(path: Path) -> tuple[object, Affine, int, str, int, int]:
+    """Open ``path`` just long enough to read its georeference, or raise a one-line InputError."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as ds:
+                return ds.crs, ds.transform, ds.count, ds.dtypes[0], ds.width, ds.height
+    except RasterioIOError as exc:
+        text = str(exc)
+        if "not recognized" in text or "not a supported" in text.lower():
+            raise InputError(path, "not a raster (GDAL does not recognise the format)") from exc
+        raise InputError(path, f"unreadable raster ({text.splitlines()[0]})") from exc
+
+
+class Mosaic:
+    """Several aligned raster tiles behaving as one north-up image with one affine transform."""
+
+    def __init__(self, tiles: list[Tile], crs, transform: Affine, width: int, height: int):
+        self.tiles = tiles
+        self.crs = crs
+        self.transform = transform
+        self.width = width
+        self.height = height
+        self._handles: dict[Path, rasterio.DatasetReader] = {}
+
+    # -- construction ---------------------------------------------------------------------------
+    @classmethod
+    def open(cls, source: str | Path | Sequence[str | Path]) -> "Mosaic":
+        """Open and validate every raster in ``source`` (file, list of files, or directory)."""
+        paths = find_rasters(source)
+        infos = [(p, *_inspect(p)) for p in paths]
+        first = infos[0]
+        for path, crs, transform, count, dtype, width, height in infos:
+            if width == 0 or height == 0:
+                raise InputError(path, "empty image (0 pixels)")
+            if count < 3:
+                raise InputError(path, f"has {count} band(s); need 4 (R, G, B, NIR) or at least 3 (R, G, B)")
+            if count == 3:
+                warnings.warn(f"{path}: 3-band RGB input; NIR is filled with the green band", InputWarning, stacklevel=2)
+            elif count > BANDS:
+                warnings.warn(f"{path}: {count} bands; using bands 1-4 as R, G, B, NIR", InputWarning, stacklevel=2)
+            if transform.b != 0 or transform.d != 0 or transform.a <= 0 or transform.e >= 0:
+                if not (crs is None and transform == Affine.identity()):
+                    raise InputError(path, "rotated or not north-up georeference is not supported")
+            if (crs is None) != (first[1] is None) or (crs is not None and crs != first[1]):
+                raise InputError(path, f"CRS {crs} differs from {first[1]} of {first[0]}")
+            if not (math.isclose(transform.a, first[2].a, rel_tol=1e-9) and math.isclose(abs(transform.e), abs(first[2].e), rel_tol=1e-9)):
+                raise InputError(path, f"pixel size {transform.a:g}x{abs(transform.e):g} differs from {first[2].a:g}x{abs(first[2].e):g} of {first[0]}")
+            if dtype != first[4]:
+                raise InputError(path, f"data type {dtype} differs from {first[4]} of {first[0]}")
+        crs = first[1]
+        if crs is None:
+            if len(infos) > 1 and all(i[2] == Affine.identity() for i in infos):
+                raise InputError(paths[1], "no CRS and no georeference: tiles cannot be placed in one mosaic")
+            warnings.warn(f"{first[0]}: no CRS; working in pixel coordinates", InputWarning, stacklevel=2)
+
+        res_x, res_y = first[2].a, first[2].e
+        west = min(i[2].c for i in infos)
+        north = max(i[2].f for i in infos) if res_y < 0 else min(i[2].f for i in infos)
+        tiles = []
+        for path, _crs, transform, count, dtype, width, height in infos:
+            col = (transform.c - west) / res_x
+            row = (transform.f - north) / res_y
+            if abs(col - round(col)) > 1e-6 or abs(row - round(row)) > 1e-6:
+                raise InputError(path, f"not aligned to the pixel grid of {first[0]} (offset {col:.3f}, {row:.3f} px)")
+            tiles.append(Tile(path, PixelWindow(int(round(col)), int(round(row)), width, height), count, dtype))
+        width = max(t.window.col_end for t in tiles)
+        height = max(t.window.row_end for t in tiles)
+        transform = Affine(res_x, 0.0, west, 0.0, res_y, north)
+        return cls(tiles, crs, transform, width, height)
+
+    # -- geometry -------------------------------------------------------------------------------
+    @property
+    def window(self) -> PixelWindow:
+        """The whole mosaic as a window."""
+        return PixelWindow(0, 0, self.width, self.height)
+
+    @property
+    def gsd(self) -> float:
+        """Ground sampling distance: world units per pixel (x)."""
+        return float(self.transform.a)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        xs, ys = pixel_to_world(self.transform, [0, self.width], [0, self.height])
+        return float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max())
+
+    def pixel_to_world(self, cols, rows):
+        return pixel_to_world(self.transform, cols, rows)
+
+    def world_to_pixel(self, xs, ys):
+        return world_to_pixel(self.transform, xs, ys)
+
+    def window_from_bounds(self, minx: float, miny: float, maxx: float, maxy: float) -> PixelWindow:
+        return window_from_bounds(self.transform, minx, miny, maxx, maxy)
+
+    # -- reading --------------------------------------------------------------------------------
+    def read(self, window: PixelWindow) -> WindowRead:
+        """Read ``window`` (mosaic pixels; may cross tiles and the mosaic edge) as 4 bands + mask."""
+        dtype = np.dtype(self.tiles[0].dtype)
+        data = np.zeros((BANDS, window.height, window.width), dtype=dtype)
+        valid = np.zeros((window.height, window.width), dtype=bool)
+        for tile in self._tiles_in(window):
+            part = tile.window.intersection(window)
+            src = part.relative_to(tile.window)
+            dst_rows, dst_cols = part.relative_to(window).slices()
+            pixels, mask = self._read_tile(tile, src)
+            data[:, dst_rows, dst_cols] = np.where(mask, pixels, 0)
+            valid[dst_rows, dst_cols] = mask
+        return WindowRead(window, data, valid)
+
+    def read_world(self, minx: float, miny: float, maxx: float, maxy: float) -> WindowRead:
+        """Read the pixels covering a world rectangle (in the mosaic's CRS units)."""
+        return self.read(self.window_from_bounds(minx, miny, maxx, maxy))
+
+    def _tiles_in(self, window: PixelWindow) -> Iterable[Tile]:
+        return (t for t in self.tiles if t.window.intersection(window) is not None)
+
+    def _read_tile(self, tile: Tile, src: PixelWindow) -> tuple[np.ndarray, np.ndarray]:
+        ds = self._handle(tile.path)
+        rio_window = Window(src.col_off, src.row_off, src.width, src.height)
+        indexes = list(range(1, min(tile.band_count, BANDS) + 1))
+        try:
+            pixels = ds.read(indexes, window=rio_window)
+            mask = ds.dataset_mask(window=rio_window) > 0
+        except RasterioIOError as exc:
+            raise InputError(tile.path, f"unreadable pixels ({str(exc).splitlines()[0]})") from exc
+        if pixels.shape[0] == 3:
+            pixels = np.concatenate([pixels, pixels[NIR_FILL_BAND : NIR_FILL_BAND + 1]], axis=0)
+        if np.issubdtype(pixels.dtype, np.floating):
+            mask &= np.isfinite(pixels).all(axis=0)
+        return pixels, mask
+
+    def _handle(self, path: Path):
+        ds = self._handles.get(path)
+        if ds is None:
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", NotGeoreferencedWarning)
+                    ds = rasterio.open(path)
+            except RasterioIOError as exc:
+                raise InputError(path, f"unreadable raster ({str(exc).splitlines()[0]})") from exc
+            self._handles[path] = ds
+        return ds
+
+    def close(self) -> None:
+        for ds in self._handles.values():
+            ds.close()
+        self._handles.clear()
+
+    def __enter__(self) -> "Mosaic":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Mosaic({len(self.tiles)} tiles, {self.width}x{self.height} px, crs={self.crs}, gsd={self.gsd:g})"
