@@ -1,0 +1,1 @@
+"""The ``csboundary`` command line."""

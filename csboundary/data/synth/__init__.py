@@ -1,0 +1,7 @@
+"""A synthetic aerial city with exact vector road-boundary ground truth.
+
+The real benchmark imagery cannot be downloaded here, so this city is what the demo, the tests
+and training use. ``streets`` builds the street network and the roadway polygon (hence the
+ground truth), ``scene`` places what stands on and beside the roads, ``render`` paints tiles,
+``city`` writes a city directory.
+"""

@@ -1,0 +1,127 @@
+"""Synthesize a whole city: street network and scene once, then every tile, then ground truth.
+
+A city is a function of (config, split, seed, tiles): the same arguments give the same bytes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+from affine import Affine
+from tqdm import tqdm
+
+from csboundary import __version__
+from csboundary.data import city as layout
+from csboundary.data.geotiff import write_geotiff
+from csboundary.data.ground_truth import write_ground_truth
+from csboundary.data.synth.config import SynthConfig, city_rng
+from csboundary.data.synth.render import TileFrame, render_tile
+from csboundary.data.synth.scene import Scene, build_scene
+from csboundary.data.synth.streets import build_network
+
+import shapely
+
+
+@dataclass
+class SyntheticCity:
+    """The geometry of a city before rendering: its scene (network inside) and tile layout."""
+
+    config: SynthConfig
+    split: str
+    seed: int
+    tiles: tuple[int, int]
+    scene: Scene
+
+    @property
+    def size_m(self) -> tuple[float, float]:
+        rows, cols = self.tiles
+        side = self.config.tile_size * self.config.gsd
+        return cols * side, rows * side
+
+    def frame(self, row: int, col: int) -> TileFrame:
+        """Local-metre frame of tile (row, col); row 0 is the northernmost."""
+        side = self.config.tile_size * self.config.gsd
+        return TileFrame(x0=col * side, y1=self.size_m[1] - row * side, size=self.config.tile_size, gsd=self.config.gsd)
+
+    def transform(self, row: int, col: int) -> Affine:
+        """World transform of tile (row, col) in the city's CRS."""
+        f = self.frame(row, col)
+        return Affine(f.gsd, 0.0, self.config.origin_x + f.x0, 0.0, -f.gsd, self.config.origin_y + f.y1)
+
+    def ground_truth(self) -> gpd.GeoDataFrame:
+        """Road boundaries in world coordinates, one LineString per row, with kind and closedness."""
+        shift = (self.config.origin_x, self.config.origin_y)
+        lines = [shapely.transform(line, lambda xy: xy + np.asarray(shift)) for line, _ in self.scene.network.boundaries]
+        kinds = [kind for _, kind in self.scene.network.boundaries]
+        return gpd.GeoDataFrame(
+            {"kind": kinds, "closed": [bool(line.is_closed) for line in lines]}, geometry=lines, crs=self.config.crs
+        )
+
+    def render(self, row: int, col: int) -> np.ndarray:
+        rng = city_rng(self.split, self.seed, 1, row, col)
+        return render_tile(self.scene, self.frame(row, col), rng, self.config.noise_sigma)
+
+
+def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]) -> SyntheticCity:
+    """Build the street network and scene of a city (no pixels yet)."""
+    rows, cols = tiles
+    if rows < 1 or cols < 1:
+        raise ValueError(f"tiles must be at least 1x1, got {rows}x{cols}")
+    rng = city_rng(split, seed, 0)
+    side = config.tile_size * config.gsd
+    network = build_network(config, rng, cols * side, rows * side)
+    scene = build_scene(config, rng, network)
+    return SyntheticCity(config, split, seed, tiles, scene)
+
+
+def synthesize_city(
+    out_dir: str | Path, seed: int, split: str, tiles: tuple[int, int] = (1, 1), config: SynthConfig = SynthConfig(), progress: bool = True
+) -> dict:
+    """Write a city directory (tiles, ground truth, city.json) and return its metadata.
+
+    ``city.json`` is written last: a directory without it is an interrupted run, not a city.
+    """
+    out_dir = Path(out_dir)
+    start = time.perf_counter()
+    city = plan_city(config, split, seed, tiles)
+    planned = time.perf_counter() - start
+    rows, cols = tiles
+    records, render_seconds = [], []
+    for row, col in tqdm([(r, c) for r in range(rows) for c in range(cols)], desc="render tiles", unit="tile", disable=not progress):
+        t0 = time.perf_counter()
+        image = city.render(row, col)
+        render_seconds.append(time.perf_counter() - t0)
+        name = layout.tile_name(row, col)
+        write_geotiff(layout.tiles_dir(out_dir) / name, image, city.transform(row, col), config.crs,
+                      tags={"generator": f"csboundary {__version__} synth", "split": split, "seed": str(seed), "tile_row": str(row), "tile_col": str(col)})
+        records.append({"path": f"{layout.TILES_DIR}/{name}", "row": row, "col": col})
+    gt = city.ground_truth()
+    write_ground_truth(layout.ground_truth_path(out_dir), gt)
+    meta = {
+        "source": "synthetic",
+        "generator": f"csboundary {__version__}",
+        "split": split,
+        "seed": seed,
+        "tiles": records,
+        "tile_grid": [rows, cols],
+        "crs": config.crs,
+        "gsd": config.gsd,
+        "config": config.to_dict(),
+        "counts": {
+            "boundaries": len(gt),
+            "boundary_km": round(float(gt.length.sum()) / 1000, 3),
+            "blocks": len(city.scene.network.blocks),
+            "islands": len(city.scene.network.islands),
+            "medians": len(city.scene.network.medians),
+            "buildings": len(city.scene.buildings),
+            "trees": len(city.scene.trees),
+            "cars": len(city.scene.cars),
+        },
+        "seconds": {"plan": round(planned, 2), "render_per_tile": [round(s, 2) for s in render_seconds]},
+    }
+    layout.write_meta(out_dir, meta)
+    return meta

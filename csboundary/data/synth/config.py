@@ -1,0 +1,79 @@
+"""Parameters of the synthetic city, with defaults chosen to resemble the NYC benchmark.
+
+Lengths are metres unless named ``*_px``. The reference patch (shared/reference) shows streets
+of ~100 px (15 m at 0.152 m/px), curb returns of ~30-40 px radius, parked cars and trees on the
+curb, crosswalks and lane markings; the defaults below reproduce those proportions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+SPLITS = ("train", "valid", "test")
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Everything that shapes one synthetic city. All fields are plain numbers, so a config is
+    recorded in ``city.json`` and a city is reproduced from (config, split, seed)."""
+
+    # raster
+    tile_size: int = 5000  # px per tile side
+    gsd: float = 0.152  # metres per pixel (NYC: 0.5 ft)
+    crs: str = "EPSG:32618"  # WGS 84 / UTM 18N (New York), metres
+    origin_x: float = 583000.0  # world x of the city's west edge
+    origin_y: float = 4507000.0  # world y of the city's south edge
+    # street network
+    avenue_spacing: tuple[float, float] = (130.0, 240.0)
+    street_spacing: tuple[float, float] = (60.0, 110.0)
+    avenue_width: tuple[float, float] = (13.0, 20.0)  # roadway width, curb to curb
+    street_width: tuple[float, float] = (8.5, 13.0)
+    cross_street_skew_deg: float = 8.0  # cross streets deviate from perpendicular by up to this
+    boulevard_share: float = 0.3  # avenues with a median
+    median_width: tuple[float, float] = (2.0, 5.0)
+    boulevard_extra_width: tuple[float, float] = (6.0, 10.0)
+    curved_street_share: float = 0.25  # cross streets replaced by a gently curving one
+    curve_amplitude: tuple[float, float] = (8.0, 25.0)
+    diagonals_per_km2: float = 1.0
+    dropped_segment_share: float = 0.08  # cross-street segments removed (merged blocks)
+    dead_end_share: float = 0.12  # cross-street segments cut to a dead end
+    cul_de_sac_share: float = 0.5  # dead ends that end in a round bulb
+    island_share: float = 0.15  # intersections that get a traffic island
+    curb_radius: tuple[float, float] = (3.0, 12.0)  # curb-return radius per block
+    sharp_block_share: float = 0.15  # blocks whose corners stay sharp
+    margin: float = 60.0  # streets are built this far beyond the city so edges look like the inside
+    # what stands on and beside the road
+    sidewalk_width: tuple[float, float] = (2.5, 5.0)
+    park_share: float = 0.1
+    lot_share: float = 0.15  # commercial blocks with asphalt parking lots
+    street_tree_spacing: tuple[float, float] = (7.0, 14.0)
+    street_tree_radius: tuple[float, float] = (2.0, 5.0)
+    parked_car_spacing: float = 6.2
+    parked_car_occupancy: tuple[float, float] = (0.3, 0.85)
+    moving_cars_per_km: float = 25.0
+    driveway_spacing: tuple[float, float] = (15.0, 45.0)
+    crosswalk_share: float = 0.6
+    # appearance
+    noise_sigma: float = 5.0  # per-pixel sensor noise, digital numbers
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "SynthConfig":
+        known = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items() if k in cls.__dataclass_fields__}
+        return cls(**known)
+
+
+def city_rng(split: str, seed: int, *stream: int) -> np.random.Generator:
+    """Random generator for (split, seed) and an optional sub-stream (e.g. a tile's row, col).
+
+    The split is part of the entropy, so the three splits never share a city for any seed.
+    """
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if seed < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    return np.random.default_rng(np.random.SeedSequence([SPLITS.index(split), seed, *stream]))

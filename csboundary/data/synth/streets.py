@@ -1,0 +1,270 @@
+"""The street network of a synthetic city, its roadway polygon and hence the ground truth.
+
+Recipe (local metres, origin at the city's south-west corner, y to the north):
+
+1. A grid of avenues at a random bearing and cross streets roughly perpendicular to them, with
+   varied spacings and widths; some cross streets curve, some segments are dropped (large
+   blocks) or cut short (dead ends, some with a round cul-de-sac); a few diagonal streets.
+2. The raw roadway is the union of every centreline buffered by its half-width.
+3. Blocks are the domain minus the raw roadway. Each block is opened (negative then positive
+   buffer) by its own curb-return radius (3-12 m), which rounds its convex corners; a share of
+   blocks keep sharp corners. The roadway is recomputed from the rounded blocks.
+4. Traffic islands at some intersections and medians along boulevards are cut out of the
+   roadway, so they are closed boundary loops.
+5. The ground truth is the rings of the final roadway, clipped to the city's extent.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString, Point, Polygon, box
+from shapely.ops import substring
+
+from csboundary.data.ground_truth import as_linestrings
+from csboundary.data.synth.config import SynthConfig
+
+QUAD_SEGS = 16  # arc resolution: a 12 m curb return deviates < 0.1 px from a true circle
+
+
+@dataclass
+class Street:
+    """A centreline with its curb-to-curb width; ``median`` > 0 for boulevards."""
+
+    centreline: LineString
+    width: float
+    kind: str  # avenue | boulevard | street | curved | diagonal | dead_end
+    median: float = 0.0
+    bulb_radius: float = 0.0  # cul-de-sac bulb at the centreline's end
+
+    def roadway(self) -> Polygon:
+        shape = self.centreline.buffer(self.width / 2, cap_style="flat", join_style="round", quad_segs=QUAD_SEGS)
+        if self.bulb_radius > 0:
+            end = Point(self.centreline.coords[-1])
+            shape = shape.union(end.buffer(self.bulb_radius, quad_segs=QUAD_SEGS))
+        return shape
+
+
+@dataclass
+class Block:
+    """A block of land between streets, after rounding its corners with ``radius`` (0 = sharp)."""
+
+    polygon: Polygon
+    radius: float
+
+
+@dataclass
+class StreetNetwork:
+    width: float  # city extent, metres
+    height: float
+    streets: list[Street]
+    blocks: list[Block]
+    islands: list[Polygon]
+    medians: list[Polygon]
+    roadway: object  # (Multi)Polygon, over the whole domain (city + margin)
+    boundaries: list[tuple[LineString, str]] = field(default_factory=list)  # (line, kind), city extent
+
+
+def _unit(angle: float) -> np.ndarray:
+    return np.array([math.cos(angle), math.sin(angle)])
+
+
+def _spaced_offsets(rng: np.random.Generator, half: float, spacing: tuple[float, float]) -> list[float]:
+    """Offsets from -half to +half with gaps drawn from ``spacing``, starting at a random phase."""
+    out, s = [], -half + rng.uniform(0, spacing[1])
+    while s < half:
+        out.append(s)
+        s += rng.uniform(*spacing)
+    return out
+
+
+def _line(centre: np.ndarray, along: np.ndarray, across: np.ndarray, offset: float, half: float, bend=None) -> LineString:
+    """A line through ``centre + across*offset`` in direction ``along``; ``bend(t)`` shifts it sideways."""
+    t = np.arange(-half, half + 5.0, 5.0) if bend is not None else np.array([-half, half])
+    shift = bend(t) if bend is not None else 0.0
+    pts = centre + np.outer(t, along) + np.outer(offset + shift, across)
+    return LineString(pts)
+
+
+def _split_between(line: LineString, cutters: list[LineString]) -> list[LineString]:
+    """Pieces of ``line`` between consecutive crossings with ``cutters`` (ends included)."""
+    cuts = {0.0, line.length}
+    for cutter in cutters:
+        hit = line.intersection(cutter)
+        for part in getattr(hit, "geoms", [hit]):
+            if not part.is_empty and part.geom_type == "Point":
+                cuts.add(line.project(part))
+    ordered = sorted(cuts)
+    return [substring(line, a, b) for a, b in zip(ordered, ordered[1:]) if b - a > 1.0]
+
+
+def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, height: float) -> list[Street]:
+    """Centrelines of avenues, cross streets (some curved, dropped or dead-ended) and diagonals."""
+    m = cfg.margin
+    centre = np.array([width / 2, height / 2])
+    half = math.hypot(width + 2 * m, height + 2 * m) / 2 + 40.0
+    bearing = rng.uniform(-math.radians(35), math.radians(35))
+    along, across = _unit(bearing), _unit(bearing + math.pi / 2)
+
+    streets: list[Street] = []
+    avenues: list[LineString] = []
+    for offset in _spaced_offsets(rng, half, cfg.avenue_spacing):
+        line = _line(centre, along, across, offset, half)
+        w = rng.uniform(*cfg.avenue_width)
+        if rng.random() < cfg.boulevard_share:
+            streets.append(Street(line, w + rng.uniform(*cfg.boulevard_extra_width), "boulevard", median=rng.uniform(*cfg.median_width)))
+        else:
+            streets.append(Street(line, w, "avenue"))
+        avenues.append(line)
+
+    offsets = _spaced_offsets(rng, half, cfg.street_spacing)
+    for i, offset in enumerate(offsets):
+        skew = math.radians(rng.uniform(-cfg.cross_street_skew_deg, cfg.cross_street_skew_deg))
+        direction = _unit(bearing + math.pi / 2 + skew)
+        normal = _unit(bearing + skew)
+        gap = min(abs(offset - offsets[j]) for j in (i - 1, i + 1) if 0 <= j < len(offsets)) if len(offsets) > 1 else 100.0
+        bend, kind = None, "street"
+        if rng.random() < cfg.curved_street_share:
+            amp = min(rng.uniform(*cfg.curve_amplitude), 0.22 * gap)
+            wavelength, phase = rng.uniform(250, 500), rng.uniform(0, 2 * math.pi)
+            bend = lambda t, a=amp, wl=wavelength, ph=phase: a * np.sin(2 * math.pi * t / wl + ph)  # noqa: E731
+            kind = "curved"
+        line = _line(centre, direction, normal, offset, half, bend)
+        w = rng.uniform(*cfg.street_width)
+        for piece in _split_between(line, avenues):
+            u = rng.random()
+            if u < cfg.dropped_segment_share:
+                continue
+            if u < cfg.dropped_segment_share + cfg.dead_end_share and piece.length > 40:
+                length = piece.length * rng.uniform(0.35, 0.6)
+                if rng.random() < 0.5:  # the dead end is the stub's last point
+                    stub = substring(piece, 0, length)
+                else:
+                    stub = shapely.reverse(substring(piece, piece.length - length, piece.length))
+                bulb = w * rng.uniform(0.75, 0.95) if rng.random() < cfg.cul_de_sac_share else 0.0
+                streets.append(Street(stub, w, "dead_end", bulb_radius=bulb))
+            else:
+                streets.append(Street(piece, w, kind))
+
+    area_km2 = (width + 2 * m) * (height + 2 * m) / 1e6
+    for _ in range(rng.poisson(cfg.diagonals_per_km2 * area_km2)):
+        angle = bearing + rng.choice([-1, 1]) * math.radians(rng.uniform(25, 65))
+        through = np.array([rng.uniform(0.2, 0.8) * width, rng.uniform(0.2, 0.8) * height])
+        bend = None
+        if rng.random() < 0.5:
+            amp, wl = rng.uniform(15, 40), rng.uniform(700, 1400)
+            bend = lambda t, a=amp, wl=wl: a * np.sin(2 * math.pi * t / wl)  # noqa: E731
+        line = _line(through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + np.linalg.norm(through - centre), bend)
+        streets.append(Street(line, rng.uniform(*cfg.street_width) + 1.0, "diagonal"))
+
+    domain = box(-m - 20, -m - 20, width + m + 20, height + m + 20)
+    clipped = []
+    for s in streets:
+        line = s.centreline.intersection(domain)
+        for part in as_linestrings(line):
+            clipped.append(Street(part, s.width, s.kind, s.median, s.bulb_radius if part.coords[-1] == s.centreline.coords[-1] else 0.0))
+    return clipped
+
+
+def _open(polygon: Polygon, radius: float) -> list[Polygon]:
+    """Morphological opening: rounds convex corners to ``radius``, keeps concave corners sharp."""
+    if radius <= 0:
+        return [polygon]
+    opened = polygon.buffer(-radius, quad_segs=QUAD_SEGS).buffer(radius, quad_segs=QUAD_SEGS)
+    return [p for p in getattr(opened, "geoms", [opened]) if p.geom_type == "Polygon" and p.area > 30.0]
+
+
+def _islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], roadway) -> list[Polygon]:
+    """Small rounded triangles at some intersections of wide streets, well inside the roadway."""
+    wide = [s for s in streets if s.width >= 10.5 and s.kind != "boulevard"]
+    inside = roadway.buffer(-2.0)
+    shapely.prepare(inside)
+    islands: list[Polygon] = []
+    for i, a in enumerate(wide):
+        for b in wide[i + 1 :]:
+            hit = a.centreline.intersection(b.centreline)
+            if hit.is_empty or hit.geom_type != "Point" or rng.random() >= cfg.island_share:
+                continue
+            side = rng.uniform(3.5, 7.0)
+            theta = rng.uniform(0, 2 * math.pi)
+            corners = [(hit.x + side * 0.58 * math.cos(theta + k * 2 * math.pi / 3), hit.y + side * 0.58 * math.sin(theta + k * 2 * math.pi / 3)) for k in range(3)]
+            island = Polygon(corners).buffer(0.8, quad_segs=QUAD_SEGS)
+            if inside.contains(island) and not any(island.distance(o) < 3.0 for o in islands):
+                islands.append(island)
+    return islands
+
+
+def _medians(streets: list[Street], road_by_street: list[Polygon], roadway) -> list[Polygon]:
+    """Boulevard medians, interrupted at every crossing street, with rounded noses."""
+    medians: list[Polygon] = []
+    tree = shapely.STRtree(road_by_street)
+    inside = roadway.buffer(-1.0)
+    shapely.prepare(inside)
+    for i, s in enumerate(streets):
+        if s.median <= 0:
+            continue
+        strip = s.centreline.buffer(s.median / 2, cap_style="flat")
+        crossing = [road_by_street[j] for j in tree.query(strip) if j != i]
+        if crossing:
+            strip = strip.difference(shapely.union_all([c.buffer(3.0) for c in crossing]))
+        nose = s.median * 0.45
+        for piece in getattr(strip, "geoms", [strip]):
+            if piece.geom_type != "Polygon" or piece.area < 20.0:
+                continue
+            for rounded in _open(piece, nose):
+                if rounded.area > 20.0 and inside.contains(rounded):
+                    medians.append(rounded)
+    return medians
+
+
+def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, height: float) -> StreetNetwork:
+    """Streets -> roadway -> rounded blocks -> islands and medians -> ground-truth boundaries."""
+    streets = build_streets(cfg, rng, width, height)
+    road_by_street = [s.roadway() for s in streets]
+    raw_roadway = shapely.union_all(road_by_street)
+    m = cfg.margin
+    domain = box(-m, -m, width + m, height + m)
+    land = domain.difference(raw_roadway)
+
+    blocks: list[Block] = []
+    for polygon in getattr(land, "geoms", [land]):
+        if polygon.geom_type != "Polygon" or polygon.area < 30.0:
+            continue
+        radius = 0.0 if rng.random() < cfg.sharp_block_share else rng.uniform(*cfg.curb_radius)
+        blocks.extend(Block(p, radius) for p in _open(polygon, radius))
+
+    roadway = domain.difference(shapely.union_all([b.polygon for b in blocks]))
+    islands = _islands(cfg, rng, streets, roadway)
+    medians = _medians(streets, road_by_street, roadway)
+    if islands or medians:
+        roadway = roadway.difference(shapely.union_all(islands + medians))
+
+    network = StreetNetwork(width, height, streets, blocks, islands, medians, roadway)
+    network.boundaries = boundary_lines(roadway, islands, medians, width, height)
+    return network
+
+
+def boundary_lines(roadway, islands: list[Polygon], medians: list[Polygon], width: float, height: float) -> list[tuple[LineString, str]]:
+    """The roadway's rings clipped to the city, merged into LineStrings, each with its kind."""
+    rings = []
+    for polygon in getattr(roadway, "geoms", [roadway]):
+        rings.append(polygon.exterior)
+        rings.extend(polygon.interiors)
+    lines = shapely.clip_by_rect(np.array([LineString(r.coords) for r in rings], dtype=object), 0.0, 0.0, width, height)
+    merged = as_linestrings(shapely.line_merge(shapely.union_all([g for g in lines if not g.is_empty])))
+    island_edges = shapely.union_all([p.exterior for p in islands]) if islands else None
+    median_edges = shapely.union_all([p.exterior for p in medians]) if medians else None
+    out = []
+    for line in merged:
+        probe = line.interpolate(0.5, normalized=True)
+        if island_edges is not None and probe.distance(island_edges) < 1e-6:
+            kind = "island"
+        elif median_edges is not None and probe.distance(median_edges) < 1e-6:
+            kind = "median"
+        else:
+            kind = "curb"
+        out.append((line, kind))
+    return out

@@ -1,0 +1,1 @@
+"""Pictures for people: imagery with ground truth (and later predictions) drawn over it."""

@@ -1,0 +1,95 @@
+"""Draw any window of a mosaic with road boundaries over it, as an RGB PNG.
+
+Ground truth is drawn in cyan as in the paper's figures; areas without valid pixels (outside
+the mosaic, missing tiles, nodata) are shown as a dark checkerboard so they are not mistaken
+for imagery.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable
+
+import cv2
+import numpy as np
+from shapely.geometry import LineString, box
+
+from csboundary.data.atomic import atomic_path
+from csboundary.data.grid import PatchGrid
+from csboundary.data.raster import Mosaic
+from csboundary.data.windows import PixelWindow, world_to_pixel
+
+CYAN = (0, 255, 255)
+GRID_CORE = (255, 80, 80)
+GRID_EXPANDED = (255, 200, 0)
+
+
+def to_display(data: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(4, h, w) bands + mask -> (h, w, 3) uint8 RGB, invalid pixels as a checkerboard."""
+    rgb = np.ascontiguousarray(np.moveaxis(data[:3], 0, -1))
+    if rgb.dtype != np.uint8:
+        top = float(np.percentile(rgb[valid], 99.5)) if valid.any() else 1.0
+        rgb = np.clip(rgb.astype(np.float32) / max(top, 1e-6) * 255, 0, 255).astype(np.uint8)
+    if not valid.all():
+        rows, cols = np.indices(valid.shape)
+        checker = np.where(((rows // 16 + cols // 16) % 2) == 0, 40, 60).astype(np.uint8)
+        rgb[~valid] = checker[~valid, None]
+    return rgb
+
+
+def draw_lines(rgb: np.ndarray, lines: Iterable[np.ndarray], colour, thickness: int) -> None:
+    """Draw polylines given in (fractional) pixel coordinates of ``rgb``, in place."""
+    pts = [np.round(np.asarray(line) * 8).astype(np.int32) for line in lines if len(line) >= 2]
+    if pts:
+        cv2.polylines(rgb, pts, False, colour, thickness, cv2.LINE_AA, shift=3)
+
+
+def render_window(
+    mosaic: Mosaic,
+    window: PixelWindow,
+    boundaries: Iterable[LineString] = (),
+    *,
+    max_size: int | None = None,
+    grid: PatchGrid | None = None,
+    colour=CYAN,
+) -> np.ndarray:
+    """RGB picture of ``window`` with ``boundaries`` (world coordinates) drawn over it.
+
+    ``max_size`` downsamples large windows (longest side) before the lines are drawn, so lines
+    stay visible; ``grid`` adds the patch grid (cores red, expanded windows yellow).
+    """
+    read = mosaic.read(window)
+    rgb = to_display(read.data, read.valid)
+    scale = 1.0
+    if max_size and max(window.width, window.height) > max_size:
+        scale = max_size / max(window.width, window.height)
+        rgb = cv2.resize(rgb, (max(1, round(window.width * scale)), max(1, round(window.height * scale))), interpolation=cv2.INTER_AREA)
+    thickness = 2 if scale > 0.5 else 1
+    world_box = box(*_world_bounds(mosaic, window))
+    lines = []
+    for line in boundaries:
+        if not line.intersects(world_box):
+            continue
+        xy = np.asarray(line.coords)[:, :2]
+        cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
+        lines.append(np.stack([(cols - window.col_off) * scale, (rows - window.row_off) * scale], axis=1))
+    if grid is not None:
+        for patch in grid:
+            for w, c in ((patch.expanded, GRID_EXPANDED), (patch.core, GRID_CORE)):
+                corners = np.array([[w.col_off, w.row_off], [w.col_end, w.row_off], [w.col_end, w.row_end], [w.col_off, w.row_end], [w.col_off, w.row_off]], float)
+                draw_lines(rgb, [(corners - [window.col_off, window.row_off]) * scale], c, 1)
+    draw_lines(rgb, lines, colour, thickness)
+    return rgb
+
+
+def _world_bounds(mosaic: Mosaic, window: PixelWindow) -> tuple[float, float, float, float]:
+    xs, ys = mosaic.pixel_to_world([window.col_off, window.col_end], [window.row_off, window.row_end])
+    return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
+
+
+def write_png(path: str | Path, rgb: np.ndarray) -> Path:
+    """Write an RGB array as PNG, atomically."""
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
+            raise OSError(f"{path}: could not write PNG")
+    return Path(path)
