@@ -52,6 +52,23 @@ def synth(
     )
 
 
+@app.command("import-topo-boundary")
+def import_topo_boundary_cmd(
+    root: Path = typer.Argument(..., help="Folder holding the Topo-boundary TTTTTT_RC.tiff patches, labels/dense_seq and data_split.json."),
+    out: Path = typer.Option(..., "--out", help="Output folder: one city directory per 6-digit tile id."),
+    patch_size: int = typer.Option(1000, min=1, help="Patch side in pixels (the benchmark's is 1000)."),
+    splits: int = typer.Option(5, min=1, help="Patches per tile side (the benchmark's is 5)."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """Reassemble Topo-boundary patches into 5000x5000 tiles with vector ground truth."""
+    from csboundary.data.topo_boundary import import_topo_boundary
+
+    report = import_topo_boundary(root, out, patch_size=patch_size, splits=splits, progress=not quiet)
+    missing = report["missing_patches"]
+    typer.echo(f"{out}: {len(report['tiles_written'])} tile(s) written; {len(missing)} missing patch(es)"
+               + (f": {', '.join(missing[:10])}{' ...' if len(missing) > 10 else ''}" if missing else ""))
+
+
 def _open_inputs(inputs: list[Path], ground_truth: Optional[Path]):
     """A city directory gives its tiles and ground truth; otherwise rasters and an optional GT file."""
     from csboundary.data import city as layout

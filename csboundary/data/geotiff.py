@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import rasterio
 from affine import Affine
+from rasterio.enums import ColorInterp
 
 from csboundary.data.atomic import atomic_path
 
@@ -46,6 +47,7 @@ def write_geotiff(
         "zlevel": 1,
         "predictor": 2,
         "interleave": "pixel",
+        "photometric": "MINISBLACK",  # band 4 is NIR: never let GDAL tag it as alpha
     }
     with atomic_path(path) as tmp:
         with rasterio.Env(GDAL_TIFF_INTERNAL_MASK=True):
@@ -53,6 +55,8 @@ def write_geotiff(
                 dst.write(image)
                 for band, name in enumerate(BAND_NAMES[:bands], start=1):
                     dst.set_band_description(band, name)
+                if bands == 4:
+                    dst.colorinterp = [ColorInterp.red, ColorInterp.green, ColorInterp.blue, ColorInterp.undefined]
                 if tags:
                     dst.update_tags(**tags)
                 if valid is not None:

@@ -117,10 +117,12 @@ class PatchGrid:
         return Patch(row, col, core, expanded, window_transform(self.transform, expanded))
 
     def neighbours(self, patch: Patch) -> list[Patch]:
-        """The up to 8 patches whose expanded windows overlap ``patch``'s."""
+        """The patches whose expanded windows overlap ``patch``'s: the up to 8 adjacent ones, and
+        more when ``2 * margin > core`` makes patches further apart overlap too."""
+        reach = max(1, math.ceil(2 * self.config.margin / self.config.core))
         out = []
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
+        for dr in range(-reach, reach + 1):
+            for dc in range(-reach, reach + 1):
                 index = (patch.row + dr, patch.col + dc)
                 if (dr or dc) and index in self:
                     out.append(self.patch(*index))
@@ -146,8 +148,13 @@ class PatchGrid:
 
     def patches_covering(self, col: float, row: float) -> list[Patch]:
         """Every patch whose expanded window holds mosaic pixel (col, row)."""
-        home = self.patch_of_pixel(col, row)
-        candidates = [home, *self.neighbours(home)]
+        # Patch r's expanded rows are [r*core - margin, (r+1)*core + margin): r lies between
+        # floor((row - margin) / core) and floor((row + margin) / core); one extra on each side
+        # guards the floating-point division, the exact test below decides.
+        c, m = self.config.core, self.config.margin
+        rows = range(max(math.floor((row - m) / c) - 1, 0), min(math.floor((row + m) / c) + 1, self.n_rows - 1) + 1)
+        cols = range(max(math.floor((col - m) / c) - 1, 0), min(math.floor((col + m) / c) + 1, self.n_cols - 1) + 1)
+        candidates = [self.patch(r, k) for r in rows for k in cols]
         return [
             p
             for p in candidates

@@ -21,7 +21,8 @@ from typing import Iterable, Sequence
 import numpy as np
 import rasterio
 from affine import Affine
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+from rasterio.enums import ColorInterp, MaskFlags
+from rasterio.errors import NodataShadowWarning, NotGeoreferencedWarning, RasterioIOError
 from rasterio.windows import Window
 
 from csboundary.data.windows import PixelWindow, pixel_to_world, window_from_bounds, world_to_pixel
@@ -86,6 +87,24 @@ def _inspect(path: Path) -> tuple[object, Affine, int, str, int, int]:
         raise InputError(path, f"unreadable raster ({text.splitlines()[0]})") from exc
 
 
+def _valid_mask(ds, window: Window) -> np.ndarray:
+    """Validity of ``window``'s pixels from the file's mask, nodata value or alpha band.
+
+    GDAL flags band 4 of a 4-band uint8 GeoTIFF as alpha by default (rasterio and ``gdal_translate``
+    write RGBA unless told otherwise), so ``dataset_mask`` would turn every pixel whose NIR is 0
+    invalid. By the band rule band 4 is NIR, never transparency, so a mask derived from an alpha
+    band among bands 1-4 is ignored. Internal masks (.msk / GDAL_TIFF_INTERNAL_MASK) and nodata
+    values are honoured.
+    """
+    flags = ds.mask_flag_enums[0]
+    if MaskFlags.alpha in flags and ColorInterp.alpha in ds.colorinterp[:BANDS]:
+        return np.ones((int(window.height), int(window.width)), dtype=bool)
+    with warnings.catch_warnings():
+        # "nodata shadows the alpha band": exactly what we want, since band 4 is NIR.
+        warnings.simplefilter("ignore", NodataShadowWarning)
+        return ds.dataset_mask(window=window) > 0
+
+
 class Mosaic:
     """Several aligned raster tiles behaving as one north-up image with one affine transform."""
 
@@ -133,10 +152,14 @@ class Mosaic:
         north = max(i[2].f for i in infos) if res_y < 0 else min(i[2].f for i in infos)
         tiles = []
         for path, _crs, transform, count, dtype, width, height in infos:
+            # Judge alignment against the first tile, not the westmost/northmost origin: otherwise a
+            # misaligned tile lying west or north of the others gets the *aligned* tiles blamed.
+            dcol = (transform.c - first[2].c) / res_x
+            drow = (transform.f - first[2].f) / res_y
+            if abs(dcol - round(dcol)) > 1e-6 or abs(drow - round(drow)) > 1e-6:
+                raise InputError(path, f"not aligned to the pixel grid of {first[0]} (offset {dcol:.3f}, {drow:.3f} px)")
             col = (transform.c - west) / res_x
             row = (transform.f - north) / res_y
-            if abs(col - round(col)) > 1e-6 or abs(row - round(row)) > 1e-6:
-                raise InputError(path, f"not aligned to the pixel grid of {first[0]} (offset {col:.3f}, {row:.3f} px)")
             tiles.append(Tile(path, PixelWindow(int(round(col)), int(round(row)), width, height), count, dtype))
         width = max(t.window.col_end for t in tiles)
         height = max(t.window.row_end for t in tiles)
@@ -196,7 +219,7 @@ class Mosaic:
         indexes = list(range(1, min(tile.band_count, BANDS) + 1))
         try:
             pixels = ds.read(indexes, window=rio_window)
-            mask = ds.dataset_mask(window=rio_window) > 0
+            mask = _valid_mask(ds, rio_window)
         except RasterioIOError as exc:
             raise InputError(tile.path, f"unreadable pixels ({str(exc).splitlines()[0]})") from exc
         if pixels.shape[0] == 3:

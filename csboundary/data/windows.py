@@ -80,7 +80,10 @@ class PixelWindow:
 
 def window_transform(transform: Affine, window: PixelWindow) -> Affine:
     """Affine transform of the raster cut out by ``window`` from a raster with ``transform``."""
-    return transform * Affine.translation(window.col_off, window.row_off)
+    # Written out rather than ``transform * Affine.translation(...)``: affine 3 deprecates ``*`` for
+    # matrix products (a PendingDeprecationWarning on every patch), and ``@`` needs affine >= 2.4.
+    x, y = pixel_to_world(transform, window.col_off, window.row_off)
+    return Affine(transform.a, transform.b, float(x), transform.d, transform.e, float(y))
 
 
 def pixel_to_world(transform: Affine, cols, rows) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +102,10 @@ def world_to_pixel(transform: Affine, xs, ys) -> tuple[np.ndarray, np.ndarray]:
 def window_from_bounds(transform: Affine, minx: float, miny: float, maxx: float, maxy: float) -> PixelWindow:
     """Smallest pixel window covering the world rectangle (north-up transforms)."""
     xs, ys = world_to_pixel(transform, [minx, maxx, minx, maxx], [miny, miny, maxy, maxy])
-    eps = 1e-9
+    # Tolerance in pixels for the round-off of the inverse transform: at UTM-sized coordinates and a
+    # non-binary pixel size (e.g. 0.3 m) it reaches ~1e-8 px, so 1e-9 turned exact pixel edges into
+    # an extra row/column.
+    eps = 1e-6
     c0, c1 = math.floor(xs.min() + eps), math.ceil(xs.max() - eps)
     r0, r1 = math.floor(ys.min() + eps), math.ceil(ys.max() - eps)
     return PixelWindow(c0, r0, max(c1 - c0, 0), max(r1 - r0, 0))

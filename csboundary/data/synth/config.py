@@ -36,7 +36,7 @@ class SynthConfig:
     boulevard_extra_width: tuple[float, float] = (6.0, 10.0)
     curved_street_share: float = 0.25  # cross streets replaced by a gently curving one
     curve_amplitude: tuple[float, float] = (8.0, 25.0)
-    diagonals_per_km2: float = 1.0
+    diagonals_per_km2: float = 0.5
     dropped_segment_share: float = 0.08  # cross-street segments removed (merged blocks)
     dead_end_share: float = 0.12  # cross-street segments cut to a dead end
     cul_de_sac_share: float = 0.5  # dead ends that end in a round bulb
