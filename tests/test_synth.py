@@ -146,3 +146,20 @@ def test_written_city_round_trips(tmp_path):
         assert gt.total_bounds[0] >= minx - 1e-6 and gt.total_bounds[2] <= maxx + 1e-6
         read = mosaic.read(mosaic.window)
         assert read.valid.all() and read.data.shape == (4, 600, 1200)
+
+
+def test_interrupted_rewrite_leaves_no_finished_city(tmp_path, monkeypatch):
+    out = tmp_path / "c"
+    synthesize_city(out, seed=1, split="train", tiles=(1, 1), config=SMALL, progress=False)
+    assert layout.is_city_dir(out)
+
+    import csboundary.data.synth.city as city_module
+
+    def crash(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(city_module, "write_ground_truth", crash)
+    with pytest.raises(KeyboardInterrupt):
+        synthesize_city(out, seed=2, split="train", tiles=(1, 1), config=SMALL, progress=False)
+    assert not layout.is_city_dir(out)  # the old city.json is gone: nothing claims to be complete
+    assert not [p for p in out.rglob("*") if "partial" in p.name]

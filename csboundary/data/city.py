@@ -38,6 +38,15 @@ def write_meta(city_dir: str | Path, meta: dict[str, Any]) -> Path:
     return path
 
 
+def begin_city(city_dir: str | Path) -> Path:
+    """Prepare ``city_dir`` for (re)writing: drop an old ``city.json`` first, so an interrupted
+    rewrite can never pass off a mix of old and new files as a finished city."""
+    city_dir = Path(city_dir)
+    (city_dir / META_FILE).unlink(missing_ok=True)
+    city_dir.mkdir(parents=True, exist_ok=True)
+    return city_dir
+
+
 def read_meta(city_dir: str | Path) -> dict[str, Any]:
     path = Path(city_dir) / META_FILE
     if not path.exists():

@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 from shapely.geometry import LineString
 from tqdm import tqdm
 
-from csboundary.data.city import ground_truth_path, tiles_dir, write_meta
+from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
 from csboundary.data.raster import BANDS, NIR_FILL_BAND
@@ -466,7 +466,7 @@ def tile_file_name(tile_id: str) -> str:
 
 def write_tile_city(tile: AssembledTile, city_dir: str | Path, index: TopoBoundaryIndex) -> Path:
     """Write one assembled tile as a city directory; ``city.json`` last marks it finished."""
-    city_dir = Path(city_dir)
+    city_dir = begin_city(city_dir)
     tags = {
         "source": SOURCE,
         "tile_id": tile.tile_id,

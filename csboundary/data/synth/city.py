@@ -85,7 +85,7 @@ def synthesize_city(
 
     ``city.json`` is written last: a directory without it is an interrupted run, not a city.
     """
-    out_dir = Path(out_dir)
+    out_dir = layout.begin_city(out_dir)
     start = time.perf_counter()
     city = plan_city(config, split, seed, tiles)
     planned = time.perf_counter() - start

@@ -1,0 +1,67 @@
+"""The command line as a user meets it: exit codes, one-line errors, files it writes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from csboundary.data import city as layout
+
+
+def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def small_city(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "city"
+    result = run("synth", str(out), "--seed", "2", "--tiles", "1x2", "--tile-size", "400", "--gsd", "0.5", "--split", "valid", "--quiet")
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+def test_every_command_has_help():
+    for command in ("synth", "show", "demo", "import-topo-boundary"):
+        result = run(command, "--help")
+        assert result.returncode == 0 and "Usage" in result.stdout, command
+
+
+def test_synth_writes_a_city(small_city):
+    meta = layout.read_meta(small_city)
+    assert meta["split"] == "valid" and meta["tile_grid"] == [1, 2]
+    assert sorted(p.name for p in layout.tiles_dir(small_city).iterdir()) == ["tile_r00_c00.tif", "tile_r00_c01.tif"]
+    assert layout.ground_truth_path(small_city).exists()
+
+
+def test_show_writes_png_of_window(small_city, tmp_path):
+    import cv2
+
+    out = tmp_path / "w.png"
+    result = run("show", str(small_city), "--window", "350,100,100,80", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    image = cv2.imread(str(out))
+    assert image.shape == (80, 100, 3)  # a window across the tile border, at full resolution
+
+
+def test_bad_input_is_one_line_naming_the_file(tmp_path):
+    bogus = tmp_path / "not-a-raster.tif"
+    bogus.write_text("hello")
+    result = run("show", str(bogus), "--out", str(tmp_path / "x.png"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and str(bogus) in lines[0] and "not a raster" in lines[0]
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_missing_file_is_reported(tmp_path):
+    result = run("show", str(tmp_path / "nope.tif"), "--out", str(tmp_path / "x.png"))
+    assert result.returncode == 2 and "nope.tif: file not found" in result.stderr
+
+
+def test_bad_tiles_argument_is_rejected(tmp_path):
+    result = run("synth", str(tmp_path / "c"), "--tiles", "two")
+    assert result.returncode != 0 and "ROWSxCOLS" in result.stderr
+    assert not (tmp_path / "c" / layout.META_FILE).exists()
