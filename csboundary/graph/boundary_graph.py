@@ -1,0 +1,198 @@
+"""The road-boundary graph shared by labels, models, metrics and output, and its JSON format.
+
+Vertices are stored in continuous pixel coordinates ``(col, row)`` of one frame (a patch or the
+whole mosaic; rasterio's convention, pixel centres at +0.5) plus that frame's affine transform,
+so world coordinates are always one multiplication away. An edge may carry a polyline (its
+interior shape, e.g. the arc of a rounded corner); otherwise it is a straight segment.
+
+JSON (``format: csboundary-graph``, ``version: 1``)::
+
+    {"format": "csboundary-graph", "version": 1, "crs": "EPSG:32618" | null,
+     "transform": [a, b, c, d, e, f] | null,
+     "vertices": [{"px": [col, row], "xy": [x, y], "kind": "..."}, ...],
+     "edges": [{"u": i, "v": j, "kind": "...", "polyline_px": [[col, row], ...], "score": s}, ...]}
+
+``xy`` is written for readers that want world coordinates and ignored on reading (``px`` and
+``transform`` are the truth). ``polyline_px`` includes both end vertices; ``score`` is optional.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from affine import Affine
+from shapely.geometry import LineString
+
+from csboundary.data.atomic import atomic_path
+from csboundary.data.windows import pixel_to_world, world_to_pixel
+from csboundary.errors import InputError
+
+FORMAT = "csboundary-graph"
+VERSION = 1
+
+
+@dataclass
+class BoundaryGraph:
+    """Undirected graph: ``vertices`` (N, 2) float pixel (col, row); ``edges`` (E, 2) int, u < v."""
+
+    vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    vertex_kinds: list[str] | None = None
+    edge_kinds: list[str] | None = None
+    edge_polylines: list[np.ndarray | None] | None = None  # pixel polylines incl. both ends
+    edge_scores: np.ndarray | None = None
+    transform: Affine | None = None  # pixel -> world of the frame the vertices refer to
+    crs: str | None = None
+
+    def __post_init__(self) -> None:
+        self.vertices = np.asarray(self.vertices, dtype=float).reshape(-1, 2)
+        edges = np.asarray(self.edges, dtype=np.int64).reshape(-1, 2)
+        if len(edges) and (edges.min() < 0 or edges.max() >= len(self.vertices)):
+            raise ValueError("edge refers to a vertex that does not exist")
+        self.edges = edges
+
+    # -- views ------------------------------------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edges)
+
+    def edge_polyline(self, k: int) -> np.ndarray:
+        """Pixel polyline of edge ``k`` from vertex u to vertex v (2 points if straight)."""
+        u, v = self.edges[k]
+        if self.edge_polylines is not None and self.edge_polylines[k] is not None:
+            return np.asarray(self.edge_polylines[k], dtype=float)
+        return self.vertices[[u, v]]
+
+    def edge_lengths(self) -> np.ndarray:
+        """Pixel length of every edge along its polyline."""
+        return np.array([_polyline_length(self.edge_polyline(k)) for k in range(self.n_edges)], dtype=float)
+
+    def world_vertices(self) -> np.ndarray:
+        if self.transform is None:
+            raise ValueError("graph has no transform: its coordinates are pixels only")
+        xs, ys = pixel_to_world(self.transform, self.vertices[:, 0], self.vertices[:, 1])
+        return np.stack([xs, ys], axis=1)
+
+    def to_linestrings(self, world: bool = False) -> list[LineString]:
+        """One LineString per edge, in pixels or (``world=True``) world coordinates."""
+        out = []
+        for k in range(self.n_edges):
+            line = self.edge_polyline(k)
+            if world:
+                xs, ys = pixel_to_world(self.transform, line[:, 0], line[:, 1])
+                line = np.stack([xs, ys], axis=1)
+            out.append(LineString(line))
+        return out
+
+    # -- construction -------------------------------------------------------------------------------
+    @classmethod
+    def from_polylines(cls, lines: Sequence[np.ndarray], transform: Affine | None = None, crs: str | None = None, snap: float = 1e-6) -> "BoundaryGraph":
+        """A graph whose vertices are the polylines' points (shared points merged within ``snap``)."""
+        points, edges = [], []
+        index: dict[tuple[int, int], int] = {}
+        for line in lines:
+            line = np.asarray(line, dtype=float)
+            ids = []
+            for p in line:
+                key = (int(round(p[0] / snap)), int(round(p[1] / snap))) if snap > 0 else (id(p), 0)
+                if key not in index:
+                    index[key] = len(points)
+                    points.append(p)
+                ids.append(index[key])
+            edges.extend((min(a, b), max(a, b)) for a, b in zip(ids, ids[1:]) if a != b)
+        edges = sorted(set(edges))
+        return cls(np.array(points).reshape(-1, 2), np.array(edges, dtype=np.int64).reshape(-1, 2), transform=transform, crs=crs)
+
+    @classmethod
+    def from_world_lines(cls, lines: Sequence[LineString], transform: Affine, crs: str | None = None) -> "BoundaryGraph":
+        """Graph of world LineStrings expressed in the pixel frame of ``transform``."""
+        pixel_lines = []
+        for line in lines:
+            xy = np.asarray(line.coords)[:, :2]
+            cols, rows = world_to_pixel(transform, xy[:, 0], xy[:, 1])
+            pixel_lines.append(np.stack([cols, rows], axis=1))
+        return cls.from_polylines(pixel_lines, transform=transform, crs=crs)
+
+    # -- JSON -----------------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        world = self.world_vertices() if self.transform is not None else None
+        vertices = []
+        for i, p in enumerate(self.vertices):
+            item: dict = {"px": [float(p[0]), float(p[1])]}
+            if world is not None:
+                item["xy"] = [float(world[i, 0]), float(world[i, 1])]
+            if self.vertex_kinds is not None:
+                item["kind"] = self.vertex_kinds[i]
+            vertices.append(item)
+        edges = []
+        for k, (u, v) in enumerate(self.edges):
+            item = {"u": int(u), "v": int(v)}
+            if self.edge_kinds is not None:
+                item["kind"] = self.edge_kinds[k]
+            if self.edge_polylines is not None and self.edge_polylines[k] is not None:
+                item["polyline_px"] = np.asarray(self.edge_polylines[k], dtype=float).round(3).tolist()
+            if self.edge_scores is not None:
+                item["score"] = float(self.edge_scores[k])
+            edges.append(item)
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "crs": self.crs,
+            "transform": list(self.transform)[:6] if self.transform is not None else None,
+            "vertices": vertices,
+            "edges": edges,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "<dict>") -> "BoundaryGraph":
+        if data.get("format") != FORMAT:
+            raise InputError(source, f"not a {FORMAT} JSON file (format={data.get('format')!r})")
+        if data.get("version") != VERSION:
+            raise InputError(source, f"unsupported {FORMAT} version {data.get('version')!r} (this build reads {VERSION})")
+        vertices = data.get("vertices", [])
+        edges = data.get("edges", [])
+        transform = Affine(*data["transform"][:6]) if data.get("transform") else None
+        try:
+            graph = cls(
+                np.array([v["px"] for v in vertices], dtype=float).reshape(-1, 2),
+                np.array([[e["u"], e["v"]] for e in edges], dtype=np.int64).reshape(-1, 2),
+                vertex_kinds=[v.get("kind", "") for v in vertices] if any("kind" in v for v in vertices) else None,
+                edge_kinds=[e.get("kind", "") for e in edges] if any("kind" in e for e in edges) else None,
+                edge_polylines=[np.array(e["polyline_px"], dtype=float) if "polyline_px" in e else None for e in edges]
+                if any("polyline_px" in e for e in edges)
+                else None,
+                edge_scores=np.array([e.get("score", np.nan) for e in edges], dtype=float) if any("score" in e for e in edges) else None,
+                transform=transform,
+                crs=data.get("crs"),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(source, f"malformed graph ({type(exc).__name__}: {exc})") from exc
+        return graph
+
+    def write_json(self, path: str | Path) -> Path:
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.to_dict()))
+        return Path(path)
+
+    @classmethod
+    def read_json(cls, path: str | Path) -> "BoundaryGraph":
+        path = Path(path)
+        if not path.exists():
+            raise InputError(path, "file not found")
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(path, f"not JSON ({exc})") from exc
+        return cls.from_dict(data, str(path))
+
+
+def _polyline_length(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum()) if len(points) > 1 else 0.0
