@@ -99,15 +99,39 @@ def show(
     ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to draw (GeoPackage/GeoJSON); a city's own by default."),
     max_size: int = typer.Option(2000, min=16, help="Downsample so the longest side is at most this many pixels."),
     grid: bool = typer.Option(False, help="Draw the patch grid (cores red, 1100 px expanded windows yellow)."),
+    labels: Optional[Path] = typer.Option(None, help="A folder from `csboundary labels`: draw one patch's labels (needs --patch)."),
+    patch: Optional[str] = typer.Option(None, help="Patch ROW,COL of the grid: the window becomes its 1100x1100 expanded window."),
 ) -> None:
-    """Draw a window of the imagery with road boundaries over it."""
+    """Draw a window of the imagery with road boundaries (or a patch's labels) over it."""
     from csboundary.data.grid import PatchGrid
     from csboundary.data.windows import PixelWindow
     from csboundary.viz.overlay import render_window, write_png
 
-    if window and bounds:
-        raise typer.BadParameter("give --window or --bounds, not both")
+    if sum(x is not None for x in (window, bounds, patch)) > 1:
+        raise typer.BadParameter("give one of --window, --bounds, --patch")
+    if labels is not None and patch is None:
+        raise typer.BadParameter("--labels needs --patch ROW,COL")
     mosaic, lines = _open_inputs(inputs, ground_truth)
+    if patch is not None:
+        row, col = (int(v) for v in patch.split(","))
+        the_patch = PatchGrid.for_mosaic(mosaic).patch(row, col)
+        window = ",".join(str(v) for v in (the_patch.expanded.col_off, the_patch.expanded.row_off, the_patch.expanded.width, the_patch.expanded.height))
+        if labels is not None:
+            from csboundary.graph import BoundaryGraph
+            from csboundary.labels.writer import PATCH_DIR, load_patch_arrays, patch_stem
+            from csboundary.viz.labels import draw_patch_labels
+            from csboundary.viz.overlay import to_display
+
+            stem = patch_stem(the_patch)
+            arrays = load_patch_arrays(labels / PATCH_DIR / f"{stem}.npz")
+            graph = BoundaryGraph.read_json(labels / PATCH_DIR / f"{stem}.graph.json")
+            with mosaic:
+                read = mosaic.read(the_patch.expanded)
+            core = the_patch.core_local
+            rgb = draw_patch_labels(to_display(read.data, read.valid), arrays, graph, (core.col_off, core.row_off, core.col_end, core.row_end))
+            write_png(out, rgb)
+            typer.echo(f"{out}: labels of patch {row},{col}: {graph.n_vertices} vertices, {graph.n_edges} edges")
+            return
     with mosaic:
         if window:
             win = PixelWindow.parse(window)
@@ -123,6 +147,28 @@ def show(
         rgb = render_window(mosaic, win, lines, max_size=max_size, grid=PatchGrid.for_mosaic(mosaic) if grid else None)
     write_png(out, rgb)
     typer.echo(f"{out}: {win.width}x{win.height} px window, {len(lines)} boundaries")
+
+
+@app.command()
+def labels(
+    city: Path = typer.Argument(..., help="A city directory (from `csboundary synth` or `import-topo-boundary`)."),
+    out: Path = typer.Option(..., "--out", help="Output folder for per-patch labels."),
+    core: int = typer.Option(1000, min=16, help="Patch core size, px (paper: 1000)."),
+    margin: int = typer.Option(50, min=0, help="Patch margin on every side, px (paper: 50)."),
+    aux_spacing: int = typer.Option(250, min=0, help="Auxiliary keypoint grid spacing, px (0 = none)."),
+    segmentation_width: int = typer.Option(3, min=1, help="Boundary width in the segmentation label, px."),
+    heat_sigma: float = typer.Option(3.0, min=0.1, help="Gaussian sigma of the keypoint map, px."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """Write every patch's training labels: segmentation, orientation, keypoint map, graph."""
+    from csboundary.data.grid import GridConfig
+    from csboundary.labels.config import LabelConfig
+    from csboundary.labels.writer import write_city_labels
+
+    config = LabelConfig(grid=GridConfig(core, margin), aux_spacing_px=aux_spacing, segmentation_width=segmentation_width, heat_sigma_px=heat_sigma)
+    manifest = write_city_labels(city, out, config, progress=not quiet)
+    c = manifest["counts"]
+    typer.echo(f"{out}: {c['patches']} patches, {c['vertices']} vertices, {c['edges']} edges ({c['corner_edges']} corner) in {manifest['seconds']['total']:.1f} s")
 
 
 @app.command()

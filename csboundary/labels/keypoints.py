@@ -1,0 +1,256 @@
+"""Keypoints of road boundaries (paper Section IV-B), uniquely determined in global coordinates.
+
+Paper: "we ... define pixels whose orientation has large enough differences with adjacent
+pixels as keypoints"; "within each image patch, we define the intersection points of the
+road-boundary and image edges as keypoints"; "we add extra lines to create more intersection
+points as auxiliary keypoints"; corner keypoints "could be gathered keypoints at rounded-corners
+... or isolated keypoints locating at curve road boundaries with sharp corners or gradual
+curvature changes". Each rule below quotes the sentence it implements.
+
+Everything is computed on whole boundaries in mosaic pixels, against global lines (the 1000 px
+grid, the 1100 px expanded edges, a finer auxiliary grid), never per patch, so two patches see
+identical keypoints wherever they overlap.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from csboundary.labels.boundaries import Boundary
+from csboundary.labels.config import LabelConfig
+
+ISOLATED = "isolated"  # a sharp corner, or a gradual curve that has turned enough
+CORNER = "corner"  # an endpoint of a gathered run (rounded corner)
+INTERSECTION = "intersection"  # a crossing with a patch edge or an auxiliary line
+END = "end"  # where an open boundary ends (the edge of the data)
+_PRIORITY = {END: 3, CORNER: 2, INTERSECTION: 1, ISOLATED: 0}
+
+
+@dataclass
+class BoundaryKeypoints:
+    """Keypoints of one boundary as sorted arc lengths ``s``, their kinds, and gathered runs."""
+
+    boundary: Boundary
+    s: np.ndarray
+    kinds: list[str]
+    runs: list[tuple[float, float]] = field(default_factory=list)  # (start, end); end < start wraps a ring
+
+    @property
+    def points(self) -> np.ndarray:
+        return self.boundary.at(self.s)
+
+    def in_run(self, s: float) -> bool:
+        for a, b in self.runs:
+            if (a <= s <= b) if a <= b else (s >= a or s <= b):
+                return True
+        return False
+
+    def stretches(self) -> list[tuple[int, int]]:
+        """Index pairs of consecutive keypoints (with the wrap-around pair on a ring)."""
+        k = len(self.s)
+        pairs = [(i, i + 1) for i in range(k - 1)]
+        if self.boundary.closed and k >= 2:
+            pairs.append((k - 1, 0))
+        return pairs
+
+    def stretch_midpoint(self, i: int, j: int) -> float:
+        a, b = self.s[i], self.s[j]
+        if b < a:  # wraps on a ring
+            length = self.boundary.length
+            return float((a + (b + length - a) / 2) % length)
+        return float((a + b) / 2)
+
+
+def compute_keypoints(boundaries: list[Boundary], config: LabelConfig = LabelConfig()) -> list[BoundaryKeypoints]:
+    """Keypoints of every boundary: curvature (gathered and isolated), intersections, ends."""
+    return [boundary_keypoints(b, config) for b in boundaries]
+
+
+def boundary_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig()) -> BoundaryKeypoints:
+    length = boundary.length
+    candidates: list[tuple[float, str]] = []
+    runs, isolated = curvature_keypoints(boundary, config)
+    for a, b in runs:
+        candidates += [(a, CORNER), (b, CORNER)]
+    candidates += [(s, ISOLATED) for s in isolated]
+    candidates += [(s, INTERSECTION) for s in intersection_keypoints(boundary, config)]
+    if not boundary.closed:
+        candidates += [(0.0, END), (length, END)]
+    s, kinds = _merge(candidates, config.min_separation_px, length if boundary.closed else None)
+    return BoundaryKeypoints(boundary, s, kinds, runs)
+
+
+def _merge(candidates: list[tuple[float, str]], separation: float, ring_length: float | None) -> tuple[np.ndarray, list[str]]:
+    """Keypoints closer than ``separation`` along the boundary are one; the higher kind wins."""
+    if ring_length is not None:
+        candidates = [(s % ring_length, k) for s, k in candidates]
+    candidates.sort(key=lambda c: (c[0], -_PRIORITY[c[1]]))
+    kept: list[list] = []
+    for s, kind in candidates:
+        if kept and s - kept[-1][0] < separation:
+            if _PRIORITY[kind] > _PRIORITY[kept[-1][1]]:
+                kept[-1] = [s, kind]
+            continue
+        kept.append([s, kind])
+    if ring_length is not None and len(kept) > 1 and kept[0][0] + ring_length - kept[-1][0] < separation:
+        last = kept.pop()
+        if _PRIORITY[last[1]] > _PRIORITY[kept[0][1]]:
+            kept[0] = last
+            kept.sort(key=lambda c: c[0])
+    return np.array([k[0] for k in kept], dtype=float), [k[1] for k in kept]
+
+
+# -- curvature ------------------------------------------------------------------------------------
+
+
+def _turning(boundary: Boundary) -> tuple[np.ndarray, np.ndarray, float]:
+    """Resample at ~1 px ("neighbouring pixels") and return (arc lengths, signed turn per sample, step)."""
+    length = boundary.length
+    n = max(int(round(length)), 2)
+    step = length / n
+    if boundary.closed:
+        s = np.arange(n) * step
+        pts = boundary.at(s)
+        before, after = pts - np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0) - pts
+    else:
+        s = np.arange(n + 1) * step
+        pts = boundary.at(s)
+        before = np.vstack([[np.nan, np.nan], pts[1:-1] - pts[:-2], [np.nan, np.nan]])
+        after = np.vstack([[np.nan, np.nan], pts[2:] - pts[1:-1], [np.nan, np.nan]])
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    dot = (before * after).sum(axis=1)
+    turn = np.nan_to_num(np.arctan2(cross, dot))
+    turn[np.abs(turn) < 1e-9] = 0.0  # straight up to rounding
+    return s, turn, step
+
+
+def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal [start, end] index intervals where ``mask`` is True (linear)."""
+    padded = np.concatenate([[False], mask, [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def curvature_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig()) -> tuple[list[tuple[float, float]], list[float]]:
+    """Gathered runs (start, end arc lengths) and isolated curvature keypoints (arc lengths).
+
+    Paper: "pixels whose orientation has large enough differences with adjacent pixels" are
+    keypoints. The turning between 1 px steps is averaged over ``smoothing_px`` steps so that
+    polygonised arcs read as a steady turn; where it exceeds ``turn_rate_deg_per_px`` the
+    boundary is a corner. Runs of one sign closer than ``merge_gap_px`` are one corner; each
+    run's ends are then refined to the first and last step that actually turns.
+    """
+    s, turn, step = _turning(boundary)
+    n = len(s)
+    width = max(1, int(config.smoothing_px))
+    kernel = np.ones(width) / (width * step)
+    if boundary.closed:
+        padded = np.concatenate([turn[-width:], turn, turn[:width]])
+        rate = np.convolve(padded, kernel, mode="same")[width:-width]
+    else:
+        rate = np.convolve(turn, kernel, mode="same")
+    threshold = math.radians(config.turn_rate_deg_per_px)
+
+    # Work in a frame that starts where the boundary is straightest, so no run straddles index 0.
+    shift = int(np.argmin(np.abs(rate))) if boundary.closed else 0
+    order = np.roll(np.arange(n), -shift)
+    turn_o, rate_o = turn[order], rate[order]
+    full_circle = boundary.closed and bool(np.all(np.abs(rate_o) > threshold)) and abs(turn.sum()) > math.pi
+    if full_circle:  # a round island: two half-circle runs
+        half = boundary.length / 2
+        return [(0.0, half), (half, 0.0)], []
+
+    spans: list[tuple[int, int, int]] = []  # (start, end, sign) in the shifted frame
+    for sign in (1, -1):
+        for a, b in _true_runs(sign * rate_o > threshold):
+            spans.append((a, b, sign))
+    spans.sort()
+    merged: list[list[int]] = []
+    gap = config.merge_gap_px / step
+    for a, b, sign in spans:
+        if merged and merged[-1][2] == sign and a - merged[-1][1] <= gap:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b, sign])
+
+    runs: list[tuple[float, float]] = []
+    isolated: list[float] = []
+    reach = width // 2 + 1
+    busy = np.zeros(n, dtype=bool)
+    for a, b, sign in merged:
+        lo, hi = max(0, a - reach), min(n - 1, b + reach)
+        idx = np.arange(lo, hi + 1)
+        turning = idx[sign * turn_o[idx] > 1e-6]
+        if len(turning) == 0:
+            continue
+        a, b = int(turning[0]), int(turning[-1])
+        total = float(turn_o[a : b + 1].sum())
+        if abs(total) < math.radians(config.min_corner_turn_deg):
+            continue
+        busy[a : b + 1] = True
+        if (b - a) * step >= config.gather_min_length_px:
+            runs.append((float(s[order[a]]), float(s[order[b]])))
+        else:  # "isolated keypoints locating at ... sharp corners": the turn-weighted centre
+            w = np.abs(turn_o[a : b + 1])
+            centre = float(np.sum((np.arange(a, b + 1)) * w) / w.sum())
+            isolated.append(float((s[order[0]] + centre * step) % (boundary.length if boundary.closed else np.inf)))
+
+    # "isolated keypoints locating at curve road boundaries with ... gradual curvature changes":
+    # outside corners, one keypoint each time the boundary has turned gradual_turn_deg since the
+    # last curvature keypoint.
+    limit = math.radians(config.gradual_turn_deg)
+    acc = 0.0
+    for i in range(n):
+        if busy[i]:
+            acc = 0.0
+            continue
+        acc += turn_o[i]
+        if abs(acc) >= limit:
+            isolated.append(float(s[order[i]]))
+            acc = 0.0
+    return runs, isolated
+
+
+# -- intersections -------------------------------------------------------------------------------
+
+
+def keypoint_lines(lo: float, hi: float, config: LabelConfig = LabelConfig()) -> np.ndarray:
+    """Global line positions (one axis) between ``lo`` and ``hi``: patch core edges (k*core),
+    expanded edges (k*core +- margin) and auxiliary lines (k*aux_spacing)."""
+    core, margin, aux = config.grid.core, config.grid.margin, config.aux_spacing_px
+    k_core = np.arange(math.floor((lo - margin) / core) - 1, math.ceil((hi + margin) / core) + 2) * core
+    values = [k_core, k_core - margin, k_core + margin]
+    if aux > 0:
+        values.append(np.arange(math.floor(lo / aux) - 1, math.ceil(hi / aux) + 2) * aux)
+    v = np.unique(np.concatenate(values).astype(float))
+    return v[(v >= lo) & (v <= hi)]
+
+
+def intersection_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig()) -> list[float]:
+    """Arc lengths where the boundary meets a global keypoint line (either axis).
+
+    Paper: "we define the intersection points of the road-boundary and image edges as
+    keypoints" (edges of this and the adjacent patches) and "we add extra lines to create more
+    intersection points as auxiliary keypoints".
+    """
+    pts, cum = boundary.points, boundary.cumulative
+    out: list[float] = []
+    for axis in (0, 1):
+        x = pts[:, axis]
+        lines = keypoint_lines(float(x.min()), float(x.max()), config)
+        if len(lines) == 0:
+            continue
+        x0, x1 = x[:-1], x[1:]
+        lo, hi = np.minimum(x0, x1), np.maximum(x0, x1)
+        first = np.searchsorted(lines, lo, side="left")
+        last = np.searchsorted(lines, hi, side="right")
+        for i in np.flatnonzero(last > first):
+            if x1[i] == x0[i]:
+                continue  # runs along the line: its ends are where it meets the crossing lines
+            v = lines[first[i] : last[i]]
+            t = (v - x0[i]) / (x1[i] - x0[i])
+            out.extend((cum[i] + t * (cum[i + 1] - cum[i])).tolist())
+    return out
