@@ -198,3 +198,19 @@ def test_label_files_round_trip_and_show(tmp_path):
     result = run("show", str(tmp_path / "c"), "--labels", str(tmp_path / "lab"), "--patch", "1,1", "--out", str(tmp_path / "l.png"))
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "l.png").stat().st_size > 1000
+
+
+def test_pixel_chain_ground_truth_gives_the_same_corners_after_import_simplification():
+    """Topo-boundary labels are chains of every pixel; after the importer's simplification the
+    rounded square still gives four gathered corners and no spurious keypoints."""
+    from csboundary.data.topo_boundary import pixels_to_line
+
+    radius = 40.0
+    poly = _open(box(130, 130, 730, 730), radius)[0]
+    dense, _ = __import__("csboundary.labels.rasterize", fromlist=["dense_samples"]).dense_samples(np.asarray(poly.exterior.coords))
+    pixels = np.floor(dense).astype(int)
+    keep = np.concatenate([[True], np.any(np.diff(pixels, axis=0) != 0, axis=1)])
+    chain = pixels[keep][:, ::-1]  # [row, col] like dense_seq
+    line = pixels_to_line(Affine.identity(), chain)
+    runs, isolated = curvature_keypoints(Boundary(np.asarray(line.coords), True), NO_AUX)
+    assert len(runs) == 4 and isolated == []

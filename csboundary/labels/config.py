@@ -21,7 +21,8 @@ class LabelConfig:
     #   neighbouring pixels": 0.4 deg/px = radius < 143 px (22 m at 0.152 m/px), above every
     #   curb return (3-12 m) and below gently curving streets
     smoothing_px: int = 9  # turning is averaged over this many 1 px steps (polygonised arcs)
-    merge_gap_px: float = 16.0  # same-sign runs closer than this are one corner (coarse arcs)
+    merge_gap_px: float = 24.0  # same-sign runs closer than this are one corner (coarse or
+    #   simplified arcs: a 0.75 px Douglas-Peucker of a 12 m curb return has ~20 px chords)
     min_corner_turn_deg: float = 10.0  # a run turning less than this in total is noise
     gather_min_length_px: float = 12.0  # runs at least this long are gathered keypoints
     gradual_turn_deg: float = 20.0  # a gradual curve gets an isolated keypoint per this much turning

@@ -127,6 +127,29 @@ def _turning(boundary: Boundary) -> tuple[np.ndarray, np.ndarray, float]:
     return s, turn, step
 
 
+def _headings(boundary: Boundary, s: np.ndarray, half: float) -> np.ndarray:
+    """Unwrapped direction of the chord from s - half to s + half at every arc length ``s``."""
+    if boundary.closed:
+        length = boundary.length
+        ahead, behind = boundary.at((s + half) % length), boundary.at((s - half) % length)
+    else:
+        ahead, behind = boundary.at(s + half), boundary.at(s - half)
+    d = ahead - behind
+    return np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+
+
+def _middle_of_longest(mask: np.ndarray) -> int:
+    """Index in the middle of the longest cyclic stretch where ``mask`` is True (0 if none)."""
+    if not mask.any():
+        return 0
+    if mask.all():
+        return 0
+    start = int(np.argmin(mask))  # a False index: no True stretch wraps past it
+    rolled = np.roll(mask, -start)
+    a, b = max(_true_runs(rolled), key=lambda r: r[1] - r[0])
+    return (start + (a + b) // 2) % len(mask)
+
+
 def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """Maximal [start, end] index intervals where ``mask`` is True (linear)."""
     padded = np.concatenate([[False], mask, [False]])
@@ -154,27 +177,25 @@ def curvature_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig())
         rate = np.convolve(turn, kernel, mode="same")
     threshold = math.radians(config.turn_rate_deg_per_px)
 
-    # Work in a frame that starts where the boundary is straightest, so no run straddles index 0.
-    shift = int(np.argmin(np.abs(rate))) if boundary.closed else 0
-    order = np.roll(np.arange(n), -shift)
-    turn_o, rate_o = turn[order], rate[order]
-    full_circle = boundary.closed and bool(np.all(np.abs(rate_o) > threshold)) and abs(turn.sum()) > math.pi
-    if full_circle:  # a round island: two half-circle runs
+    calm = np.abs(rate) <= threshold
+    if boundary.closed and not calm.any() and abs(turn.sum()) > math.pi:  # a round island
         half = boundary.length / 2
         return [(0.0, half), (half, 0.0)], []
+    # On a ring, work in a frame that starts in the middle of the longest calm stretch, so that
+    # no corner straddles index 0.
+    shift = _middle_of_longest(calm) if boundary.closed else 0
+    order = np.roll(np.arange(n), -shift)
+    turn_o, rate_o = turn[order], rate[order]
 
-    spans: list[tuple[int, int, int]] = []  # (start, end, sign) in the shifted frame
-    for sign in (1, -1):
-        for a, b in _true_runs(sign * rate_o > threshold):
-            spans.append((a, b, sign))
-    spans.sort()
-    merged: list[list[int]] = []
+    merged: list[list[int]] = []  # (start, end, sign) in the shifted frame
     gap = config.merge_gap_px / step
-    for a, b, sign in spans:
-        if merged and merged[-1][2] == sign and a - merged[-1][1] <= gap:
-            merged[-1][1] = max(merged[-1][1], b)
-        else:
-            merged.append([a, b, sign])
+    for sign in (1, -1):  # merged per sign, so a blip of the other sign cannot split a corner
+        for a, b in _true_runs(sign * rate_o > threshold):
+            if merged and merged[-1][2] == sign and a - merged[-1][1] <= gap:
+                merged[-1][1] = b
+            else:
+                merged.append([a, b, sign])
+    merged.sort()
 
     runs: list[tuple[float, float]] = []
     isolated: list[float] = []
@@ -199,18 +220,23 @@ def curvature_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig())
             isolated.append(float((s[order[0]] + centre * step) % (boundary.length if boundary.closed else np.inf)))
 
     # "isolated keypoints locating at curve road boundaries with ... gradual curvature changes":
-    # outside corners, one keypoint each time the boundary has turned gradual_turn_deg since the
-    # last curvature keypoint.
+    # outside corners, one keypoint each time the boundary's direction (a chord over
+    # +-smoothing_px/2, robust to polygonised or pixel-chain input) has turned gradual_turn_deg
+    # since the last curvature keypoint.
     limit = math.radians(config.gradual_turn_deg)
-    acc = 0.0
+    half = max(1.0, width / 2)
+    heading = _headings(boundary, s[order], half)
+    near = int(math.ceil(half / step)) + 1  # chords reaching into a corner still see it turn
+    busy = np.convolve(busy.astype(int), np.ones(2 * near + 1, dtype=int), mode="same") > 0
+    reference = None
     for i in range(n):
         if busy[i]:
-            acc = 0.0
-            continue
-        acc += turn_o[i]
-        if abs(acc) >= limit:
+            reference = None
+        elif reference is None:
+            reference = heading[i]
+        elif abs(heading[i] - reference) >= limit:
             isolated.append(float(s[order[i]]))
-            acc = 0.0
+            reference = heading[i]
     return runs, isolated
 
 
