@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import cv2
 import numpy as np
@@ -219,7 +218,8 @@ def test_ring_band_does_not_crash_and_gives_two_ends():
     assert graph.edge_lengths()[0] == pytest.approx(math.pi * 20.0, rel=0.15)  # about half of it
 
 
-def test_large_map_with_many_pieces_is_fast():
+def test_large_map_with_many_pieces_finds_every_piece():
+    """(Speed is measured in benchmarks/vertex_extraction_speed.py, not here.)"""
     seeds = np.full((1100, 1100), 255, np.uint8)  # 0 where heat is 1, as keypoint_heat seeds it
     cells = [(35 + 70 * i, 35 + 70 * j) for j in range(16) for i in range(16)][:150]  # 70 px apart
     n_blobs = 100
@@ -230,10 +230,6 @@ def test_large_map_with_many_pieces_is_fast():
             cv2.ellipse(seeds, (x - 12, y - 12), (25, 25), 0, 0, 90, 0, 1)
     distance = cv2.distanceTransform(seeds, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     prob = np.exp(-(distance**2) / (2 * SIGMA**2)).astype(np.float32)
-    extract_vertices(prob)  # warm-up
-    start = time.perf_counter()
     graph = extract_vertices(prob)
-    elapsed = time.perf_counter() - start
     assert graph.vertex_kinds.count("isolated") == n_blobs
     assert graph.n_edges == len(cells) - n_blobs and graph.n_vertices == n_blobs + 2 * graph.n_edges
-    assert elapsed < 1.5  # about 0.1 s; generous for slow machines
