@@ -172,6 +172,44 @@ def labels(
 
 
 @app.command()
+def train(
+    model: str = typer.Argument(..., help="fpn or afanet."),
+    config: Path = typer.Option(..., "--config", help="Training config JSON (see configs/)."),
+    out: Path = typer.Option(..., "--out", help="Run folder: checkpoints, train.log."),
+    resume: Optional[Path] = typer.Option(None, help="Checkpoint (*-last.pt) to resume from."),
+    steps: Optional[int] = typer.Option(None, min=1, help="Override the config's step count."),
+    fpn_weights: Optional[Path] = typer.Option(None, help="AfANet only: the trained FPN (overrides the config)."),
+    device: str = typer.Option("auto", help="auto | cpu | cuda."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """Train the FPN or AfANet on synthetic cities (built on first use under the config's cache)."""
+    import json as _json
+
+    from csboundary.models.device import resolve_device
+    from csboundary.models.train import TrainConfig, train_afanet, train_fpn
+
+    if model not in ("fpn", "afanet"):
+        raise typer.BadParameter("model must be fpn or afanet")
+    if not config.exists():
+        raise InputError(config, "file not found")
+    try:
+        cfg = TrainConfig.from_file(config)
+    except (ValueError, TypeError) as exc:
+        raise InputError(config, f"invalid training config ({exc})") from exc
+    if cfg.model != model:
+        raise InputError(config, f"is a {cfg.model} config, not {model}")
+    if steps is not None:
+        cfg.steps = steps
+    if fpn_weights is not None:
+        cfg.fpn_weights = str(fpn_weights)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(_json.dumps(cfg.to_dict(), indent=2) + "\n")
+    runner = train_fpn if model == "fpn" else train_afanet
+    weights = runner(cfg, out, resolve_device(device), str(resume) if resume else None, progress=not quiet)
+    typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
+
+
+@app.command()
 def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),
     seed: int = typer.Option(0, min=0, help="City seed (test split)."),
@@ -217,3 +255,4 @@ def main() -> None:
     except KeyboardInterrupt:
         typer.echo("interrupted: no partial file was left under a final name", err=True)
         sys.exit(130)
+

@@ -1,0 +1,326 @@
+"""Training loops for the FPN and AfANet (paper V-B), nanoGPT-style: one file, plain loops.
+
+FPN: random crops of the train city, Adam (paper: lr 1e-3, decay 1e-4), BCE on the keypoint
+heat and the segmentation with ``pos_weight`` against class imbalance (boundary pixels are ~3%
+of a crop, keypoint peaks far fewer). AfANet: "we first pre-train the network with ground-truth
+graph vertices, and then train AfANet with the graph vertices extracted from predicted keypoint
+maps": stage ``gt`` then stage ``pred``, BCE on the adjacency label of each vertex set, positives
+weighted by the negative/positive ratio (capped). Seeded; validation every N steps on the valid
+city; checkpoints hold config, code version and validation metrics and resume exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
+
+from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
+from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
+from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.models.training_data import CitySpec, TrainingCity, augment
+from csboundary.pipeline.maps import predict_mosaic_maps
+
+
+@dataclass
+class TrainConfig:
+    """Everything a run depends on; stored in every checkpoint and in the log."""
+
+    model: str = "fpn"  # fpn | afanet
+    seed: int = 0
+    cache: str = "data/cities"
+    train_city: CitySpec = field(default_factory=CitySpec)
+    valid_city: CitySpec = field(default_factory=lambda: CitySpec(split="valid", seed=0, tiles=(1, 1)))
+    steps: int = 2500
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    validate_every: int = 250
+    validation_samples: int = 8
+    # fpn
+    fpn: dict = field(default_factory=dict)  # FPNConfig overrides
+    crop: int = 256
+    batch: int = 4
+    pos_weight_keypoint: float = 20.0
+    pos_weight_segmentation: float = 10.0
+    # afanet
+    afanet: dict = field(default_factory=dict)  # AfANetConfig overrides
+    fpn_weights: str = ""  # the trained FPN whose maps and vertices AfANet learns from
+    window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
+    gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
+    vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1
+    max_vertices: int = 160
+    max_pos_weight: float = 30.0
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> "TrainConfig":
+        data = json.loads(Path(path).read_text())
+        return cls.from_dict(data)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TrainConfig":
+        data = dict(data)
+        for key in ("train_city", "valid_city"):
+            if key in data:
+                spec = dict(data[key])
+                if "tiles" in spec:
+                    spec["tiles"] = tuple(spec["tiles"])
+                data[key] = CitySpec(**spec)
+        unknown = set(data) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown training option(s): {', '.join(sorted(unknown))}")
+        return cls(**data)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+class RunLog:
+    """Append-only JSON-lines log (one line per validation and per milestone) plus stdout."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+
+    def write(self, **record: Any) -> None:
+        record = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), **record}
+        with open(self.path, "a") as fh:
+            fh.write(json.dumps(record) + "\n")
+        tqdm.write(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in record.items()))
+
+
+# -- FPN ----------------------------------------------------------------------------------------------
+
+
+def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, config: TrainConfig) -> torch.Tensor:
+    weights = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
+    loss = F.binary_cross_entropy_with_logits(logits, target, pos_weight=weights, reduction="none")
+    mask = valid[:, None].to(loss.dtype)
+    return (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
+
+
+def _fpn_batch(city: TrainingCity, rng: np.random.Generator, config: TrainConfig, train: bool):
+    images, targets, valids = [], [], []
+    for _ in range(config.batch):
+        image, target, valid = city.fpn_sample(city.random_window(rng, config.crop))
+        if train:
+            image, target, valid = augment(rng, image, target, valid)
+        images.append(image)
+        targets.append(target)
+        valids.append(valid)
+    return torch.from_numpy(np.stack(images)), torch.from_numpy(np.stack(targets)), torch.from_numpy(np.stack(valids))
+
+
+@torch.no_grad()
+def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, float]:
+    model.eval()
+    losses, tp, fp, fn = [], 0, 0, 0
+    for image, target, valid in batches:
+        logits = model(image.to(device))
+        losses.append(float(fpn_loss(logits, target.to(device), valid.to(device), config)))
+        pred = (torch.sigmoid(logits[:, 1]) > 0.5).cpu() & valid
+        truth = (target[:, 1] > 0.5) & valid
+        tp += int((pred & truth).sum())
+        fp += int((pred & ~truth).sum())
+        fn += int((~pred & truth).sum())
+    model.train()
+    precision, recall = tp / max(tp + fp, 1), tp / max(tp + fn, 1)
+    return {"val_loss": float(np.mean(losses)), "val_seg_precision": precision, "val_seg_recall": recall,
+            "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+
+
+def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+    seed_everything(config.seed)
+    log = RunLog(out_dir / "train.log")
+    train_city = TrainingCity(config.train_city.ensure(config.cache))
+    valid_city = TrainingCity(config.valid_city.ensure(config.cache))
+    model_config = FPNConfig.from_dict(config.fpn) if config.fpn else FPNConfig()
+    model = FPN(model_config).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    rng = np.random.default_rng(config.seed)
+    valid_rng = np.random.default_rng(config.seed + 1)
+    valid_batches = [_fpn_batch(valid_city, valid_rng, config, train=False) for _ in range(config.validation_samples)]
+    step, history = _maybe_resume(resume, "fpn", model, optimizer)
+    if step:
+        rng = np.random.default_rng([config.seed, step])
+    log.write(event="start", model="fpn", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    model.train()
+    bar = tqdm(total=config.steps, initial=step, desc="train fpn", unit="step", disable=not progress)
+    while step < config.steps:
+        image, target, valid = _fpn_batch(train_city, rng, config, train=True)
+        lr = _cosine_lr(config, step)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        loss = fpn_loss(model(image.to(device)), target.to(device), valid.to(device), config)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        step += 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{loss.item():.4f}")
+        if step % config.validate_every == 0 or step == config.steps:
+            metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **validate_fpn(model, valid_batches, device, config)}
+            history.append(metrics)
+            log.write(event="validate", **metrics)
+            _save(out_dir / "fpn-last.pt", "fpn", model, model_config, config, step, history, optimizer)
+    bar.close()
+    final = out_dir / "fpn.pt"
+    _save(final, "fpn", model, model_config, config, step, history, None)
+    log.write(event="done", step=step, weights=str(final))
+    return final
+
+
+# -- AfANet -------------------------------------------------------------------------------------------
+
+
+def adjacency_loss(logits: torch.Tensor, label: torch.Tensor, max_pos_weight: float) -> torch.Tensor:
+    """BCE over the off-diagonal pairs, positives weighted by the negative/positive ratio."""
+    m = logits.shape[0]
+    off = ~torch.eye(m, dtype=torch.bool, device=logits.device)
+    positives = label[off].sum()
+    negatives = off.sum() - positives
+    pos_weight = (negatives / positives.clamp(min=1)).clamp(1.0, max_pos_weight)
+    return F.binary_cross_entropy_with_logits(logits[off], label[off], pos_weight=pos_weight)
+
+
+def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: str, config: TrainConfig, vertex_config: VertexConfig):
+    tensor = city.afanet_tensor(window)
+    if stage == "gt":
+        vertices = city.gt_vertices(window)
+        vertices = vertices + rng.normal(0, config.vertex_jitter_px, vertices.shape)
+    else:
+        graph = extract_vertices(tensor[4], vertex_config)
+        vertices = graph.vertices + np.array([window.col_off, window.row_off])
+    if len(vertices) > config.max_vertices:
+        vertices = vertices[np.sort(rng.choice(len(vertices), config.max_vertices, replace=False))]
+    label = city.adjacency(vertices, window)
+    local = vertices - np.array([window.col_off, window.row_off])
+    return torch.from_numpy(tensor), torch.from_numpy(local.astype(np.float32)), torch.from_numpy(label.astype(np.float32))
+
+
+@torch.no_grad()
+def validate_afanet(model: AfANet, samples, device) -> dict[str, float]:
+    model.eval()
+    tp = fp = fn = 0
+    losses = []
+    for tensor, vertices, label in samples:
+        if len(vertices) < 2:
+            continue
+        logits = model(tensor.to(device), vertices.to(device))
+        losses.append(float(adjacency_loss(logits, label.to(device), 30.0)))
+        edges = set(edges_from_adjacency(model.adjacency(tensor.to(device), vertices.to(device))))
+        truth = {(int(u), int(v)) for u, v in zip(*np.nonzero(np.triu(label.numpy(), 1)))}
+        tp += len(edges & truth)
+        fp += len(edges - truth)
+        fn += len(truth - edges)
+    model.train()
+    precision, recall = tp / max(tp + fp, 1), tp / max(tp + fn, 1)
+    return {"val_loss": float(np.mean(losses)) if losses else float("nan"), "val_edge_precision": precision,
+            "val_edge_recall": recall, "val_edge_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+
+
+def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+    seed_everything(config.seed)
+    log = RunLog(out_dir / "train.log")
+    if not config.fpn_weights:
+        raise ValueError("AfANet training needs fpn_weights: the trained FPN whose maps it reads")
+    fpn_payload = load_checkpoint(config.fpn_weights, ("fpn", "bundle"), map_location=device)
+    fpn = FPN(FPNConfig.from_dict(fpn_payload["fpn_config"])).to(device)
+    fpn.load_state_dict(fpn_payload["fpn"])
+    cities = {}
+    for name, spec in (("train", config.train_city), ("valid", config.valid_city)):
+        city = TrainingCity(spec.ensure(config.cache))
+        city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)
+        cities[name] = city
+    del fpn
+    model_config = AfANetConfig.from_dict(config.afanet) if config.afanet else AfANetConfig()
+    model = AfANet(model_config).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    vertex_config = VertexConfig()
+    valid_rng = np.random.default_rng(config.seed + 1)
+    valid_windows = [cities["valid"].random_window(valid_rng, config.window) for _ in range(config.validation_samples)]
+    valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
+    step, history = _maybe_resume(resume, "afanet", model, optimizer)
+    rng = np.random.default_rng([config.seed, step])
+    log.write(event="start", model="afanet", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    model.train()
+    bar = tqdm(total=config.steps, initial=step, desc="train afanet", unit="step", disable=not progress)
+    while step < config.steps:
+        stage = "gt" if step < config.gt_steps else "pred"
+        tensor, vertices, label = _afanet_sample(cities["train"], cities["train"].random_window(rng, config.window), rng, stage, config, vertex_config)
+        step += 1
+        bar.update(1)
+        if len(vertices) >= 2:
+            lr = _cosine_lr(config, step)
+            for group in optimizer.param_groups:
+                group["lr"] = lr
+            loss = adjacency_loss(model(tensor.to(device), vertices.to(device)), label.to(device), config.max_pos_weight)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            bar.set_postfix(loss=f"{loss.item():.4f}", stage=stage, m=len(vertices))
+        if step % config.validate_every == 0 or step == config.steps:
+            metrics = {"step": step, "stage": stage}
+            for name, samples in valid_sets.items():
+                metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device).items()})
+            history.append(metrics)
+            log.write(event="validate", **metrics)
+            _save(out_dir / "afanet-last.pt", "afanet", model, model_config, config, step, history, optimizer)
+    bar.close()
+    final = out_dir / "afanet.pt"
+    _save(final, "afanet", model, model_config, config, step, history, None)
+    log.write(event="done", step=step, weights=str(final))
+    return final
+
+
+# -- shared -------------------------------------------------------------------------------------------
+
+
+def _cosine_lr(config: TrainConfig, step: int) -> float:
+    """Short linear warm-up, then cosine decay to 5% of the base rate."""
+    warm = max(1, config.steps // 50)
+    if step < warm:
+        return config.lr * (step + 1) / warm
+    t = (step - warm) / max(1, config.steps - warm)
+    return config.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, t))))
+
+
+def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer) -> None:
+    content = {
+        kind: model.state_dict(),
+        f"{kind}_config": model_config.to_dict(),
+        "train_config": config.to_dict(),
+        "step": step,
+        "validation": history,
+    }
+    if optimizer is not None:
+        content["optimizer"] = optimizer.state_dict()
+        content["torch_rng"] = torch.get_rng_state()
+    save_checkpoint(path, kind, **content)
+
+
+def _maybe_resume(resume: str | None, kind: str, model, optimizer) -> tuple[int, list]:
+    if not resume:
+        return 0, []
+    payload = load_checkpoint(resume, (kind,))
+    model.load_state_dict(payload[kind])
+    if "optimizer" in payload:
+        optimizer.load_state_dict(payload["optimizer"])
+    if "torch_rng" in payload:
+        torch.set_rng_state(payload["torch_rng"])
+    return int(payload["step"]), list(payload.get("validation", []))

@@ -1,0 +1,107 @@
+"""Training samples drawn from synthetic (or imported) cities, labels computed on the fly.
+
+Labels are cheap to compute for any window (see :mod:`csboundary.labels`), so samples are random
+windows anywhere in a city, not fixed grid patches: more variety for the same imagery.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from csboundary.data import city as layout
+from csboundary.data.ground_truth import read_ground_truth
+from csboundary.data.raster import Mosaic
+from csboundary.data.windows import PixelWindow
+from csboundary.labels.adjacency import adjacency_label
+from csboundary.labels.config import LabelConfig
+from csboundary.labels.patch_graph import window_graph
+from csboundary.labels.rasterize import keypoint_heat, segmentation_label
+from csboundary.labels.writer import CityLabels
+
+
+@dataclass(frozen=True)
+class CitySpec:
+    """A synthetic city by its recipe; built under ``cache`` on first use."""
+
+    split: str = "train"
+    seed: int = 0
+    tiles: tuple[int, int] = (2, 2)
+    tile_size: int = 5000
+
+    def path(self, cache: str | Path) -> Path:
+        rows, cols = self.tiles
+        return Path(cache) / f"{self.split}-s{self.seed}-{rows}x{cols}-{self.tile_size}"
+
+    def ensure(self, cache: str | Path) -> Path:
+        from csboundary.data.synth.city import synthesize_city
+        from csboundary.data.synth.config import SynthConfig
+
+        path = self.path(cache)
+        if not layout.is_city_dir(path):
+            synthesize_city(path, self.seed, self.split, tuple(self.tiles), SynthConfig(tile_size=self.tile_size))
+        return path
+
+
+class TrainingCity:
+    """A city's imagery and global label geometry, with samplers for both networks."""
+
+    def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig()):
+        self.path = Path(city_dir)
+        self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
+        gt = read_ground_truth(layout.ground_truth_path(city_dir))
+        if gt.crs is not None and self.mosaic.crs is not None and gt.crs != self.mosaic.crs:
+            gt = gt.to_crs(self.mosaic.crs)
+        self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
+        self.config = config
+        self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
+
+    def random_window(self, rng: np.random.Generator, size: int) -> PixelWindow:
+        col = int(rng.integers(0, max(1, self.mosaic.width - size + 1)))
+        row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
+        return PixelWindow(col, row, size, size)
+
+    def fpn_sample(self, window: PixelWindow) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Image (4, s, s) float32 in [0, 1]; targets (2, s, s): keypoint heat, segmentation; valid (s, s)."""
+        read = self.mosaic.read(window)
+        lab = self.labels
+        heat = keypoint_heat(lab.keypoints, lab.bounds, window, self.config.heat_sigma_px)
+        seg = segmentation_label(lab.boundaries, lab.bounds, window, self.config.segmentation_width)
+        return read.data.astype(np.float32) / 255.0, np.stack([heat, seg.astype(np.float32)]), read.valid
+
+    def gt_vertices(self, window: PixelWindow) -> np.ndarray:
+        """Ground-truth keypoints inside ``window`` as global pixel coordinates (M, 2)."""
+        graph, _ = window_graph(self.labels.keypoints, self.labels.bounds, window)
+        return graph.vertices + np.array([window.col_off, window.row_off])
+
+    def afanet_tensor(self, window: PixelWindow) -> np.ndarray:
+        """The 6-channel input of AfANet: image bands and the FPN probability maps, (6, s, s)."""
+        if self.maps is None:
+            raise RuntimeError("predict the city's FPN maps before sampling AfANet inputs")
+        read = self.mosaic.read(window)
+        part = window.intersection(self.mosaic.window)
+        maps = np.zeros((2, window.height, window.width), np.float32)
+        if part is not None:
+            rows, cols = part.slices()
+            lrows, lcols = part.relative_to(window).slices()
+            maps[:, lrows, lcols] = self.maps[:, rows, cols]
+        return np.concatenate([read.data.astype(np.float32) / 255.0, maps])
+
+    def adjacency(self, vertices: np.ndarray, window: PixelWindow) -> np.ndarray:
+        lab = self.labels
+        return adjacency_label(vertices, lab.boundaries, lab.bounds, window, self.config.snap_tolerance_px)
+
+
+def augment(rng: np.random.Generator, *arrays: np.ndarray) -> list[np.ndarray]:
+    """The same random flip / 90-degree rotation applied to every (..., h, w) array."""
+    k = int(rng.integers(4))
+    flip = bool(rng.integers(2))
+    out = []
+    for a in arrays:
+        a = np.rot90(a, k, axes=(-2, -1))
+        if flip:
+            a = a[..., ::-1]
+        out.append(np.ascontiguousarray(a))
+    return out

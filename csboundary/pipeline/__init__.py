@@ -1,0 +1,1 @@
+"""Running the trained models over patches and cities."""

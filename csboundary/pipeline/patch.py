@@ -1,0 +1,85 @@
+"""One patch, end to end: FPN maps -> vertices -> AfANet adjacency -> graph (paper Alg. 1 body).
+
+The returned graph has the extracted vertices; its edges are the corner edges of gathered runs
+(kind ``corner``, with the skeleton polyline, score 1) and the AfANet edges (kind ``normal``,
+score = symmetric adjacency probability).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
+from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
+from csboundary.models.checkpoint import load_checkpoint
+from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.pipeline.maps import image_tensor, predict_probabilities
+
+SHIPPED_WEIGHTS = "csboundary-synthetic.pt"
+
+
+def shipped_weights() -> Path:
+    """Path of the weights shipped inside the package (trained by ``csboundary train``)."""
+    return Path(str(resources.files("csboundary") / "weights" / SHIPPED_WEIGHTS))
+
+
+@dataclass
+class PatchPredictor:
+    fpn: FPN
+    afanet: AfANet
+    device: torch.device
+    vertices: VertexConfig = field(default_factory=VertexConfig)
+    edge_threshold: float = 0.5
+    max_degree: int | None = 2
+
+    @classmethod
+    def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
+        """From a bundle (both models; the shipped one by default), or an AfANet checkpoint plus
+        ``fpn_weights``."""
+        path = Path(weights) if weights else shipped_weights()
+        payload = load_checkpoint(path, ("bundle", "afanet"), map_location=device)
+        fpn_payload = payload if payload["kind"] == "bundle" else load_checkpoint(fpn_weights or payload["train_config"]["fpn_weights"], ("fpn", "bundle"), map_location=device)
+        fpn = FPN(FPNConfig.from_dict(fpn_payload["fpn_config"])).to(device).eval()
+        fpn.load_state_dict(fpn_payload["fpn"])
+        afanet = AfANet(AfANetConfig.from_dict(payload["afanet_config"])).to(device).eval()
+        afanet.load_state_dict(payload["afanet"])
+        settings = payload.get("inference", {})
+        return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2))
+
+    def maps(self, image: np.ndarray) -> np.ndarray:
+        return predict_probabilities(self.fpn, image, self.device)
+
+    @torch.no_grad()
+    def graph(self, image: np.ndarray, maps: np.ndarray | None = None) -> BoundaryGraph:
+        """Graph of one patch (pixel coordinates of ``image``); ``maps`` when already stitched."""
+        if maps is None:
+            maps = self.maps(image)
+        found = extract_vertices(maps[0], self.vertices)
+        m = found.n_vertices
+        corner = [tuple(int(x) for x in e) for e in found.edges]
+        polylines = {tuple(sorted(e)): found.edge_polylines[k] for k, e in enumerate(corner)} if found.edge_polylines else {}
+        if m >= 2:
+            tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(maps).to(self.device)], dim=0)
+            vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
+            probs = self.afanet.adjacency(tensor, vertices).cpu()
+            edges = edges_from_adjacency(probs, self.edge_threshold, self.max_degree, fixed=corner)
+        else:
+            probs, edges = torch.zeros((m, m)), [tuple(sorted(e)) for e in corner]
+        kinds, lines, scores = [], [], []
+        for u, v in edges:
+            line = polylines.get((u, v))
+            if line is not None:
+                line = np.asarray(line)
+                if np.linalg.norm(line[0] - found.vertices[u]) > np.linalg.norm(line[0] - found.vertices[v]):
+                    line = line[::-1]
+            kinds.append("corner" if line is not None else "normal")
+            lines.append(line)
+            scores.append(1.0 if line is not None else float(probs[u, v]))
+        return BoundaryGraph(found.vertices, np.array(edges, dtype=np.int64).reshape(-1, 2), vertex_kinds=found.vertex_kinds,
+                             edge_kinds=kinds, edge_polylines=lines, edge_scores=np.array(scores))
