@@ -256,3 +256,6 @@ def main() -> None:
         typer.echo("interrupted: no partial file was left under a final name", err=True)
         sys.exit(130)
 
+
+from csboundary.cli.evaluate import evaluate  # noqa: E402
+app.command()(evaluate)

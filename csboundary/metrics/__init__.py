@@ -1,0 +1,92 @@
+"""Evaluation of road-boundary graphs (paper Section V-C); definitions in docs/metrics.md.
+
+Pixel level: relaxed precision, recall and F1 at tau = 2, 5, 10 px. Topology: APLS in two named
+variants (``paper``, ``symmetric``) and TLTS on the paper's pairs. City scale scores whole
+graphs; patch scale averages over the 1000 px patch cores. Every random choice comes from a
+seeded ``numpy`` generator: the same seed gives bit-identical results.
+
+All functions take :class:`~csboundary.graph.BoundaryGraph` objects in one common pixel frame
+(:mod:`csboundary.metrics.io` loads files into one) and put the prediction first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.metrics.aggregate import evaluate_city, evaluate_patches, metric_names
+from csboundary.metrics.apls import VARIANTS, SymmetricApls, apls_from_pairs, paper_pairs, symmetric_apls
+from csboundary.metrics.config import MetricConfig
+from csboundary.metrics.pixel import rasterize, relaxed_scores
+from csboundary.metrics.sampling import Segments, common_origin, flatten, resample
+from csboundary.metrics.tlts import TltsResult, tlts_from_pairs
+
+__all__ = [
+    "MetricConfig",
+    "VARIANTS",
+    "SymmetricApls",
+    "TltsResult",
+    "apls",
+    "apls_paper",
+    "apls_symmetric",
+    "evaluate",
+    "evaluate_city",
+    "evaluate_patches",
+    "metric_names",
+    "pixel_scores",
+    "tlts",
+]
+
+
+def _segments(pred: BoundaryGraph, gt: BoundaryGraph) -> tuple[Segments, Segments]:
+    pred_seg, gt_seg = flatten(pred), flatten(gt)
+    origin = common_origin(pred_seg, gt_seg)
+    return pred_seg.shifted(origin), gt_seg.shifted(origin)
+
+
+def pixel_scores(pred: BoundaryGraph, gt: BoundaryGraph, taus=MetricConfig().taus) -> dict[float, tuple[float, float, float]]:
+    """``{tau: (precision, recall, f1)}`` of the rasterised graphs."""
+    pred_seg, gt_seg = _segments(pred, gt)
+    return relaxed_scores(rasterize(pred_seg), rasterize(gt_seg), taus)
+
+
+def apls_paper(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> float:
+    """APLS as Topo-boundary / csBoundary define it (seeded; nan if the ground truth gives no pair)."""
+    pred_seg, gt_seg = _segments(pred, gt)
+    pairs = paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
+    return apls_from_pairs(pairs)
+
+
+def apls_symmetric(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> SymmetricApls:
+    """SpaceNet-style APLS: both directions and their harmonic mean."""
+    pred_seg, gt_seg = _segments(pred, gt)
+    rng = np.random.default_rng(seed)
+    return symmetric_apls(resample(gt_seg, config.sym_spacing), resample(pred_seg, config.sym_spacing), rng, config)
+
+
+def apls(pred: BoundaryGraph, gt: BoundaryGraph, variant: str = "paper", seed: int = 0, config: MetricConfig = MetricConfig()) -> float:
+    """APLS of the named variant (``paper`` or ``symmetric``)."""
+    if variant == "paper":
+        return apls_paper(pred, gt, seed, config)
+    if variant == "symmetric":
+        return apls_symmetric(pred, gt, seed, config).score
+    raise ValueError(f"apls variant must be one of {VARIANTS}, got {variant!r}")
+
+
+def tlts(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> TltsResult:
+    """TLTS on the paper's pairs (the same pairs :func:`apls_paper` draws for the same seed)."""
+    pred_seg, gt_seg = _segments(pred, gt)
+    pairs = paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
+    return tlts_from_pairs(pairs, config.phi)
+
+
+def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", grid=None, apls: str = "paper", seed: int = 0,
+             config: MetricConfig = MetricConfig()) -> dict:
+    """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``)."""
+    if scale == "city":
+        return evaluate_city(pred, gt, apls=apls, seed=seed, config=config)
+    if scale == "patch":
+        if grid is None:
+            raise ValueError("patch scale needs the city's PatchGrid")
+        return evaluate_patches(pred, gt, grid, apls=apls, seed=seed, config=config)
+    raise ValueError(f"scale must be 'city' or 'patch', got {scale!r}")

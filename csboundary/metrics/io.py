@@ -1,0 +1,226 @@
+"""Load a prediction and a ground truth into one pixel frame for evaluation.
+
+Inputs are the project's graph JSON (``csboundary-graph``), any OGR vector file of LineStrings
+(GeoPackage, GeoJSON, ...) or a city directory (its ``ground_truth.gpkg``). The common frame is,
+in this order: ``--pixels`` (coordinates already are pixels), the raster given with ``--raster``
+(a city directory, GeoTIFF(s) or a directory of tiles), the city directory given as an input,
+the transform stored in a graph JSON input, or ``--gsd`` (a north-up grid of that pixel size at
+the inputs' top-left corner). World coordinates are reprojected to the frame's CRS when both are
+known and differ. Every problem is an :class:`~csboundary.errors.InputError` naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from affine import Affine
+
+from csboundary.data import city as layout
+from csboundary.data.grid import PatchGrid
+from csboundary.data.windows import pixel_to_world, world_to_pixel
+from csboundary.errors import InputError
+from csboundary.graph.boundary_graph import FORMAT, BoundaryGraph
+
+GEOJSON_TYPES = ("FeatureCollection", "Feature", "LineString", "MultiLineString", "GeometryCollection")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The pixel frame of an evaluation: ``transform`` pixel -> world (None: pixels only)."""
+
+    transform: Affine | None
+    crs: str | None
+    width: int | None = None  # raster size when a raster defines the frame
+    height: int | None = None
+    source: str = "pixels"
+
+
+@dataclass
+class Source:
+    """One input as read: a graph (with its own transform) or world/pixel LineStrings."""
+
+    path: Path
+    graph: BoundaryGraph | None = None
+    lines: object = None  # GeoDataFrame of LineStrings
+
+    @property
+    def crs(self):
+        if self.graph is not None:
+            return self.graph.crs if self.graph.transform is not None else None
+        return self.lines.crs
+
+
+def read_source(path: str | Path) -> Source:
+    """Read a graph JSON, a vector file or a city directory's ground truth."""
+    from csboundary.data.ground_truth import read_ground_truth
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file not found")
+    if path.is_dir():
+        if layout.is_city_dir(path) and layout.ground_truth_path(path).exists():
+            return Source(path, lines=read_ground_truth(layout.ground_truth_path(path)))
+        raise InputError(path, "is a directory but not a city directory with ground_truth.gpkg")
+    if path.suffix.lower() == ".json":
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(path, f"not JSON ({exc})") from exc
+        if isinstance(data, dict) and data.get("format") == FORMAT:
+            return Source(path, graph=BoundaryGraph.from_dict(data, str(path)))
+        if not (isinstance(data, dict) and data.get("type") in GEOJSON_TYPES):
+            raise InputError(path, f"neither a {FORMAT} JSON file nor GeoJSON")
+    return Source(path, lines=read_ground_truth(path))
+
+
+def frame_from_raster(path: str | Path) -> Frame:
+    """The pixel frame of a city directory, a GeoTIFF, several tiles or a directory of tiles."""
+    from csboundary.data.raster import Mosaic
+
+    path = Path(path)
+    source = layout.tiles_dir(path) if layout.is_city_dir(path) else path
+    with Mosaic.open(source) as mosaic:
+        crs = mosaic.crs.to_string() if mosaic.crs is not None else None
+        transform = mosaic.transform if mosaic.crs is not None else None
+        return Frame(transform, crs, mosaic.width, mosaic.height, str(path))
+
+
+def resolve_frame(pred: Source, gt: Source, raster: str | Path | None = None, gsd: float | None = None, pixels: bool = False) -> Frame:
+    """Pick the common pixel frame (order: module doc)."""
+    if pixels:
+        return Frame(None, None, source="pixels (--pixels)")
+    if raster is not None:
+        return frame_from_raster(raster)
+    for src in (gt, pred):
+        if src.path.is_dir() and layout.is_city_dir(src.path) and layout.tiles_dir(src.path).is_dir():
+            return frame_from_raster(src.path)
+    for src in (gt, pred):
+        if src.graph is not None and src.graph.transform is not None:
+            return Frame(src.graph.transform, src.graph.crs, source=str(src.path))
+    vectors = [s for s in (gt, pred) if s.lines is not None]
+    crs = next((s.crs for s in vectors if s.crs is not None), None)
+    if gsd is not None:
+        if gsd <= 0:
+            raise InputError("--gsd", f"pixel size must be > 0, got {gsd}")
+        boxes = [np.asarray(_to_crs(s, crs).total_bounds) for s in vectors if len(s.lines)]
+        if not boxes:
+            raise InputError(gt.path, "--gsd needs world coordinates, but no input holds lines")
+        minx, maxy = min(b[0] for b in boxes), max(b[3] for b in boxes)
+        return Frame(Affine(gsd, 0.0, math.floor(minx), 0.0, -gsd, math.ceil(maxy)), crs.to_string() if crs is not None else None, source=f"--gsd {gsd:g}")
+    if crs is None:
+        return Frame(None, None, source="pixels (no CRS in the inputs)")
+    blame = next(s for s in vectors if s.crs is not None)
+    raise InputError(blame.path, f"holds world coordinates ({crs.to_string()}): give --raster or --gsd to convert them to pixels, or --pixels if they are pixels")
+
+
+def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
+    """The input as a BoundaryGraph in the frame's pixels."""
+    if src.graph is not None:
+        graph = src.graph
+        if frame.transform is None or graph.transform is None or (graph.transform == frame.transform and _same_crs(graph.crs, frame.crs)):
+            return BoundaryGraph(graph.vertices, graph.edges, graph.vertex_kinds, graph.edge_kinds, graph.edge_polylines,
+                                 graph.edge_scores, frame.transform, frame.crs)
+        project = _projector(src, graph.crs, frame)
+
+        def move(px: np.ndarray) -> np.ndarray:
+            xs, ys = pixel_to_world(graph.transform, px[:, 0], px[:, 1])
+            xs, ys = project(xs, ys)
+            cols, rows = world_to_pixel(frame.transform, xs, ys)
+            return np.stack([cols, rows], axis=1)
+
+        polylines = None
+        if graph.edge_polylines is not None:
+            polylines = [move(np.asarray(p, dtype=float)) if p is not None else None for p in graph.edge_polylines]
+        return BoundaryGraph(move(graph.vertices), graph.edges, graph.vertex_kinds, graph.edge_kinds, polylines,
+                             graph.edge_scores, frame.transform, frame.crs)
+    from csboundary.data.ground_truth import as_linestrings
+
+    lines = [part for geom in src.lines.geometry for part in as_linestrings(geom)]
+    if frame.transform is None:
+        return BoundaryGraph.from_polylines([np.asarray(line.coords)[:, :2] for line in lines])
+    if frame.crs is not None and src.crs is not None and not _same_crs(src.crs, frame.crs):
+        try:
+            lines = [part for geom in src.lines.to_crs(frame.crs).geometry for part in as_linestrings(geom)]
+        except Exception as exc:  # pyproj raises several types
+            raise InputError(src.path, f"cannot reproject from {src.crs} to {frame.crs} ({exc})".splitlines()[0]) from exc
+    return BoundaryGraph.from_world_lines(lines, frame.transform, crs=frame.crs)
+
+
+def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False) -> tuple[BoundaryGraph, BoundaryGraph, Frame]:
+    """Read both inputs, put them in one frame and check that they can be compared."""
+    pred_src, gt_src = read_source(pred_path), read_source(gt_path)
+    frame = resolve_frame(pred_src, gt_src, raster, gsd, pixels)
+    pred, gt = to_frame(pred_src, frame), to_frame(gt_src, frame)
+    check_overlap(pred, gt, frame, pred_src.path, gt_src.path)
+    return pred, gt, frame
+
+
+def check_overlap(pred: BoundaryGraph, gt: BoundaryGraph, frame: Frame, pred_path, gt_path) -> None:
+    """Disjoint inputs almost always mean a wrong CRS or frame, so they are refused."""
+    box_pred, box_gt = graph_bounds(pred), graph_bounds(gt)
+    if frame.width is not None:
+        raster_box = np.array([0.0, 0.0, frame.width, frame.height])
+        for box, path in ((box_gt, gt_path), (box_pred, pred_path)):
+            if box is not None and not _touch(box, raster_box):
+                raise InputError(path, f"lies outside the raster {frame.source} (different CRS or frame?)")
+    if box_pred is not None and box_gt is not None and not _touch(box_pred, box_gt):
+        raise InputError(pred_path, f"does not overlap the ground truth {gt_path} (different CRS or frame?)")
+
+
+def graph_bounds(graph: BoundaryGraph) -> np.ndarray | None:
+    """[min col, min row, max col, max row] of vertices and polylines, None if empty."""
+    parts = [graph.vertices] + [np.asarray(p, dtype=float) for p in (graph.edge_polylines or []) if p is not None]
+    pts = np.concatenate([p.reshape(-1, 2) for p in parts])
+    if len(pts) == 0:
+        return None
+    return np.concatenate([pts.min(axis=0), pts.max(axis=0)])
+
+
+def grid_for(frame: Frame, pred: BoundaryGraph, gt: BoundaryGraph) -> PatchGrid:
+    """The patch grid of the frame: the raster's, or one from pixel (0, 0) covering both graphs."""
+    if frame.width is not None:
+        return PatchGrid(frame.width, frame.height, frame.transform or Affine.identity())
+    boxes = [b for b in (graph_bounds(pred), graph_bounds(gt)) if b is not None]
+    width = math.ceil(max([b[2] for b in boxes], default=0))
+    height = math.ceil(max([b[3] for b in boxes], default=0))
+    if width <= 0 or height <= 0:
+        raise InputError("<inputs>", "no boundary lies at positive pixel coordinates: nothing to cut into patches")
+    return PatchGrid(width, height, frame.transform or Affine.identity())
+
+
+def _touch(a: np.ndarray, b: np.ndarray, margin: float = 1.0) -> bool:
+    return bool(a[0] <= b[2] + margin and b[0] <= a[2] + margin and a[1] <= b[3] + margin and b[1] <= a[3] + margin)
+
+
+def _same_crs(a, b) -> bool:
+    if a is None or b is None:
+        return True  # unknown CRS: taken to be the frame's
+    from pyproj import CRS
+
+    return CRS.from_user_input(a) == CRS.from_user_input(b)
+
+
+def _to_crs(src: Source, crs):
+    table = src.lines
+    if crs is not None and table.crs is not None and not _same_crs(table.crs, crs):
+        try:
+            return table.to_crs(crs)
+        except Exception as exc:
+            raise InputError(src.path, f"cannot reproject from {table.crs} to {crs} ({exc})".splitlines()[0]) from exc
+    return table
+
+
+def _projector(src: Source, crs, frame: Frame):
+    if _same_crs(crs, frame.crs):
+        return lambda xs, ys: (xs, ys)
+    from pyproj import Transformer
+
+    try:
+        transformer = Transformer.from_crs(crs, frame.crs, always_xy=True)
+    except Exception as exc:
+        raise InputError(src.path, f"cannot reproject from {crs} to {frame.crs} ({exc})".splitlines()[0]) from exc
+    return lambda xs, ys: transformer.transform(xs, ys)
