@@ -209,6 +209,102 @@ def train(
     typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
 
 
+@app.command("bundle-weights")
+def bundle_weights(
+    fpn: Path = typer.Option(..., help="Trained FPN checkpoint (fpn.pt)."),
+    afanet: Path = typer.Option(..., help="Trained AfANet checkpoint (afanet.pt)."),
+    out: Path = typer.Option(..., "--out", help="Bundle to write (e.g. csboundary/weights/csboundary-synthetic.pt)."),
+    edge_threshold: float = typer.Option(0.5, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
+) -> None:
+    """Bundle a trained FPN and AfANet (weights + provenance) into one weights file."""
+    from csboundary.models.bundle import make_bundle
+
+    path = make_bundle(fpn, afanet, out, edge_threshold)
+    typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
+
+
+@app.command("evaluate-model")
+def evaluate_model(
+    city: Path = typer.Argument(..., help="A city directory with ground truth (e.g. a valid-split synthetic city)."),
+    weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
+    seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
+    device: str = typer.Option("auto", help="auto | cpu | cuda."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """Patch-scale evaluation of a model: every patch predicted on its own, scored on its core."""
+    import json as _json
+
+    from csboundary.cli.evaluate import format_table
+    from csboundary.data import city as layout
+    from csboundary.data.grid import PatchGrid
+    from csboundary.data.ground_truth import read_ground_truth
+    from csboundary.data.raster import Mosaic
+    from csboundary.graph import BoundaryGraph
+    from csboundary.metrics import evaluate as evaluate_graphs
+    from csboundary.models.device import resolve_device
+    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.patchwise import predict_patchwise
+
+    predictor = PatchPredictor.load(weights, resolve_device(device))
+    layout.read_meta(city)
+    with Mosaic.open(layout.tiles_dir(city)) as mosaic:
+        grid = PatchGrid.for_mosaic(mosaic)
+        pred = predict_patchwise(predictor, mosaic, grid, progress=not quiet)
+        gt_frame = read_ground_truth(layout.ground_truth_path(city))
+        gt = BoundaryGraph.from_world_lines(list(gt_frame.geometry), mosaic.transform)
+    result = evaluate_graphs(pred, gt, scale="patch", grid=grid, seed=seed)
+    result["inputs"] = {"pred": f"{weights or 'shipped weights'} on {city}", "gt": str(layout.ground_truth_path(city))}
+    typer.echo(format_table(result))
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(_json.dumps(result, indent=2, default=float) + "\n")
+
+
+@app.command("predict-patch")
+def predict_patch(
+    image: Path = typer.Argument(..., help="One patch: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
+    out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png, maps.png."),
+    weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
+    fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
+    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    max_degree: int = typer.Option(2, min=0, help="Edges per vertex at most (0 = no limit; road boundaries are polylines: 2)."),
+    device: str = typer.Option("auto", help="auto | cpu | cuda."),
+) -> None:
+    """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
+    import geopandas as gpd
+
+    from csboundary.data.atomic import atomic_path
+    from csboundary.data.raster import Mosaic
+    from csboundary.models.device import resolve_device
+    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.viz.labels import draw_patch_labels
+    from csboundary.viz.overlay import to_display, write_png
+
+    predictor = PatchPredictor.load(weights, resolve_device(device), fpn_weights)
+    if edge_threshold is not None:
+        predictor.edge_threshold = edge_threshold
+    predictor.max_degree = max_degree or None
+    with Mosaic.open(image) as mosaic:
+        if mosaic.width > 1100 or mosaic.height > 1100:
+            raise InputError(image, f"is {mosaic.width}x{mosaic.height} px; predict-patch takes at most 1100x1100 (a patch)")
+        read = mosaic.read(mosaic.window)
+        maps = predictor.maps(read.data)
+        graph = predictor.graph(read.data, maps)
+        graph.transform, graph.crs = mosaic.transform, (mosaic.crs.to_string() if mosaic.crs else None)
+    out.mkdir(parents=True, exist_ok=True)
+    graph.write_json(out / "graph.json")
+    frame = gpd.GeoDataFrame(
+        {"kind": graph.edge_kinds or [], "confidence": list(graph.edge_scores) if graph.edge_scores is not None else []},
+        geometry=graph.to_linestrings(world=True), crs=graph.crs,
+    )
+    with atomic_path(out / "boundaries.geojson") as tmp:
+        frame.to_file(tmp, driver="GeoJSON", engine="pyogrio")
+    arrays = {"segmentation": maps[1] > 0.5, "keypoint_heat": maps[0]}
+    write_png(out / "overlay.png", draw_patch_labels(to_display(read.data, read.valid), arrays, graph))
+    typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({sum(k == 'corner' for k in graph.edge_kinds or [])} corner)")
+
+
 @app.command()
 def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),

@@ -1,0 +1,31 @@
+"""Weights bundles: the FPN and AfANet a project run trained, in one file with their provenance.
+
+The shipped weights are such a bundle. Beside the weights it records, for each model, the
+training config, code version, step count and validation history, plus inference settings, so
+``csboundary predict-patch`` needs only this one file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+
+
+def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, edge_threshold: float = 0.5, max_degree: int = 2) -> Path:
+    fpn = load_checkpoint(fpn_path, ("fpn",))
+    afanet = load_checkpoint(afanet_path, ("afanet",))
+    provenance = {
+        name: {k: payload.get(k) for k in ("code_version", "train_config", "step", "validation")}
+        for name, payload in (("fpn", fpn), ("afanet", afanet))
+    }
+    return save_checkpoint(
+        out,
+        "bundle",
+        fpn=fpn["fpn"],
+        fpn_config=fpn["fpn_config"],
+        afanet=afanet["afanet"],
+        afanet_config=afanet["afanet_config"],
+        inference={"edge_threshold": edge_threshold, "max_degree": max_degree},
+        provenance=provenance,
+    )
