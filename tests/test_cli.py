@@ -65,3 +65,17 @@ def test_bad_tiles_argument_is_rejected(tmp_path):
     result = run("synth", str(tmp_path / "c"), "--tiles", "two")
     assert result.returncode != 0 and "ROWSxCOLS" in result.stderr
     assert not (tmp_path / "c" / layout.META_FILE).exists()
+
+
+@pytest.mark.parametrize("args", [["--patch", "1"], ["--patch", "a,b"], ["--patch", "9,9"], ["--window", "0,0,-5,5"], ["--bounds", "x,1,2,3"]])
+def test_bad_show_arguments_are_one_line_errors(small_city, tmp_path, args):
+    result = run("show", str(small_city), *args, "--out", str(tmp_path / "x.png"))
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr and not (tmp_path / "x.png").exists()
+
+
+def test_a_smaller_rewrite_does_not_keep_old_tiles(tmp_path):
+    out = tmp_path / "c"
+    assert run("synth", str(out), "--tiles", "1x2", "--tile-size", "200", "--gsd", "1.0", "--quiet").returncode == 0
+    assert run("synth", str(out), "--tiles", "1x1", "--tile-size", "200", "--gsd", "1.0", "--quiet").returncode == 0
+    assert [p.name for p in layout.tiles_dir(out).iterdir()] == ["tile_r00_c00.tif"]

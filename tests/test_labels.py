@@ -214,3 +214,14 @@ def test_pixel_chain_ground_truth_gives_the_same_corners_after_import_simplifica
     line = pixels_to_line(Affine.identity(), chain)
     runs, isolated = curvature_keypoints(Boundary(np.asarray(line.coords), True), NO_AUX)
     assert len(runs) == 4 and isolated == []
+
+
+def test_a_round_island_gets_three_vertices_and_its_whole_ring():
+    t = np.linspace(0, 2 * np.pi, 200)
+    circle = Boundary(np.stack([150 + 50 * np.cos(t), 150 + 50 * np.sin(t)], axis=1), True)
+    circle.points[-1] = circle.points[0]
+    kps = compute_keypoints([circle], NO_AUX)
+    assert len(kps[0].s) >= 3
+    graph, _ = window_graph(kps, boundary_bounds([circle]), PixelWindow(-50, -50, 1100, 1100))
+    assert graph.n_edges == graph.n_vertices >= 3
+    assert graph.edge_lengths().sum() == pytest.approx(circle.length, rel=1e-6)

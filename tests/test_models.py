@@ -56,14 +56,16 @@ def test_gradients_reach_both_encoder_branches():
 
 def test_roi_crops_are_centred_on_pixel_centres_and_zero_outside():
     tensor = torch.arange(100.0).reshape(1, 10, 10)  # value = 10 * row + col
-    rois = crop_rois(tensor, torch.tensor([[5.5, 4.5], [0.5, 0.5]]), 4)
-    assert rois.shape == (2, 1, 4, 4)
-    # Vertex at the centre of pixel [4, 5]: the window covers rows 2..5 and cols 3..6.
-    expected = torch.tensor([[10.0 * r + c for c in range(3, 7)] for r in range(2, 6)])
+    rois = crop_rois(tensor, torch.tensor([[5.5, 4.5], [0.5, 0.5]]), 3)
+    assert rois.shape == (2, 1, 3, 3)
+    # Vertex at the centre of pixel [4, 5]: the window covers rows 3..5 and cols 4..6.
+    expected = torch.tensor([[10.0 * r + c for c in range(4, 7)] for r in range(3, 6)])
     assert torch.allclose(rois[0, 0], expected, atol=1e-4)
-    # Vertex at the centre of pixel [0, 0]: rows/cols -2..1, the first two of each outside (zero).
-    corner = torch.tensor([[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 10, 11.0]])
+    # Vertex at the centre of pixel [0, 0]: rows/cols -1..1, the first of each outside (zero).
+    corner = torch.tensor([[0, 0, 0], [0, 0, 1], [0, 10, 11.0]])
     assert torch.allclose(rois[1, 0], corner, atol=1e-4)
+    even = crop_rois(tensor, torch.tensor([[5.5, 4.5]]), 2)  # even windows straddle the vertex
+    assert torch.allclose(even[0, 0], torch.tensor([[39.5, 40.5], [49.5, 50.5]]), atol=1e-4)
 
 
 def test_edges_respect_threshold_degree_and_fixed_edges():

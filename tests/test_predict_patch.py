@@ -74,3 +74,14 @@ def test_evaluate_model_scores_every_patch(bundle, small_city, tmp_path):
     scores = json.loads((tmp_path / "e.json").read_text())
     assert scores["scale"] == "patch" and scores["counts"]["patches"] == 1
     assert all(0.0 <= v <= 1.0 for v in scores["metrics"].values() if v is not None)
+
+
+def test_sixteen_bit_imagery_is_refused(bundle, tmp_path):
+    import numpy as np
+    from affine import Affine
+
+    from csboundary.data.geotiff import write_geotiff
+
+    path = write_geotiff(tmp_path / "u16.tif", np.full((4, 64, 64), 1000, np.uint16), Affine(0.3, 0, 0, 0, -0.3, 0), "EPSG:32618")
+    result = run("predict-patch", str(path), "--out", str(tmp_path / "p"), "--weights", str(bundle))
+    assert result.returncode == 2 and "8-bit" in result.stderr and str(path) in result.stderr

@@ -69,6 +69,16 @@ def import_topo_boundary_cmd(
                + (f": {', '.join(missing[:10])}{' ...' if len(missing) > 10 else ''}" if missing else ""))
 
 
+def _parse_ints(text: str, count: int, option: str, form: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != count:
+        raise typer.BadParameter(f"expected {form}, got {text!r}", param_hint=option)
+    return values
+
+
 def _open_inputs(inputs: list[Path], ground_truth: Optional[Path]):
     """A city directory gives its tiles and ground truth; otherwise rasters and an optional GT file."""
     from csboundary.data import city as layout
@@ -83,10 +93,7 @@ def _open_inputs(inputs: list[Path], ground_truth: Optional[Path]):
         mosaic = Mosaic.open(inputs)
     lines = []
     if ground_truth is not None:
-        frame = read_ground_truth(ground_truth)
-        if frame.crs is not None and mosaic.crs is not None and frame.crs != mosaic.crs:
-            frame = frame.to_crs(mosaic.crs)
-        lines = list(frame.geometry)
+        lines = list(read_ground_truth(ground_truth, mosaic.crs).geometry)
     return mosaic, lines
 
 
@@ -103,7 +110,9 @@ def show(
     patch: Optional[str] = typer.Option(None, help="Patch ROW,COL of the grid: the window becomes its 1100x1100 expanded window."),
 ) -> None:
     """Draw a window of the imagery with road boundaries (or a patch's labels) over it."""
-    from csboundary.data.grid import PatchGrid
+    import json
+
+    from csboundary.data.grid import GridConfig, PatchGrid
     from csboundary.data.windows import PixelWindow
     from csboundary.viz.overlay import render_window, write_png
 
@@ -113,8 +122,19 @@ def show(
         raise typer.BadParameter("--labels needs --patch ROW,COL")
     mosaic, lines = _open_inputs(inputs, ground_truth)
     if patch is not None:
-        row, col = (int(v) for v in patch.split(","))
-        the_patch = PatchGrid.for_mosaic(mosaic).patch(row, col)
+        grid_config = GridConfig()
+        if labels is not None:
+            from csboundary.labels.writer import MANIFEST
+
+            manifest = labels / MANIFEST
+            if not manifest.exists():
+                raise InputError(labels, f"not a labels folder (no {MANIFEST})")
+            grid_config = GridConfig(**json.loads(manifest.read_text())["config"]["grid"])
+        row, col = _parse_ints(patch, 2, "--patch", "ROW,COL")
+        grid_ = PatchGrid(mosaic.width, mosaic.height, mosaic.transform, grid_config)
+        if (row, col) not in grid_:
+            raise typer.BadParameter(f"patch {row},{col} is outside the {grid_.n_rows}x{grid_.n_cols} grid", param_hint="--patch")
+        the_patch = grid_.patch(row, col)
         window = ",".join(str(v) for v in (the_patch.expanded.col_off, the_patch.expanded.row_off, the_patch.expanded.width, the_patch.expanded.height))
         if labels is not None:
             from csboundary.graph import BoundaryGraph
@@ -134,11 +154,17 @@ def show(
             return
     with mosaic:
         if window:
-            win = PixelWindow.parse(window)
+            c, r, w, h = _parse_ints(window, 4, "--window", "COL,ROW,WIDTH,HEIGHT")
+            if w <= 0 or h <= 0:
+                raise typer.BadParameter("width and height must be positive", param_hint="--window")
+            win = PixelWindow(c, r, w, h)
         elif bounds:
-            values = [float(v) for v in bounds.split(",")]
+            try:
+                values = [float(v) for v in bounds.split(",")]
+            except ValueError:
+                values = []
             if len(values) != 4:
-                raise typer.BadParameter("expected MINX,MINY,MAXX,MAXY", param_hint="--bounds")
+                raise typer.BadParameter(f"expected MINX,MINY,MAXX,MAXY, got {bounds!r}", param_hint="--bounds")
             win = mosaic.window_from_bounds(*values)
         else:
             win = mosaic.window
@@ -202,8 +228,10 @@ def train(
         cfg.steps = steps
     if fpn_weights is not None:
         cfg.fpn_weights = str(fpn_weights)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(_json.dumps(cfg.to_dict(), indent=2) + "\n")
+    from csboundary.data.atomic import atomic_path
+
+    with atomic_path(out / "config.json") as tmp:
+        tmp.write_text(_json.dumps(cfg.to_dict(), indent=2) + "\n")
     runner = train_fpn if model == "fpn" else train_afanet
     weights = runner(cfg, out, resolve_device(device), str(resume) if resume else None, progress=not quiet)
     typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
@@ -251,24 +279,27 @@ def evaluate_model(
     with Mosaic.open(layout.tiles_dir(city)) as mosaic:
         grid = PatchGrid.for_mosaic(mosaic)
         pred = predict_patchwise(predictor, mosaic, grid, progress=not quiet)
-        gt_frame = read_ground_truth(layout.ground_truth_path(city))
+        gt_frame = read_ground_truth(layout.ground_truth_path(city), mosaic.crs)
         gt = BoundaryGraph.from_world_lines(list(gt_frame.geometry), mosaic.transform)
     result = evaluate_graphs(pred, gt, scale="patch", grid=grid, seed=seed)
     result["inputs"] = {"pred": f"{weights or 'shipped weights'} on {city}", "gt": str(layout.ground_truth_path(city))}
     typer.echo(format_table(result))
     if json_out is not None:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(_json.dumps(result, indent=2, default=float) + "\n")
+        from csboundary.data.atomic import atomic_path
+        from csboundary.metrics.aggregate import nan_to_none
+
+        with atomic_path(json_out) as tmp:
+            tmp.write_text(_json.dumps(nan_to_none(result), indent=2, default=float) + "\n")
 
 
 @app.command("predict-patch")
 def predict_patch(
     image: Path = typer.Argument(..., help="One patch: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
-    out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png, maps.png."),
+    out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
     edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
-    max_degree: int = typer.Option(2, min=0, help="Edges per vertex at most (0 = no limit; road boundaries are polylines: 2)."),
+    max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
 ) -> None:
     """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
@@ -284,11 +315,14 @@ def predict_patch(
     predictor = PatchPredictor.load(weights, resolve_device(device), fpn_weights)
     if edge_threshold is not None:
         predictor.edge_threshold = edge_threshold
-    predictor.max_degree = max_degree or None
+    if max_degree is not None:
+        predictor.max_degree = max_degree or None
     with Mosaic.open(image) as mosaic:
         if mosaic.width > 1100 or mosaic.height > 1100:
             raise InputError(image, f"is {mosaic.width}x{mosaic.height} px; predict-patch takes at most 1100x1100 (a patch)")
         read = mosaic.read(mosaic.window)
+        if read.data.dtype != "uint8":
+            raise InputError(image, f"is {read.data.dtype}; the networks take 8-bit imagery (rescale to 0-255 first)")
         maps = predictor.maps(read.data)
         graph = predictor.graph(read.data, maps)
         graph.transform, graph.crs = mosaic.transform, (mosaic.crs.to_string() if mosaic.crs else None)

@@ -39,10 +39,16 @@ def write_meta(city_dir: str | Path, meta: dict[str, Any]) -> Path:
 
 
 def begin_city(city_dir: str | Path) -> Path:
-    """Prepare ``city_dir`` for (re)writing: drop an old ``city.json`` first, so an interrupted
-    rewrite can never pass off a mix of old and new files as a finished city."""
+    """Prepare ``city_dir`` for (re)writing: drop an old ``city.json``, tiles and ground truth
+    first, so an interrupted or smaller rewrite never mixes old and new files."""
     city_dir = Path(city_dir)
     (city_dir / META_FILE).unlink(missing_ok=True)
+    (city_dir / GROUND_TRUTH_FILE).unlink(missing_ok=True)
+    old_tiles = city_dir / TILES_DIR
+    if old_tiles.is_dir():  # a smaller new city must not inherit tiles of the old one
+        for tile in old_tiles.iterdir():
+            if tile.is_file():
+                tile.unlink()
     city_dir.mkdir(parents=True, exist_ok=True)
     return city_dir
 

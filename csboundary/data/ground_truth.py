@@ -41,8 +41,9 @@ def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame) -> Path:
     return Path(path)
 
 
-def read_ground_truth(path: str | Path) -> gpd.GeoDataFrame:
-    """Read boundary LineStrings (GeoPackage, GeoJSON or anything OGR reads), exploded to parts."""
+def read_ground_truth(path: str | Path, crs=None) -> gpd.GeoDataFrame:
+    """Read boundary LineStrings (GeoPackage, GeoJSON or anything OGR reads), exploded to parts,
+    reprojected to ``crs`` when both it and the file's CRS are known."""
     path = Path(path)
     if not path.exists():
         raise InputError(path, "file not found")
@@ -53,6 +54,8 @@ def read_ground_truth(path: str | Path) -> gpd.GeoDataFrame:
     except Exception as exc:  # pyogrio raises several unrelated types for unreadable files
         raise InputError(path, f"not a readable vector file ({type(exc).__name__}: {exc})".splitlines()[0]) from exc
     frame = frame.explode(index_parts=False, ignore_index=True)
+    if crs is not None and frame.crs is not None and frame.crs != crs:
+        frame = frame.to_crs(crs)
     bad = ~frame.geometry.geom_type.isin(["LineString", "LinearRing"])
     if bad.any():
         raise InputError(path, f"{int(bad.sum())} geometries are not LineStrings (road boundaries are lines)")

@@ -202,8 +202,8 @@ class Mosaic:
             src = part.relative_to(tile.window)
             dst_rows, dst_cols = part.relative_to(window).slices()
             pixels, mask = self._read_tile(tile, src)
-            data[:, dst_rows, dst_cols] = np.where(mask, pixels, 0)
-            valid[dst_rows, dst_cols] = mask
+            data[:, dst_rows, dst_cols] = np.where(mask, pixels, data[:, dst_rows, dst_cols])
+            valid[dst_rows, dst_cols] |= mask  # where tiles overlap, a later tile's nodata keeps earlier pixels
         return WindowRead(window, data, valid)
 
     def read_world(self, minx: float, miny: float, maxx: float, maxy: float) -> WindowRead:

@@ -37,7 +37,8 @@ VERSION = 1
 
 @dataclass
 class BoundaryGraph:
-    """Undirected graph: ``vertices`` (N, 2) float pixel (col, row); ``edges`` (E, 2) int, u < v."""
+    """Undirected graph: ``vertices`` (N, 2) float pixel (col, row); ``edges`` (E, 2) int pairs
+    (u, v), whose order is the direction of the edge's polyline when it has one."""
 
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))

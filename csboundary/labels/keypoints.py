@@ -80,7 +80,26 @@ def boundary_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig()) 
     if not boundary.closed:
         candidates += [(0.0, END), (length, END)]
     s, kinds = _merge(candidates, config.min_separation_px, length if boundary.closed else None)
+    if boundary.closed:
+        s, kinds = _at_least_three(s, kinds, length)
     return BoundaryKeypoints(boundary, s, kinds, runs)
+
+
+def _at_least_three(s: np.ndarray, kinds: list[str], length: float) -> tuple[np.ndarray, list[str]]:
+    """A ring needs three vertices to be a polygon in a graph (two give one edge, i.e. half of
+    it): split the longest gap between keypoints until there are three."""
+    s, kinds = list(s), list(kinds)
+    while len(s) < 3:
+        if not s:
+            s, kinds = [0.0], [ISOLATED]
+            continue
+        gaps = [((s[(i + 1) % len(s)] - s[i]) % length or length, i) for i in range(len(s))]
+        gap, i = max(gaps)
+        s.append((s[i] + gap / 2) % length)
+        kinds.append(ISOLATED)
+        order = np.argsort(s)
+        s, kinds = [s[k] for k in order], [kinds[k] for k in order]
+    return np.array(s, dtype=float), kinds
 
 
 def _merge(candidates: list[tuple[float, str]], separation: float, ring_length: float | None) -> tuple[np.ndarray, list[str]]:

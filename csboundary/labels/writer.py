@@ -108,9 +108,7 @@ def write_city_labels(city_dir: str | Path, out_dir: str | Path, config: LabelCo
     (out_dir / MANIFEST).unlink(missing_ok=True)
     start = time.perf_counter()
     with Mosaic.open(layout.tiles_dir(city_dir)) as mosaic:
-        gt = read_ground_truth(layout.ground_truth_path(city_dir))
-        if gt.crs is not None and mosaic.crs is not None and gt.crs != mosaic.crs:
-            gt = gt.to_crs(mosaic.crs)
+        gt = read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs)
         labels = CityLabels.build(list(gt.geometry), mosaic, config)
         prepared = time.perf_counter() - start
         counts = {"patches": 0, "vertices": 0, "edges": 0, "corner_edges": 0}

@@ -182,10 +182,11 @@ class AfANet(nn.Module):
 
 def crop_rois(tensor: torch.Tensor, vertices: torch.Tensor, size: int) -> torch.Tensor:
     """(M, C, size, size) windows of ``tensor`` (C, H, W) centred on (col, row) ``vertices``,
-    sampled bilinearly at pixel centres, zero beyond the edges (works on any device)."""
+    sampled bilinearly (at pixel centres for odd ``size`` and a vertex on a pixel centre), zero
+    beyond the edges (works on any device)."""
     c, height, width = tensor.shape
     m = vertices.shape[0]
-    offsets = torch.arange(size, device=tensor.device, dtype=tensor.dtype) - size // 2  # on pixel centres
+    offsets = torch.arange(size, device=tensor.device, dtype=tensor.dtype) - (size - 1) / 2  # symmetric about the vertex
     cols = vertices[:, 0, None].to(tensor.dtype) + offsets[None, :]  # (M, size)
     rows = vertices[:, 1, None].to(tensor.dtype) + offsets[None, :]
     gx = (cols / width) * 2 - 1  # align_corners=False: pixel centre (c + 0.5) <-> ((c + 0.5)/W)*2-1

@@ -149,15 +149,13 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     log = RunLog(out_dir / "train.log")
     train_city = TrainingCity(config.train_city.ensure(config.cache))
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
-    model_config = FPNConfig.from_dict(config.fpn) if config.fpn else FPNConfig()
+    model_config = _model_config(FPNConfig, config.fpn)
     model = FPN(model_config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_fpn_batch(valid_city, valid_rng, config, train=False) for _ in range(config.validation_samples)]
-    step, history = _maybe_resume(resume, "fpn", model, optimizer)
-    if step:
-        rng = np.random.default_rng([config.seed, step])
+    step, history = _maybe_resume(resume, "fpn", model, optimizer, rng)
     log.write(event="start", model="fpn", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
     model.train()
     bar = tqdm(total=config.steps, initial=step, desc="train fpn", unit="step", disable=not progress)
@@ -177,7 +175,7 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
             metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **validate_fpn(model, valid_batches, device, config)}
             history.append(metrics)
             log.write(event="validate", **metrics)
-            _save(out_dir / "fpn-last.pt", "fpn", model, model_config, config, step, history, optimizer)
+            _save(out_dir / "fpn-last.pt", "fpn", model, model_config, config, step, history, optimizer, rng)
     bar.close()
     final = out_dir / "fpn.pt"
     _save(final, "fpn", model, model_config, config, step, history, None)
@@ -214,7 +212,7 @@ def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: 
 
 
 @torch.no_grad()
-def validate_afanet(model: AfANet, samples, device) -> dict[str, float]:
+def validate_afanet(model: AfANet, samples, device, max_pos_weight: float) -> dict[str, float]:
     model.eval()
     tp = fp = fn = 0
     losses = []
@@ -222,7 +220,7 @@ def validate_afanet(model: AfANet, samples, device) -> dict[str, float]:
         if len(vertices) < 2:
             continue
         logits = model(tensor.to(device), vertices.to(device))
-        losses.append(float(adjacency_loss(logits, label.to(device), 30.0)))
+        losses.append(float(adjacency_loss(logits, label.to(device), max_pos_weight)))
         edges = set(edges_from_adjacency(model.adjacency(tensor.to(device), vertices.to(device))))
         truth = {(int(u), int(v)) for u, v in zip(*np.nonzero(np.triu(label.numpy(), 1)))}
         tp += len(edges & truth)
@@ -248,15 +246,15 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
         city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)
         cities[name] = city
     del fpn
-    model_config = AfANetConfig.from_dict(config.afanet) if config.afanet else AfANetConfig()
+    model_config = _model_config(AfANetConfig, config.afanet)
     model = AfANet(model_config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     vertex_config = VertexConfig()
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_windows = [cities["valid"].random_window(valid_rng, config.window) for _ in range(config.validation_samples)]
     valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
-    step, history = _maybe_resume(resume, "afanet", model, optimizer)
-    rng = np.random.default_rng([config.seed, step])
+    rng = np.random.default_rng(config.seed)
+    step, history = _maybe_resume(resume, "afanet", model, optimizer, rng)
     log.write(event="start", model="afanet", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
     model.train()
     bar = tqdm(total=config.steps, initial=step, desc="train afanet", unit="step", disable=not progress)
@@ -277,10 +275,10 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
         if step % config.validate_every == 0 or step == config.steps:
             metrics = {"step": step, "stage": stage}
             for name, samples in valid_sets.items():
-                metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device).items()})
+                metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()})
             history.append(metrics)
             log.write(event="validate", **metrics)
-            _save(out_dir / "afanet-last.pt", "afanet", model, model_config, config, step, history, optimizer)
+            _save(out_dir / "afanet-last.pt", "afanet", model, model_config, config, step, history, optimizer, rng)
     bar.close()
     final = out_dir / "afanet.pt"
     _save(final, "afanet", model, model_config, config, step, history, None)
@@ -289,6 +287,14 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
 
 
 # -- shared -------------------------------------------------------------------------------------------
+
+
+def _model_config(cls, overrides: dict):
+    """A model config from the training config's overrides; a misspelt key is an error."""
+    unknown = set(overrides) - set(cls.__dataclass_fields__)
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} option(s): {', '.join(sorted(unknown))}")
+    return cls.from_dict(overrides)
 
 
 def _cosine_lr(config: TrainConfig, step: int) -> float:
@@ -300,7 +306,7 @@ def _cosine_lr(config: TrainConfig, step: int) -> float:
     return config.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, t))))
 
 
-def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer) -> None:
+def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer, rng=None) -> None:
     content = {
         kind: model.state_dict(),
         f"{kind}_config": model_config.to_dict(),
@@ -311,10 +317,14 @@ def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step:
     if optimizer is not None:
         content["optimizer"] = optimizer.state_dict()
         content["torch_rng"] = torch.get_rng_state()
+        content["numpy_rng"] = rng.bit_generator.state if rng is not None else None
+        if torch.cuda.is_available():
+            content["cuda_rng"] = torch.cuda.get_rng_state_all()
     save_checkpoint(path, kind, **content)
 
 
-def _maybe_resume(resume: str | None, kind: str, model, optimizer) -> tuple[int, list]:
+def _maybe_resume(resume: str | None, kind: str, model, optimizer, rng: np.random.Generator) -> tuple[int, list]:
+    """Restore weights, optimizer and every random stream, so a resumed run continues exactly."""
     if not resume:
         return 0, []
     payload = load_checkpoint(resume, (kind,))
@@ -323,4 +333,8 @@ def _maybe_resume(resume: str | None, kind: str, model, optimizer) -> tuple[int,
         optimizer.load_state_dict(payload["optimizer"])
     if "torch_rng" in payload:
         torch.set_rng_state(payload["torch_rng"])
+    if payload.get("numpy_rng"):
+        rng.bit_generator.state = payload["numpy_rng"]
+    if payload.get("cuda_rng") and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(payload["cuda_rng"])
     return int(payload["step"]), list(payload.get("validation", []))

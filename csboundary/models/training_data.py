@@ -20,6 +20,7 @@ from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.rasterize import keypoint_heat, segmentation_label
 from csboundary.labels.writer import CityLabels
+from csboundary.pipeline.maps import unit_bands
 
 
 @dataclass(frozen=True)
@@ -51,9 +52,7 @@ class TrainingCity:
     def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig()):
         self.path = Path(city_dir)
         self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
-        gt = read_ground_truth(layout.ground_truth_path(city_dir))
-        if gt.crs is not None and self.mosaic.crs is not None and gt.crs != self.mosaic.crs:
-            gt = gt.to_crs(self.mosaic.crs)
+        gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
         self.config = config
         self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
@@ -69,7 +68,7 @@ class TrainingCity:
         lab = self.labels
         heat = keypoint_heat(lab.keypoints, lab.bounds, window, self.config.heat_sigma_px)
         seg = segmentation_label(lab.boundaries, lab.bounds, window, self.config.segmentation_width)
-        return read.data.astype(np.float32) / 255.0, np.stack([heat, seg.astype(np.float32)]), read.valid
+        return unit_bands(read.data), np.stack([heat, seg.astype(np.float32)]), read.valid
 
     def gt_vertices(self, window: PixelWindow) -> np.ndarray:
         """Ground-truth keypoints inside ``window`` as global pixel coordinates (M, 2)."""
@@ -87,7 +86,7 @@ class TrainingCity:
             rows, cols = part.slices()
             lrows, lcols = part.relative_to(window).slices()
             maps[:, lrows, lcols] = self.maps[:, rows, cols]
-        return np.concatenate([read.data.astype(np.float32) / 255.0, maps])
+        return np.concatenate([unit_bands(read.data), maps])
 
     def adjacency(self, vertices: np.ndarray, window: PixelWindow) -> np.ndarray:
         lab = self.labels

@@ -13,12 +13,25 @@ from tqdm import tqdm
 
 from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
+from csboundary.errors import InputError
 from csboundary.models.fpn import FPN
 
 
 def image_tensor(data: np.ndarray, device: torch.device) -> torch.Tensor:
     """(4, h, w) uint8 bands -> float tensor in [0, 1] on ``device``."""
-    return torch.from_numpy(np.ascontiguousarray(data)).to(device=device, dtype=torch.float32) / 255.0
+    return torch.from_numpy(unit_bands(data)).to(device=device)
+
+
+def unit_bands(data: np.ndarray) -> np.ndarray:
+    """8-bit bands -> float32 in [0, 1]: the only input scale the networks were trained on.
+
+    Other data types have no agreed range (12-bit, 16-bit, reflectance), so guessing one would
+    give silently wrong maps; they are refused (rescale to 8 bits first, e.g. gdal_translate
+    -ot Byte -scale).
+    """
+    if data.dtype != np.uint8:
+        raise InputError("<imagery>", f"the networks take 8-bit imagery; got {data.dtype} (rescale to 0-255 first)")
+    return np.ascontiguousarray(data, dtype=np.float32) / 255.0
 
 
 @torch.no_grad()

@@ -37,9 +37,10 @@ class TileFrame:
         return self.x0, self.y1 - extent, self.x0 + extent, self.y1
 
     def to_pixels(self, coords: np.ndarray) -> np.ndarray:
-        """Local metres (N, 2) -> fixed-point pixel vertices for cv2 (N, 2) int32."""
-        cols = (coords[:, 0] - self.x0) / self.gsd
-        rows = (self.y1 - coords[:, 1]) / self.gsd
+        """Local metres (N, 2) -> fixed-point cv2 vertices (N, 2) int32 (cv2's pixel-centre frame)."""
+        # OpenCV puts integer coordinates at pixel centres; ours put them at pixel corners.
+        cols = (coords[:, 0] - self.x0) / self.gsd - 0.5
+        rows = (self.y1 - coords[:, 1]) / self.gsd - 0.5
         return np.round(np.stack([cols, rows], axis=1) * SCALE).astype(np.int32)
 
 
