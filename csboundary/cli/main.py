@@ -257,6 +257,7 @@ def evaluate_model(
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
+    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
@@ -275,6 +276,8 @@ def evaluate_model(
     from csboundary.pipeline.patchwise import predict_patchwise
 
     predictor = PatchPredictor.load(weights, resolve_device(device))
+    if edge_threshold is not None:
+        predictor.edge_threshold = edge_threshold
     layout.read_meta(city)
     with Mosaic.open(layout.tiles_dir(city)) as mosaic:
         grid = PatchGrid.for_mosaic(mosaic)
