@@ -79,3 +79,17 @@ def test_a_smaller_rewrite_does_not_keep_old_tiles(tmp_path):
     assert run("synth", str(out), "--tiles", "1x2", "--tile-size", "200", "--gsd", "1.0", "--quiet").returncode == 0
     assert run("synth", str(out), "--tiles", "1x1", "--tile-size", "200", "--gsd", "1.0", "--quiet").returncode == 0
     assert [p.name for p in layout.tiles_dir(out).iterdir()] == ["tile_r00_c00.tif"]
+
+
+def test_demo_predicts_and_scores_a_city_with_the_shipped_weights(tmp_path):
+    import json
+
+    result = run("demo", "--out", str(tmp_path / "demo"), "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    scores = json.loads((tmp_path / "demo" / "scores.json").read_text())
+    assert scores["scale"] == "patch" and scores["counts"]["patches_scored"] == 9
+    values = [v for v in scores["metrics"].values() if v is not None]
+    assert values and all(0.0 <= v <= 1.0 for v in values)
+    assert scores["metrics"]["f1@5"] > 0.5  # the shipped weights find most curbs of a test city
+    for name in ("overview.png", "patch.png", "prediction.gpkg", "prediction.graph.json"):
+        assert (tmp_path / "demo" / name).stat().st_size > 0

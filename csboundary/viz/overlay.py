@@ -8,7 +8,7 @@ for imagery.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -52,11 +52,13 @@ def render_window(
     max_size: int | None = None,
     grid: PatchGrid | None = None,
     colour=CYAN,
+    layers: Sequence[tuple[Iterable[LineString], tuple]] = (),
 ) -> np.ndarray:
     """RGB picture of ``window`` with ``boundaries`` (world coordinates) drawn over it.
 
     ``max_size`` downsamples large windows (longest side) before the lines are drawn, so lines
-    stay visible; ``grid`` adds the patch grid (cores red, expanded windows yellow).
+    stay visible; ``grid`` adds the patch grid (cores red, expanded windows yellow); ``layers``
+    are more (lines, colour) pairs drawn on top (e.g. a prediction over the ground truth).
     """
     read = mosaic.read(window)
     rgb = to_display(read.data, read.valid)
@@ -66,19 +68,25 @@ def render_window(
         rgb = cv2.resize(rgb, (max(1, round(window.width * scale)), max(1, round(window.height * scale))), interpolation=cv2.INTER_AREA)
     thickness = 2 if scale > 0.5 else 1
     world_box = box(*_world_bounds(mosaic, window))
-    lines = []
-    for line in boundaries:
-        if not line.intersects(world_box):
-            continue
-        xy = np.asarray(line.coords)[:, :2]
-        cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
-        lines.append(np.stack([(cols - window.col_off) * scale, (rows - window.row_off) * scale], axis=1))
+
+    def to_pixels(lines_world: Iterable[LineString]) -> list[np.ndarray]:
+        out = []
+        for line in lines_world:
+            if not line.intersects(world_box):
+                continue
+            xy = np.asarray(line.coords)[:, :2]
+            cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
+            out.append(np.stack([(cols - window.col_off) * scale, (rows - window.row_off) * scale], axis=1))
+        return out
+
     if grid is not None:
         for patch in grid:
             for w, c in ((patch.expanded, GRID_EXPANDED), (patch.core, GRID_CORE)):
                 corners = np.array([[w.col_off, w.row_off], [w.col_end, w.row_off], [w.col_end, w.row_end], [w.col_off, w.row_end], [w.col_off, w.row_off]], float)
                 draw_lines(rgb, [(corners - [window.col_off, window.row_off]) * scale], c, 1)
-    draw_lines(rgb, lines, colour, thickness)
+    draw_lines(rgb, to_pixels(boundaries), colour, thickness)
+    for lines_world, layer_colour in layers:
+        draw_lines(rgb, to_pixels(lines_world), layer_colour, thickness)
     return rgb
 
 
