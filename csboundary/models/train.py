@@ -173,14 +173,9 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
         bar.set_postfix(loss=f"{loss.item():.4f}")
         if step % config.validate_every == 0 or step == config.steps:
             metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **validate_fpn(model, valid_batches, device, config)}
-            history.append(metrics)
-            log.write(event="validate", **metrics)
-            _save(out_dir / "fpn-last.pt", "fpn", model, model_config, config, step, history, optimizer, rng)
+            _record(out_dir, "fpn", metrics, model, model_config, config, step, history, optimizer, rng, log)
     bar.close()
-    final = out_dir / "fpn.pt"
-    _save(final, "fpn", model, model_config, config, step, history, None)
-    log.write(event="done", step=step, weights=str(final))
-    return final
+    return _finish(out_dir, "fpn", model, model_config, config, step, history, log)
 
 
 # -- AfANet -------------------------------------------------------------------------------------------
@@ -276,14 +271,9 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
             metrics = {"step": step, "stage": stage}
             for name, samples in valid_sets.items():
                 metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()})
-            history.append(metrics)
-            log.write(event="validate", **metrics)
-            _save(out_dir / "afanet-last.pt", "afanet", model, model_config, config, step, history, optimizer, rng)
+            _record(out_dir, "afanet", metrics, model, model_config, config, step, history, optimizer, rng, log)
     bar.close()
-    final = out_dir / "afanet.pt"
-    _save(final, "afanet", model, model_config, config, step, history, None)
-    log.write(event="done", step=step, weights=str(final))
-    return final
+    return _finish(out_dir, "afanet", model, model_config, config, step, history, log)
 
 
 # -- shared -------------------------------------------------------------------------------------------
@@ -304,6 +294,21 @@ def _cosine_lr(config: TrainConfig, step: int) -> float:
         return config.lr * (step + 1) / warm
     t = (step - warm) / max(1, config.steps - warm)
     return config.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, t))))
+
+
+def _record(out_dir: Path, kind: str, metrics: dict, model, model_config, config, step, history, optimizer, rng, log: RunLog) -> None:
+    """Log one validation and write the resumable ``<kind>-last.pt``."""
+    history.append(metrics)
+    log.write(event="validate", **metrics)
+    _save(out_dir / f"{kind}-last.pt", kind, model, model_config, config, step, history, optimizer, rng)
+
+
+def _finish(out_dir: Path, kind: str, model, model_config, config, step, history, log: RunLog) -> Path:
+    """Write the final ``<kind>.pt`` (no optimizer state) and log its path."""
+    final = out_dir / f"{kind}.pt"
+    _save(final, kind, model, model_config, config, step, history, None)
+    log.write(event="done", step=step, weights=str(final))
+    return final
 
 
 def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer, rng=None) -> None:

@@ -1,0 +1,61 @@
+"""Training runs end to end on tiny cities, logs and checkpoints, and resumes exactly."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from csboundary.models.checkpoint import load_checkpoint
+from csboundary.models.train import TrainConfig, train_afanet, train_fpn
+
+TINY_FPN = {"widths": [8, 8, 8, 8], "blocks": [1, 1, 1, 1], "pyramid": 8, "stem": 8}
+TINY_AFANET = {"global_size": 32, "roi": 16, "encoder_widths": [8, 8], "dim": 32, "layers": 1}
+
+
+def config(tmp_path, **overrides) -> TrainConfig:
+    base = {
+        "cache": str(tmp_path / "cities"),
+        "train_city": {"split": "train", "seed": 2, "tiles": [1, 1], "tile_size": 400},
+        "valid_city": {"split": "valid", "seed": 2, "tiles": [1, 1], "tile_size": 400},
+        "steps": 4, "validate_every": 2, "validation_samples": 1, "crop": 64, "batch": 2, "fpn": TINY_FPN,
+    }
+    base.update(overrides)
+    return TrainConfig.from_dict(base)
+
+
+@pytest.fixture(scope="module")
+def fpn_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("fpn")
+    return tmp, train_fpn(config(tmp), tmp / "run", torch.device("cpu"), progress=False)
+
+
+def test_fpn_run_writes_weights_log_and_validation(fpn_run):
+    tmp, weights = fpn_run
+    payload = load_checkpoint(weights, ("fpn",))
+    assert payload["step"] == 4 and [v["step"] for v in payload["validation"]] == [2, 4]
+    assert "optimizer" not in payload and payload["train_config"]["seed"] == 0
+    events = [json.loads(line)["event"] for line in (tmp / "run" / "train.log").read_text().splitlines()]
+    assert events == ["start", "validate", "validate", "done"]
+
+
+def test_resumed_run_equals_uninterrupted_run(fpn_run, tmp_path):
+    tmp, weights = fpn_run
+    cfg = config(tmp, steps=2)
+    train_fpn(cfg, tmp_path / "half", torch.device("cpu"), progress=False)
+    resumed = train_fpn(config(tmp), tmp_path / "half", torch.device("cpu"), resume=str(tmp_path / "half" / "fpn-last.pt"), progress=False)
+    a, b = load_checkpoint(weights, ("fpn",))["fpn"], load_checkpoint(resumed, ("fpn",))["fpn"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_afanet_trains_on_fpn_maps(fpn_run, tmp_path):
+    tmp, fpn_weights = fpn_run
+    cfg = config(tmp, model="afanet", fpn_weights=str(fpn_weights), afanet=TINY_AFANET, window=200, gt_steps=2, steps=3, validate_every=3)
+    weights = train_afanet(cfg, tmp_path / "afa", torch.device("cpu"), progress=False)
+    assert load_checkpoint(weights, ("afanet",))["step"] == 3
+
+
+def test_misspelt_model_option_is_an_error(tmp_path):
+    with pytest.raises(ValueError, match="unknown FPNConfig option"):
+        train_fpn(config(tmp_path, fpn={"width": [8, 8, 8, 8]}), tmp_path / "run", torch.device("cpu"), progress=False)
