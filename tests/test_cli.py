@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from helpers import run_cli
 from csboundary.data import city as layout
 
 
-def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+run = run_cli
 
 
 @pytest.fixture(scope="module")

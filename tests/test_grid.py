@@ -10,6 +10,7 @@ from affine import Affine
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers import north_up
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow as W
@@ -325,13 +326,6 @@ def test_grid_on_a_real_mosaic(shared_tiles):
     assert (float(x), float(y)) == pytest.approx((X0, Y0), abs=1e-9)
 
 
-north_up = st.builds(
-    lambda gsd_x, gsd_y, x0, y0: Affine(gsd_x, 0.0, x0, 0.0, -gsd_y, y0),
-    st.floats(0.05, 30.0),
-    st.floats(0.05, 30.0),
-    st.floats(-1e6, 1e6),
-    st.floats(-1e7, 1e7),
-)
 
 
 @settings(max_examples=150, deadline=None)

@@ -178,16 +178,13 @@ def test_keypoints_move_with_the_boundary_by_whole_grid_periods(dx, dy, radius):
 
 
 def test_label_files_round_trip_and_show(tmp_path):
-    import subprocess
-    import sys
-
     from csboundary.data.synth.city import synthesize_city
     from csboundary.data.synth.config import SynthConfig
     from csboundary.graph import BoundaryGraph
     from csboundary.labels.writer import PATCH_DIR, load_patch_arrays
 
     synthesize_city(tmp_path / "c", 4, "train", (1, 1), SynthConfig(tile_size=1200, gsd=0.3), progress=False)
-    run = lambda *a: subprocess.run([sys.executable, "-m", "csboundary", *a], capture_output=True, text=True, timeout=300)  # noqa: E731
+    from helpers import run_cli as run
     result = run("labels", str(tmp_path / "c"), "--out", str(tmp_path / "lab"), "--quiet")
     assert result.returncode == 0, result.stderr
     arrays = load_patch_arrays(tmp_path / "lab" / PATCH_DIR / "r01_c01.npz")

@@ -4,20 +4,19 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import run_cli
 from csboundary.data import city as layout
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics.io import load_pair
 
 
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, timeout=300)
+run = run_cli
 
 
 @pytest.fixture(scope="module")

@@ -3,19 +3,17 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 import torch
 
+from helpers import run_cli
 from csboundary.models.afanet import AfANet, AfANetConfig
 from csboundary.models.checkpoint import save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
 
 
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, timeout=600)
+run = run_cli
 
 
 @pytest.fixture(scope="module")

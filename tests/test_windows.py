@@ -8,6 +8,7 @@ from affine import Affine
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers import north_up
 from csboundary.data.windows import (
     PixelWindow,
     pixel_to_world,
@@ -195,13 +196,6 @@ def test_window_transform_maps_window_origin():
     assert (t.a, t.e) == (T.a, T.e)
 
 
-north_up = st.builds(
-    lambda gsd_x, gsd_y, x0, y0: Affine(gsd_x, 0.0, x0, 0.0, -gsd_y, y0),
-    st.floats(0.05, 30.0),
-    st.floats(0.05, 30.0),
-    st.floats(-1e6, 1e6),
-    st.floats(-1e7, 1e7),
-)
 
 
 @given(north_up, st.floats(-1e4, 6e4), st.floats(-1e4, 6e4))

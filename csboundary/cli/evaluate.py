@@ -44,9 +44,17 @@ def evaluate(
     result["inputs"] = {"pred": str(pred), "gt": str(gt), "frame": frame.source, "crs": frame.crs}
     typer.echo(format_table(result))
     if json_out is not None:
-        with atomic_path(json_out) as tmp:
-            tmp.write_text(json.dumps(nan_to_none(result), indent=1) + "\n")
+        write_scores(json_out, result)
         typer.echo(f"wrote {json_out}")
+
+
+def write_scores(path: Path, result: dict) -> None:
+    """Scores as JSON, atomically; undefined metrics (NaN) become null."""
+    from csboundary.data.atomic import atomic_path
+    from csboundary.metrics.aggregate import nan_to_none
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(nan_to_none(result), indent=1, default=float) + "\n")
 
 
 def _num(value: float) -> str:

@@ -262,37 +262,23 @@ def evaluate_model(
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
     """Patch-scale evaluation of a model: every patch predicted on its own, scored on its core."""
-    import json as _json
-
-    from csboundary.cli.evaluate import format_table
+    from csboundary.cli.evaluate import format_table, write_scores
     from csboundary.data import city as layout
-    from csboundary.data.grid import PatchGrid
-    from csboundary.data.ground_truth import read_ground_truth
-    from csboundary.data.raster import Mosaic
-    from csboundary.graph import BoundaryGraph
-    from csboundary.metrics import evaluate as evaluate_graphs
     from csboundary.models.device import resolve_device
     from csboundary.pipeline.patch import PatchPredictor
-    from csboundary.pipeline.patchwise import predict_patchwise
+    from csboundary.pipeline.patchwise import score_patchwise
 
     predictor = PatchPredictor.load(weights, resolve_device(device))
     if edge_threshold is not None:
         predictor.edge_threshold = edge_threshold
     layout.read_meta(city)
-    with Mosaic.open(layout.tiles_dir(city)) as mosaic:
-        grid = PatchGrid.for_mosaic(mosaic)
-        pred = predict_patchwise(predictor, mosaic, grid, progress=not quiet)
-        gt_frame = read_ground_truth(layout.ground_truth_path(city), mosaic.crs)
-        gt = BoundaryGraph.from_world_lines(list(gt_frame.geometry), mosaic.transform)
-    result = evaluate_graphs(pred, gt, scale="patch", grid=grid, seed=seed)
+    mosaic, lines = _open_inputs([city], None)
+    with mosaic:
+        _, result, _ = score_patchwise(predictor, mosaic, lines, seed, progress=not quiet)
     result["inputs"] = {"pred": f"{weights or 'shipped weights'} on {city}", "gt": str(layout.ground_truth_path(city))}
     typer.echo(format_table(result))
     if json_out is not None:
-        from csboundary.data.atomic import atomic_path
-        from csboundary.metrics.aggregate import nan_to_none
-
-        with atomic_path(json_out) as tmp:
-            tmp.write_text(_json.dumps(nan_to_none(result), indent=2, default=float) + "\n")
+        write_scores(json_out, result)
 
 
 @app.command("predict-patch")
@@ -356,22 +342,15 @@ def demo(
     OUT/overview.png (ground truth cyan, prediction orange, patch grid) and OUT/patch.png.
     City-scale stitching is not in place yet: patches are predicted one by one.
     """
-    import json as _json
-
     import geopandas as gpd
 
-    from csboundary.cli.evaluate import format_table
-    from csboundary.data.atomic import atomic_path
-    from csboundary.data.grid import PatchGrid
+    from csboundary.cli.evaluate import format_table, write_scores
     from csboundary.data.ground_truth import write_ground_truth
     from csboundary.data.synth.city import synthesize_city
     from csboundary.data.synth.config import SynthConfig
-    from csboundary.graph import BoundaryGraph
-    from csboundary.metrics import evaluate as evaluate_graphs
-    from csboundary.metrics.aggregate import nan_to_none
     from csboundary.models.device import resolve_device
     from csboundary.pipeline.patch import PatchPredictor
-    from csboundary.pipeline.patchwise import predict_patchwise
+    from csboundary.pipeline.patchwise import score_patchwise
     from csboundary.viz.overlay import render_window, write_png
 
     predictor = PatchPredictor.load(None, resolve_device(device))
@@ -379,16 +358,12 @@ def demo(
     meta = synthesize_city(city_dir, seed, "test", (2, 2), SynthConfig(tile_size=1500))
     mosaic, lines = _open_inputs([city_dir], None)
     with mosaic:
-        grid = PatchGrid.for_mosaic(mosaic)
-        pred = predict_patchwise(predictor, mosaic, grid)
-        gt = BoundaryGraph.from_world_lines(lines, mosaic.transform)
-        scores = evaluate_graphs(pred, gt, scale="patch", grid=grid, seed=0)
+        pred, scores, grid = score_patchwise(predictor, mosaic, lines)
         scores["inputs"] = {"pred": "shipped weights, patch by patch", "gt": str(city_dir / "ground_truth.gpkg")}
         predicted = pred.to_linestrings(world=True)
         pred.write_json(out / "prediction.graph.json")
         write_ground_truth(out / "prediction.gpkg", gpd.GeoDataFrame(geometry=predicted, crs=pred.crs))
-        with atomic_path(out / "scores.json") as tmp:
-            tmp.write_text(_json.dumps(nan_to_none(scores), indent=2, default=float) + "\n")
+        write_scores(out / "scores.json", scores)
         orange = (255, 140, 0)
         write_png(out / "overview.png", render_window(mosaic, mosaic.window, lines, max_size=1500, grid=grid, layers=[(predicted, orange)]))
         write_png(out / "patch.png", render_window(mosaic, grid.patch(1, 1).core, lines, layers=[(predicted, orange)]))

@@ -18,6 +18,17 @@ from csboundary.graph import BoundaryGraph
 from csboundary.pipeline.patch import PatchPredictor
 
 
+def score_patchwise(predictor: PatchPredictor, mosaic: Mosaic, ground_truth, seed: int = 0, progress: bool = True) -> tuple[BoundaryGraph, dict, PatchGrid]:
+    """Predict every patch on its own and score the result against ``ground_truth`` (world
+    LineStrings) at patch scale; returns the prediction, the scores and the grid."""
+    from csboundary.metrics import evaluate
+
+    grid = PatchGrid.for_mosaic(mosaic)
+    pred = predict_patchwise(predictor, mosaic, grid, progress)
+    gt = BoundaryGraph.from_world_lines(list(ground_truth), mosaic.transform)
+    return pred, evaluate(pred, gt, scale="patch", grid=grid, seed=seed), grid
+
+
 def predict_patchwise(predictor: PatchPredictor, mosaic: Mosaic, grid: PatchGrid, progress: bool = True) -> BoundaryGraph:
     """One graph in mosaic pixels: each patch's predicted edges clipped to that patch's core."""
     lines: list[np.ndarray] = []
