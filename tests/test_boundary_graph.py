@@ -51,12 +51,16 @@ def test_json_round_trip(points, with_extras, tmp_path_factory):
         g.edge_scores = np.linspace(0, 1, g.n_edges)
         g.edge_kinds = ["normal"] * g.n_edges
         g.vertex_kinds = ["isolated"] * g.n_vertices
+        g.edge_patches = np.stack([np.arange(g.n_edges), np.arange(g.n_edges)[::-1]], axis=1)
     path = tmp_path_factory.mktemp("g") / "g.json"
     back = BoundaryGraph.read_json(g.write_json(path))
     assert np.array_equal(back.vertices, g.vertices) and np.array_equal(back.edges, g.edges)
     assert back.transform == T and back.crs == "EPSG:32618"
     if with_extras:
         assert np.allclose(back.edge_scores, g.edge_scores) and back.edge_kinds == g.edge_kinds
+        assert np.array_equal(back.edge_patches, g.edge_patches)
+    else:
+        assert back.edge_patches is None
     data = json.loads(path.read_text())
     assert data["vertices"][0]["xy"] == pytest.approx(list(T @ tuple(pts[0])))
 

@@ -10,10 +10,12 @@ JSON (``format: csboundary-graph``, ``version: 1``)::
     {"format": "csboundary-graph", "version": 1, "crs": "EPSG:32618" | null,
      "transform": [a, b, c, d, e, f] | null,
      "vertices": [{"px": [col, row], "xy": [x, y], "kind": "..."}, ...],
-     "edges": [{"u": i, "v": j, "kind": "...", "polyline_px": [[col, row], ...], "score": s}, ...]}
+     "edges": [{"u": i, "v": j, "kind": "...", "polyline_px": [[col, row], ...], "score": s,
+                "patch": [row, col]}, ...]}
 
 ``xy`` is written for readers that want world coordinates and ignored on reading (``px`` and
-``transform`` are the truth). ``polyline_px`` includes both end vertices; ``score`` is optional.
+``transform`` are the truth). ``polyline_px`` includes both end vertices; ``score`` (confidence)
+and ``patch`` (the grid patch whose prediction the edge comes from) are optional.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ class BoundaryGraph:
     edge_kinds: list[str] | None = None
     edge_polylines: list[np.ndarray | None] | None = None  # pixel polylines incl. both ends
     edge_scores: np.ndarray | None = None
+    edge_patches: np.ndarray | None = None  # (E, 2) int grid (row, col) of the source patch
     transform: Affine | None = None  # pixel -> world of the frame the vertices refer to
     crs: str | None = None
 
@@ -55,6 +58,8 @@ class BoundaryGraph:
         if len(edges) and (edges.min() < 0 or edges.max() >= len(self.vertices)):
             raise ValueError("edge refers to a vertex that does not exist")
         self.edges = edges
+        if self.edge_patches is not None:
+            self.edge_patches = np.asarray(self.edge_patches, dtype=np.int64).reshape(-1, 2)
 
     # -- views ------------------------------------------------------------------------------------
     @property
@@ -142,6 +147,8 @@ class BoundaryGraph:
                 item["polyline_px"] = np.asarray(self.edge_polylines[k], dtype=float).round(3).tolist()
             if self.edge_scores is not None:
                 item["score"] = float(self.edge_scores[k])
+            if self.edge_patches is not None:
+                item["patch"] = [int(x) for x in self.edge_patches[k]]
             edges.append(item)
         return {
             "format": FORMAT,
@@ -171,6 +178,9 @@ class BoundaryGraph:
                 if any("polyline_px" in e for e in edges)
                 else None,
                 edge_scores=np.array([e.get("score", np.nan) for e in edges], dtype=float) if any("score" in e for e in edges) else None,
+                edge_patches=np.array([e.get("patch", [-1, -1]) for e in edges], dtype=np.int64).reshape(-1, 2)
+                if any("patch" in e for e in edges)
+                else None,
                 transform=transform,
                 crs=data.get("crs"),
             )
