@@ -36,10 +36,13 @@ def unit_bands(data: np.ndarray) -> np.ndarray:
 
 @torch.no_grad()
 def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device) -> np.ndarray:
-    """(4, h, w) uint8 -> (2, h, w) float32 probabilities (keypoint, segmentation)."""
+    """(4, h, w) uint8 -> (2, h, w) float32 probabilities (keypoint, segmentation); a batch
+    (B, 4, h, w) -> (B, 2, h, w)."""
     model.eval()
-    logits = model(image_tensor(image, device)[None])[0]
-    return torch.sigmoid(logits).float().cpu().numpy()
+    batch = image_tensor(image, device)
+    logits = model(batch if batch.ndim == 4 else batch[None])
+    probs = torch.sigmoid(logits).float().cpu().numpy()
+    return probs if batch.ndim == 4 else probs[0]
 
 
 def predict_mosaic_maps(model: FPN, mosaic: Mosaic, grid: PatchGrid, device: torch.device, progress: bool = True) -> np.ndarray:

@@ -64,31 +64,52 @@ class PatchPredictor:
     def maps(self, image: np.ndarray) -> np.ndarray:
         return predict_probabilities(self.fpn, image, self.device)
 
+    def patch_maps(self, patches: list, images: list[np.ndarray]) -> list[np.ndarray]:
+        """FPN maps of several patches in one batch (the city pipeline's ``PatchModel`` step)."""
+        return list(predict_probabilities(self.fpn, np.stack(images), self.device))
+
+    def extract(self, maps: np.ndarray) -> BoundaryGraph:
+        """Vertices (and corner edges) of a patch's keypoint map."""
+        return extract_vertices(maps[0], self.vertices)
+
     @torch.no_grad()
+    def connect(self, patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
+        """The patch graph: ``found``'s vertices joined by its corner edges and AfANet's edges."""
+        m = found.n_vertices
+        if m < 2:
+            return graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree)
+        tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(np.ascontiguousarray(maps)).to(self.device)], dim=0)
+        vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
+        probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
+        return graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree)
+
     def graph(self, image: np.ndarray, maps: np.ndarray | None = None) -> BoundaryGraph:
         """Graph of one patch (pixel coordinates of ``image``); ``maps`` when already stitched."""
         if maps is None:
             maps = self.maps(image)
-        found = extract_vertices(maps[0], self.vertices)
-        m = found.n_vertices
-        corner = [tuple(int(x) for x in e) for e in found.edges]
-        polylines = {tuple(sorted(e)): _smooth(found.edge_polylines[k]) for k, e in enumerate(corner)} if found.edge_polylines else {}
-        if m >= 2:
-            tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(maps).to(self.device)], dim=0)
-            vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
-            probs = self.afanet.adjacency(tensor, vertices).cpu()
-            edges = edges_from_adjacency(probs, self.edge_threshold, self.max_degree, fixed=corner)
-        else:
-            probs, edges = torch.zeros((m, m)), [tuple(sorted(e)) for e in corner]
-        kinds, lines, scores = [], [], []
-        for u, v in edges:
-            line = polylines.get((u, v))
-            if line is not None:
-                line = np.asarray(line)
-                if np.linalg.norm(line[0] - found.vertices[u]) > np.linalg.norm(line[0] - found.vertices[v]):
-                    line = line[::-1]
-            kinds.append("corner" if line is not None else "normal")
-            lines.append(line)
-            scores.append(1.0 if line is not None else float(probs[u, v]))
-        return BoundaryGraph(found.vertices, np.array(edges, dtype=np.int64).reshape(-1, 2), vertex_kinds=found.vertex_kinds,
-                             edge_kinds=kinds, edge_polylines=lines, edge_scores=np.array(scores))
+        return self.connect(None, image, maps, self.extract(maps))
+
+
+def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: float, max_degree: int | None) -> BoundaryGraph:
+    """Extracted vertices + an (M, M) edge probability matrix -> the patch graph.
+
+    Corner edges from vertex extraction are always kept (kind ``corner``, their skeleton smoothed
+    into the polyline, score = mean keypoint probability along it); the other edges are decoded
+    from ``probs`` (kind ``normal``, score = their probability).
+    """
+    corner = [tuple(int(x) for x in e) for e in found.edges]
+    polylines = {tuple(sorted(e)): _smooth(found.edge_polylines[k]) for k, e in enumerate(corner)} if found.edge_polylines else {}
+    corner_scores = {tuple(sorted(e)): float(found.edge_scores[k]) for k, e in enumerate(corner)} if found.edge_scores is not None else {}
+    edges = edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), threshold, max_degree, fixed=corner) if len(probs) >= 2 else [tuple(sorted(e)) for e in corner]
+    kinds, lines, scores = [], [], []
+    for u, v in edges:
+        line = polylines.get((u, v))
+        if line is not None:
+            line = np.asarray(line)
+            if np.linalg.norm(line[0] - found.vertices[u]) > np.linalg.norm(line[0] - found.vertices[v]):
+                line = line[::-1]
+        kinds.append("corner" if line is not None else "normal")
+        lines.append(line)
+        scores.append(corner_scores.get((u, v), 1.0) if line is not None else float(probs[u, v]))
+    return BoundaryGraph(found.vertices, np.array(edges, dtype=np.int64).reshape(-1, 2), vertex_kinds=found.vertex_kinds,
+                         edge_kinds=kinds, edge_polylines=lines, edge_scores=np.array(scores, dtype=float))

@@ -1,0 +1,203 @@
+"""Patch graphs -> one city graph, through the vertices neighbouring patches share (paper IV-E).
+
+Each patch's graph is predicted on its 1100 px window of the stitched (averaged) maps, so where
+two windows overlap they see the same keypoint map and extract the same vertices there: "the
+graph of the two adjacent image patches could be stitched together easily by connecting
+exclusive vertices of two patches with the shared vertices". The paper leaves the details open;
+the rules here:
+
+* **Edge ownership.** Both patches predict the edges inside their overlap, not always alike.
+  Each edge is kept from exactly one patch: the one whose core holds the edge's midpoint (half
+  its arc length along its polyline). Cores tile the mosaic, so there are no duplicates, and
+  every edge is judged by the patch that sees at least ``margin`` px of context around it.
+  Patches on the mosaic border own everything beyond it on that side too.
+* **Shared vertices.** Vertices closer than ``merge_px`` become one (the first seen keeps its
+  position). Shared vertices are bit-identical, so merging only has to absorb float noise; the
+  radius also guarantees that no two output vertices are closer than ``merge_px``.
+* **Cut pieces.** A keypoint blob cut by a window's border gives that patch a vertex that its
+  neighbour, which sees the whole blob, puts elsewhere. A vertex within ``border_px`` of its
+  window's inner border (one with a neighbour behind it) is therefore moved onto the nearest
+  vertex within ``snap_px`` that a neighbour extracted away from its own border.
+
+Coordinates are mosaic pixels (col, row), the frame of ``grid.transform``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from csboundary.data.grid import Patch, PatchGrid
+from csboundary.graph.boundary_graph import BoundaryGraph
+
+Index = tuple[int, int]
+
+
+@dataclass(frozen=True)
+class StitchConfig:
+    """Distances in pixels; see the module docstring."""
+
+    merge_px: float = 1.0
+    border_px: float = 8.0
+    snap_px: float = 5.0
+
+    def __post_init__(self) -> None:
+        if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0):
+            raise ValueError(f"need merge_px > 0, border_px >= 0, snap_px >= 0; got {self}")
+
+
+def to_mosaic(graph: BoundaryGraph, patch: Patch) -> BoundaryGraph:
+    """A patch graph (pixels of ``patch.expanded``) moved to mosaic pixels."""
+    offset = np.array([patch.expanded.col_off, patch.expanded.row_off], float)
+    lines = None if graph.edge_polylines is None else [None if p is None else np.asarray(p, float) + offset for p in graph.edge_polylines]
+    return BoundaryGraph(graph.vertices + offset, graph.edges, vertex_kinds=graph.vertex_kinds, edge_kinds=graph.edge_kinds,
+                         edge_polylines=lines, edge_scores=graph.edge_scores, crs=graph.crs)
+
+
+def owner_bounds(patch: Patch, grid: PatchGrid) -> tuple[float, float, float, float]:
+    """(x0, y0, x1, y1) of the region whose edges ``patch`` keeps: its core, unbounded on the
+    sides where the mosaic ends."""
+    core = patch.core
+    x0 = -np.inf if patch.col == 0 else core.col_off
+    y0 = -np.inf if patch.row == 0 else core.row_off
+    x1 = np.inf if patch.col == grid.n_cols - 1 else core.col_end
+    y1 = np.inf if patch.row == grid.n_rows - 1 else core.row_end
+    return x0, y0, x1, y1
+
+
+def polyline_midpoint(points: np.ndarray) -> np.ndarray:
+    """The point at half the arc length of a polyline."""
+    points = np.asarray(points, float)
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    if len(points) < 2 or steps.sum() == 0:
+        return points[0]
+    cum = np.concatenate([[0.0], np.cumsum(steps)])
+    half = cum[-1] / 2
+    k = min(int(np.searchsorted(cum, half, side="right")) - 1, len(steps) - 1)
+    t = (half - cum[k]) / steps[k] if steps[k] > 0 else 0.0
+    return points[k] + t * (points[k + 1] - points[k])
+
+
+def border_distance(points: np.ndarray, patch: Patch, grid: PatchGrid) -> np.ndarray:
+    """Distance of each point to the nearest side of ``patch``'s window that has a neighbour
+    behind it (inf when every side is the mosaic's edge)."""
+    win = patch.expanded
+    x, y = points[:, 0], points[:, 1]
+    sides = [
+        (patch.col > 0, x - win.col_off),
+        (patch.col < grid.n_cols - 1, win.col_end - x),
+        (patch.row > 0, y - win.row_off),
+        (patch.row < grid.n_rows - 1, win.row_end - y),
+    ]
+    out = np.full(len(points), np.inf)
+    for has_neighbour, distance in sides:
+        if has_neighbour:
+            out = np.minimum(out, distance)
+    return out
+
+
+class _VertexRegistry:
+    """Output vertices, each new point merged into an existing one closer than ``radius``."""
+
+    def __init__(self, radius: float):
+        self.radius = radius
+        self.points: list[np.ndarray] = []
+        self.kinds: list[str] = []
+        self._cells: dict[tuple[int, int], list[int]] = {}
+
+    def add(self, point: np.ndarray, kind: str) -> int:
+        cx, cy = int(np.floor(point[0] / self.radius)), int(np.floor(point[1] / self.radius))
+        best, best_d = -1, self.radius
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for i in self._cells.get((cx + dx, cy + dy), ()):
+                    d = float(np.hypot(*(self.points[i] - point)))
+                    if d < best_d:
+                        best, best_d = i, d
+        if best >= 0:
+            return best
+        self.points.append(np.asarray(point, float))
+        self.kinds.append(kind)
+        self._cells.setdefault((cx, cy), []).append(len(self.points) - 1)
+        return len(self.points) - 1
+
+
+def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig = StitchConfig(),
+                        crs: str | None = None) -> BoundaryGraph:
+    """One city graph from per-patch graphs given in mosaic pixels (see :func:`to_mosaic`)."""
+    safe = _safe_vertices(graphs, grid, config)
+    registry = _VertexRegistry(config.merge_px)
+    kept: dict[tuple[int, int], dict] = {}
+    for index in sorted(graphs):
+        graph, patch = graphs[index], grid.patch(*index)
+        if graph.n_edges == 0:
+            continue
+        x0, y0, x1, y1 = owner_bounds(patch, grid)
+        positions = _snapped(graph, patch, grid, safe, config)
+        kinds = graph.vertex_kinds or ["vertex"] * graph.n_vertices
+        for k, (u, v) in enumerate(graph.edges):
+            line = graph.edge_polyline(k)
+            mx, my = polyline_midpoint(line)
+            if not (x0 <= mx < x1 and y0 <= my < y1):
+                continue
+            a, b = registry.add(positions[u], kinds[u]), registry.add(positions[v], kinds[v])
+            if a == b:
+                continue
+            kind = graph.edge_kinds[k] if graph.edge_kinds is not None else "normal"
+            score = float(graph.edge_scores[k]) if graph.edge_scores is not None else np.nan
+            polyline = None
+            if graph.edge_polylines is not None and graph.edge_polylines[k] is not None:
+                polyline = np.array(line, float)
+                polyline[0], polyline[-1] = registry.points[a], registry.points[b]
+            edge = {"u": a, "v": b, "kind": kind, "score": score, "polyline": polyline, "patch": index}
+            key = (min(a, b), max(a, b))
+            if key not in kept or _better(edge, kept[key]):
+                kept[key] = edge
+    edges = list(kept.values())
+    return BoundaryGraph(
+        np.array(registry.points).reshape(-1, 2),
+        np.array([[e["u"], e["v"]] for e in edges], dtype=np.int64).reshape(-1, 2),
+        vertex_kinds=list(registry.kinds),
+        edge_kinds=[e["kind"] for e in edges],
+        edge_polylines=[e["polyline"] for e in edges],
+        edge_scores=np.array([e["score"] for e in edges], dtype=float),
+        edge_patches=np.array([e["patch"] for e in edges], dtype=np.int64).reshape(-1, 2),
+        transform=grid.transform,
+        crs=crs,
+    )
+
+
+def _better(new: dict, old: dict) -> bool:
+    """Between two edges joining the same vertices, a corner edge (it has the curb's shape) wins,
+    then the more confident one."""
+    if (new["kind"] == "corner") != (old["kind"] == "corner"):
+        return new["kind"] == "corner"
+    return np.nan_to_num(new["score"], nan=-1) > np.nan_to_num(old["score"], nan=-1)
+
+
+def _safe_vertices(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig) -> dict[Index, np.ndarray]:
+    """Per patch, its vertices that lie at least ``border_px`` from its window's inner border."""
+    out = {}
+    for index, graph in graphs.items():
+        far = border_distance(graph.vertices, grid.patch(*index), grid) >= config.border_px
+        out[index] = graph.vertices[far]
+    return out
+
+
+def _snapped(graph: BoundaryGraph, patch: Patch, grid: PatchGrid, safe: Mapping[Index, np.ndarray], config: StitchConfig) -> np.ndarray:
+    """Vertex positions with the ones near the window border moved onto a neighbour's vertex."""
+    positions = graph.vertices.copy()
+    fragile = np.flatnonzero(border_distance(positions, patch, grid) < config.border_px)
+    if not len(fragile) or config.snap_px == 0:
+        return positions
+    candidates = [safe[q.index] for q in grid.neighbours(patch) if q.index in safe and len(safe[q.index])]
+    if not candidates:
+        return positions
+    pool = np.concatenate(candidates)
+    distance, nearest = cKDTree(pool).query(positions[fragile], distance_upper_bound=config.snap_px)
+    hit = np.isfinite(distance)
+    positions[fragile[hit]] = pool[nearest[hit]]
+    return positions

@@ -1,0 +1,54 @@
+"""A perfect "model" built from the ground truth, for the city pipeline's :class:`PatchModel` slot.
+
+Its maps are the training labels (keypoint heat and segmentation) and its edges the adjacency
+labels of whatever vertices were extracted. Fed through the real pipeline (streaming map
+averaging, vertex extraction, graph stitching) it isolates the pipeline's own losses from the
+networks' errors: the upper bound of the system, and the test that stitching keeps boundaries
+whole across patch seams.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from csboundary.data.grid import Patch
+from csboundary.data.raster import Mosaic
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
+from csboundary.labels.adjacency import adjacency_label
+from csboundary.labels.config import LabelConfig
+from csboundary.labels.rasterize import keypoint_heat, segmentation_label
+from csboundary.labels.writer import CityLabels
+from csboundary.pipeline.patch import graph_from_adjacency
+
+
+@dataclass
+class OracleModel:
+    labels: CityLabels
+    vertices: VertexConfig = VertexConfig()
+
+    @classmethod
+    def from_lines(cls, lines, mosaic: Mosaic, config: LabelConfig = LabelConfig()) -> "OracleModel":
+        """From ground-truth LineStrings in the mosaic's world coordinates."""
+        return cls(CityLabels.build(lines, mosaic, config))
+
+    def patch_maps(self, patches: list[Patch], images: list[np.ndarray]) -> list[np.ndarray]:
+        lab, c = self.labels, self.labels.config
+        return [
+            np.stack([
+                keypoint_heat(lab.keypoints, lab.bounds, p.expanded, c.heat_sigma_px),
+                segmentation_label(lab.boundaries, lab.bounds, p.expanded, c.segmentation_width),
+            ]).astype(np.float32)
+            for p in patches
+        ]
+
+    def extract(self, maps: np.ndarray) -> BoundaryGraph:
+        return extract_vertices(maps[0], self.vertices)
+
+    def connect(self, patch: Patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
+        offset = np.array([patch.expanded.col_off, patch.expanded.row_off], float)
+        lab = self.labels
+        adjacency = adjacency_label(found.vertices + offset, lab.boundaries, lab.bounds, patch.expanded, lab.config.snap_tolerance_px)
+        return graph_from_adjacency(found, adjacency.astype(np.float32), 0.5, None)

@@ -1,0 +1,106 @@
+"""Graph stitching through shared vertices: hand-made patch graphs with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.distance import pdist
+
+from csboundary.data.grid import GridConfig, PatchGrid
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.stitching import StitchConfig, border_distance, owner_bounds, polyline_midpoint, stitch_patch_graphs
+
+# 1 x 2 patches: cores [0, 100) and [100, 200); windows [-10, 110) and [90, 210).
+GRID = PatchGrid(200, 100, config=GridConfig(core=100, margin=10))
+
+
+def graph(points, edges, **extra) -> BoundaryGraph:
+    return BoundaryGraph(np.array(points, float), np.array(edges), **extra)
+
+
+def test_a_shared_vertex_joins_the_two_sides():
+    left = graph([[50, 50], [100, 50], [108, 50]], [[0, 1], [1, 2]])  # b-c lies in the right core
+    right = graph([[100, 50], [150, 50]], [[0, 1]])
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert city.n_vertices == 3 and city.n_edges == 2
+    assert sorted(map(tuple, city.vertices.tolist())) == [(50, 50), (100, 50), (150, 50)]
+    assert sorted(map(tuple, city.edge_patches.tolist())) == [(0, 0), (0, 1)]
+    degree = np.bincount(city.edges.ravel())
+    assert sorted(degree.tolist()) == [1, 1, 2]  # one unbroken path
+
+
+def test_an_edge_both_patches_predict_is_kept_once_from_its_owner():
+    both = graph([[95, 20], [105, 30]], [[0, 1]], edge_scores=np.array([0.9]))
+    other = graph([[95, 20], [105, 30]], [[0, 1]], edge_scores=np.array([0.4]))
+    city = stitch_patch_graphs({(0, 0): both, (0, 1): other}, GRID)
+    assert city.n_edges == 1 and city.edge_patches.tolist() == [[0, 1]] and city.edge_scores.tolist() == [0.4]
+
+
+def test_an_edge_only_the_non_owner_predicts_is_dropped():
+    left = graph([[95, 20], [107, 30]], [[0, 1]])  # midpoint x = 101: the right patch decides
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): graph([[95, 20], [107, 30]], np.zeros((0, 2)))}, GRID)
+    assert city.n_edges == 0
+
+
+def test_a_vertex_cut_by_the_window_border_snaps_to_the_neighbours_version():
+    # The left window ends at x = 110: its vertex at 108.5 comes from a cut blob; the right patch,
+    # which sees the whole blob, puts it at 106.
+    left = graph([[50, 50], [108.5, 50]], [[0, 1]])
+    right = graph([[106, 50], [150, 50]], [[0, 1]])
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert city.n_vertices == 3 and sorted(city.vertices[:, 0].tolist()) == [50, 106, 150]
+    assert sorted(np.bincount(city.edges.ravel()).tolist()) == [1, 1, 2]
+    # Without snapping the two sides stay apart.
+    apart = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(snap_px=0))
+    assert apart.n_vertices == 4
+
+
+def test_patches_on_the_mosaic_border_keep_edges_beyond_it():
+    outer = graph([[-8, 10], [-2, 30]], [[0, 1]])  # in the left patch's margin, outside the mosaic
+    city = stitch_patch_graphs({(0, 0): outer, (0, 1): BoundaryGraph()}, GRID)
+    assert city.n_edges == 1
+    assert owner_bounds(GRID.patch(0, 0), GRID) == (-np.inf, -np.inf, 100, np.inf)
+
+
+def test_corner_polylines_follow_their_merged_ends():
+    arc = np.array([[60.0, 60], [80, 62], [99.6, 80]])
+    left = graph([[60, 60], [99.6, 80]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[arc], edge_scores=np.array([0.8]))
+    right = graph([[100, 80], [150, 80]], [[0, 1]], edge_kinds=["normal"], edge_polylines=[None])
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert city.n_vertices == 3  # 99.6 and 100 are within merge_px
+    k = city.edge_kinds.index("corner")
+    line = city.edge_polyline(k)
+    u, v = city.edges[k]
+    assert np.array_equal(line[0], city.vertices[u]) and np.array_equal(line[-1], city.vertices[v])
+
+
+def test_geometry_helpers():
+    assert polyline_midpoint(np.array([[0, 0], [10, 0], [10, 30]])).tolist() == [10, 10]
+    d = border_distance(np.array([[0.0, 50], [105, 50], [50, 95]]), GRID.patch(0, 0), GRID)
+    assert d.tolist() == [110, 5, 60]  # only the right side (x = 110) has a neighbour behind it
+
+
+points = st.lists(st.tuples(st.floats(-10, 210), st.floats(-10, 110)), min_size=2, max_size=25)
+
+
+@settings(max_examples=60, deadline=None)
+@given(left=points, right=points, data=st.data())
+def test_no_two_output_vertices_are_within_the_merge_radius(left, right, data):
+    graphs = {}
+    for index, pts in (((0, 0), left), ((0, 1), right)):
+        n = len(pts)
+        edges = data.draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)), max_size=30))
+        edges = [e for e in edges if e[0] != e[1]]
+        graphs[index] = graph(pts, np.array(edges).reshape(-1, 2))
+    city = stitch_patch_graphs(graphs, GRID)
+    if city.n_vertices > 1:
+        assert pdist(city.vertices).min() >= StitchConfig().merge_px
+    assert len({tuple(sorted(e)) for e in city.edges.tolist()}) == city.n_edges  # no duplicate edges
+    assert all(u != v for u, v in city.edges.tolist())
+
+
+def test_config_is_checked():
+    with pytest.raises(ValueError):
+        StitchConfig(merge_px=0)
