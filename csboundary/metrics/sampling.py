@@ -25,6 +25,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.chains import chains as find_chains
 
 _MIN_WEIGHT = 1e-9  # csgraph drops zero weights; a zero-length piece still connects its ends
 
@@ -135,50 +136,6 @@ def clip(seg: Segments, x0: float, y0: float, x1: float, y1: float) -> Segments:
     used[:n] |= inside & (degree == 0)  # isolated vertices inside the window stay
     new_id = np.cumsum(used) - 1
     return Segments(all_pts[used], np.stack([new_id[u], new_id[v]], axis=1).astype(np.int64))
-
-
-def _chains(n_points: int, edges: np.ndarray) -> tuple[list[list[int]], np.ndarray]:
-    """Maximal chains: walks between vertices of degree != 2, then the remaining closed loops.
-
-    Returns the chains as vertex sequences and the anchor mask (degree != 2, or a loop's start).
-    """
-    degree = np.bincount(edges.ravel(), minlength=n_points)
-    anchor = degree != 2
-    e_ids = np.arange(len(edges))
-    ends = np.concatenate([edges[:, 0], edges[:, 1]])
-    order = np.argsort(ends, kind="stable")
-    inc_edge = np.concatenate([e_ids, e_ids])[order].tolist()
-    inc_other = np.concatenate([edges[:, 1], edges[:, 0]])[order].tolist()
-    indptr = np.concatenate([[0], np.cumsum(degree)]).tolist()
-    is_anchor = anchor.tolist()
-    used = [False] * len(edges)
-    chains: list[list[int]] = []
-
-    def walk(start: int, slot: int) -> list[int]:
-        seq = [start]
-        e, nxt = inc_edge[slot], inc_other[slot]
-        while True:
-            used[e] = True
-            seq.append(nxt)
-            if is_anchor[nxt]:
-                return seq
-            s = indptr[nxt]
-            if inc_edge[s] == e:
-                s += 1
-            e, nxt = inc_edge[s], inc_other[s]
-
-    for k in np.flatnonzero(anchor).tolist():
-        for slot in range(indptr[k], indptr[k + 1]):
-            if not used[inc_edge[slot]]:
-                chains.append(walk(k, slot))
-    for e in range(len(edges)):
-        if not used[e]:  # a loop of degree-2 vertices: anchor it at the edge's first vertex
-            start = int(edges[e, 0])
-            is_anchor[start] = True
-            anchor[start] = True
-            slot = indptr[start] if inc_edge[indptr[start]] == e else indptr[start] + 1
-            chains.append(walk(start, slot))
-    return chains, anchor
 
 
 @dataclass(frozen=True)
@@ -298,7 +255,8 @@ def resample(seg: Segments, spacing: float) -> SampledGraph:
     if spacing <= 0:
         raise ValueError(f"spacing must be > 0, got {spacing}")
     pts, edges = seg.points, seg.edges
-    chains, anchor = _chains(len(pts), edges)
+    found = find_chains(len(pts), edges)
+    chains, anchor = found.vertices, found.anchor
     anchor_ids = np.flatnonzero(anchor)
     key_id = np.full(len(pts), -1, dtype=np.int64)
     key_id[anchor_ids] = np.arange(len(anchor_ids))
