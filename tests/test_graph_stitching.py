@@ -104,3 +104,16 @@ def test_no_two_output_vertices_are_within_the_merge_radius(left, right, data):
 def test_config_is_checked():
     with pytest.raises(ValueError):
         StitchConfig(merge_px=0)
+
+
+def test_a_neighbour_mends_two_ends_its_owner_left_dangling():
+    # The left patch owns x < 100 but saw no edge between its end (60, 50) and the right side's
+    # end (105, 50); the right patch, with both in view, did (midpoint x = 82.5: not its own).
+    left = graph([[20, 50], [60, 50]], [[0, 1]])
+    right = graph([[60, 50], [105, 50], [160, 50]], [[0, 1], [1, 2]], edge_scores=np.array([0.7, 0.9]))
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert city.n_edges == 3 and sorted(np.bincount(city.edges.ravel()).tolist()) == [1, 1, 2, 2]
+    assert stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(repair=False)).n_edges == 2
+    # An end that already continues is not joined again.
+    branchy = graph([[20, 50], [60, 50], [60, 90]], [[0, 1], [1, 2]])
+    assert stitch_patch_graphs({(0, 0): branchy, (0, 1): right}, GRID).n_edges == 3

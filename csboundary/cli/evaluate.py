@@ -57,8 +57,8 @@ def write_scores(path: Path, result: dict) -> None:
         tmp.write_text(json.dumps(nan_to_none(result), indent=1, default=float) + "\n")
 
 
-def _num(value: float) -> str:
-    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.4f}"
+def _num(value: float, digits: int = 4) -> str:
+    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
 
 
 def format_table(result: dict) -> str:
@@ -78,4 +78,18 @@ def format_table(result: dict) -> str:
     lines.append(f"{'TLTS':12s}{_num(m['tlts']):>10s}   too long {_num(m['tlts_too_long'])}, too short {_num(m['tlts_too_short'])}, "
                  f"infeasible {_num(m['tlts_infeasible'])}")
     lines.append(f"{c['pairs']} sampled pairs (phi {result['config']['phi']:g}, snap < {result['config']['snap_radius']:g} px)")
+    return "\n".join(lines)
+
+
+def format_rows(results: dict[str, dict]) -> str:
+    """Several results side by side, one row each (the shape of the paper's tables)."""
+    first = next(iter(results.values()))
+    taus = [f"{t:g}" for t in first["config"]["taus"]]
+    columns = [f"{k}@{t}" for k in ("precision", "recall", "f1") for t in taus] + ["apls", "tlts"]
+    header = ["P@" + t for t in taus] + ["R@" + t for t in taus] + ["F1@" + t for t in taus] + ["APLS", "TLTS"]
+    width = max(12, *(len(k) + 2 for k in results))
+    lines = [f"{'':{width}s}" + "".join(f"{h:>8s}" for h in header)]
+    for label, result in results.items():
+        m = result["metrics"]
+        lines.append(f"{label:{width}s}" + "".join(f"{_num(m[c], 3):>8s}" for c in columns))
     return "\n".join(lines)

@@ -258,27 +258,63 @@ def evaluate_model(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
     edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
-    """Patch-scale evaluation of a model: every patch predicted on its own, scored on its core."""
-    from csboundary.cli.evaluate import format_table, write_scores
+    """Evaluate a model on a city at patch scale (each patch's graph on its core) and city scale
+    (the stitched graph), without writing the prediction."""
+    from csboundary.cli.evaluate import format_rows, write_scores
     from csboundary.data import city as layout
+    from csboundary.pipeline.city import predict_city
+    from csboundary.pipeline.run import evaluate_run
+
+    predictor = _load_predictor(weights, device, edge_threshold)
+    layout.read_meta(city)
+    mosaic, lines = _open_inputs([city], None)
+    with mosaic:
+        result = predict_city(mosaic, predictor, batch_size=batch_size, progress=not quiet)
+    scores = evaluate_run(result, lines, seed)
+    for item in scores.values():
+        item["inputs"] = {"pred": f"{weights or 'shipped weights'} on {city}", "gt": str(layout.ground_truth_path(city))}
+    typer.echo(format_rows(scores))
+    if json_out is not None:
+        write_scores(json_out, scores)
+
+
+def _load_predictor(weights: Optional[Path], device: str, edge_threshold: Optional[float] = None):
     from csboundary.models.device import resolve_device
     from csboundary.pipeline.patch import PatchPredictor
-    from csboundary.pipeline.patchwise import score_patchwise
 
     predictor = PatchPredictor.load(weights, resolve_device(device))
     if edge_threshold is not None:
         predictor.edge_threshold = edge_threshold
-    layout.read_meta(city)
-    mosaic, lines = _open_inputs([city], None)
+    return predictor
+
+
+@app.command()
+def predict(
+    inputs: list[Path] = typer.Argument(..., help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
+    out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
+    weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
+    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
+    write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
+    device: str = typer.Option("auto", help="auto | cpu | cuda."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """City-scale prediction: patch grid -> FPN -> averaged maps -> vertices -> AfANet -> stitched
+    city graph, written in the input's CRS."""
+    from csboundary.pipeline.run import run_prediction, stage_table
+
+    predictor = _load_predictor(weights, device, edge_threshold)
+    mosaic, _ = _open_inputs(inputs, None)
+    settings = {"weights": str(weights or "shipped"), "edge_threshold": predictor.edge_threshold, "batch_size": batch_size,
+                "device": str(predictor.device)}
     with mosaic:
-        _, result, _ = score_patchwise(predictor, mosaic, lines, seed, progress=not quiet)
-    result["inputs"] = {"pred": f"{weights or 'shipped weights'} on {city}", "gt": str(layout.ground_truth_path(city))}
-    typer.echo(format_table(result))
-    if json_out is not None:
-        write_scores(json_out, result)
+        _, summary = run_prediction(mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=not quiet, settings=settings)
+    c = summary["counts"]
+    typer.echo(f"{out}: {c['edges']} edges, {c['vertices']} vertices, {c['boundary_km']} km of boundary\n{stage_table(summary)}")
 
 
 @app.command("predict-patch")
@@ -336,42 +372,32 @@ def demo(
 ) -> None:
     """The main job on an embedded default: a small test-split city, predicted and scored.
 
-    Synthesizes a 3000x3000 px city (2x2 tiles, 9 patches), predicts every patch with the shipped
-    weights, scores the result against the ground truth at patch scale (paper Table I), and writes
-    OUT/city (tiles, ground truth), OUT/prediction.graph.json, OUT/prediction.gpkg, OUT/scores.json,
-    OUT/overview.png (ground truth cyan, prediction orange, patch grid) and OUT/patch.png.
-    City-scale stitching is not in place yet: patches are predicted one by one.
+    Synthesizes a 3000x3000 px city (2x2 tiles, 3x3 patches) into OUT/city, predicts it with the
+    shipped weights exactly as `csboundary predict` does (outputs in OUT/prediction), scores it
+    against the ground truth at patch and city scale (OUT/scores.json) and prints the table.
     """
-    import geopandas as gpd
-
-    from csboundary.cli.evaluate import format_table, write_scores
-    from csboundary.data.ground_truth import write_ground_truth
+    from csboundary.cli.evaluate import format_rows, write_scores
     from csboundary.data.synth.city import synthesize_city
     from csboundary.data.synth.config import SynthConfig
-    from csboundary.models.device import resolve_device
-    from csboundary.pipeline.patch import PatchPredictor
-    from csboundary.pipeline.patchwise import score_patchwise
-    from csboundary.viz.overlay import render_window, write_png
+    from csboundary.pipeline.run import evaluate_run, run_prediction, stage_table
 
-    predictor = PatchPredictor.load(None, resolve_device(device))
+    predictor = _load_predictor(None, device)
     city_dir = out / "city"
     meta = synthesize_city(city_dir, seed, "test", (2, 2), SynthConfig(tile_size=1500))
     mosaic, lines = _open_inputs([city_dir], None)
+    settings = {"weights": "shipped", "edge_threshold": predictor.edge_threshold, "device": str(predictor.device)}
     with mosaic:
-        pred, scores, grid = score_patchwise(predictor, mosaic, lines)
-        scores["inputs"] = {"pred": "shipped weights, patch by patch", "gt": str(city_dir / "ground_truth.gpkg")}
-        predicted = pred.to_linestrings(world=True)
-        pred.write_json(out / "prediction.graph.json")
-        write_ground_truth(out / "prediction.gpkg", gpd.GeoDataFrame(geometry=predicted, crs=pred.crs))
-        write_scores(out / "scores.json", scores)
-        orange = (255, 140, 0)
-        write_png(out / "overview.png", render_window(mosaic, mosaic.window, lines, max_size=1500, grid=grid, layers=[(predicted, orange)]))
-        write_png(out / "patch.png", render_window(mosaic, grid.patch(1, 1).core, lines, layers=[(predicted, orange)]))
-    typer.echo(format_table(scores))
+        result, summary = run_prediction(mosaic, predictor, out / "prediction", settings=settings, ground_truth=lines)
+    scores = evaluate_run(result, lines, seed=0)
+    for item in scores.values():
+        item["inputs"] = {"pred": str(out / "prediction"), "gt": str(city_dir / "ground_truth.gpkg")}
+    write_scores(out / "scores.json", scores)
+    typer.echo(format_rows(scores))
     typer.echo(
-        f"demo city: {mosaic.width}x{mosaic.height} px in {len(meta['tiles'])} tiles, {len(grid)} patches, "
-        f"{meta['counts']['boundaries']} boundaries ({meta['counts']['boundary_km']} km); predicted {pred.n_edges} edges\n"
-        f"wrote {out / 'overview.png'}, {out / 'patch.png'}, {out / 'prediction.gpkg'}, {out / 'scores.json'}, {city_dir}"
+        f"demo city (test split, seed {seed}): {mosaic.width}x{mosaic.height} px, {len(meta['tiles'])} tiles, "
+        f"{meta['counts']['boundaries']} boundaries ({meta['counts']['boundary_km']} km)\n{stage_table(summary)}\n"
+        f"wrote {out / 'prediction'} (boundaries.gpkg, boundaries.geojson, graph.json, overview.png, detail.png, summary.json), "
+        f"{out / 'scores.json'}, {city_dir}"
     )
 
 

@@ -146,7 +146,8 @@ class BoundaryGraph:
             if self.edge_polylines is not None and self.edge_polylines[k] is not None:
                 item["polyline_px"] = np.asarray(self.edge_polylines[k], dtype=float).round(3).tolist()
             if self.edge_scores is not None:
-                item["score"] = float(self.edge_scores[k])
+                score = float(self.edge_scores[k])
+                item["score"] = score if np.isfinite(score) else None  # strict JSON has no NaN
             if self.edge_patches is not None:
                 item["patch"] = [int(x) for x in self.edge_patches[k]]
             edges.append(item)
@@ -177,7 +178,7 @@ class BoundaryGraph:
                 edge_polylines=[np.array(e["polyline_px"], dtype=float) if "polyline_px" in e else None for e in edges]
                 if any("polyline_px" in e for e in edges)
                 else None,
-                edge_scores=np.array([e.get("score", np.nan) for e in edges], dtype=float) if any("score" in e for e in edges) else None,
+                edge_scores=np.array([np.nan if e.get("score") is None else e["score"] for e in edges], dtype=float) if any("score" in e for e in edges) else None,
                 edge_patches=np.array([e.get("patch", [-1, -1]) for e in edges], dtype=np.int64).reshape(-1, 2)
                 if any("patch" in e for e in edges)
                 else None,

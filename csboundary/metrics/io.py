@@ -11,6 +11,8 @@ known and differ. Every problem is an :class:`~csboundary.errors.InputError` nam
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import math
 from dataclasses import dataclass
@@ -122,8 +124,7 @@ def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
     if src.graph is not None:
         graph = src.graph
         if frame.transform is None or graph.transform is None or (graph.transform == frame.transform and _same_crs(graph.crs, frame.crs)):
-            return BoundaryGraph(graph.vertices, graph.edges, graph.vertex_kinds, graph.edge_kinds, graph.edge_polylines,
-                                 graph.edge_scores, frame.transform, frame.crs)
+            return dataclasses.replace(graph, transform=frame.transform, crs=frame.crs)
         project = _projector(src, graph.crs, frame)
 
         def move(px: np.ndarray) -> np.ndarray:
@@ -135,8 +136,7 @@ def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
         polylines = None
         if graph.edge_polylines is not None:
             polylines = [move(np.asarray(p, dtype=float)) if p is not None else None for p in graph.edge_polylines]
-        return BoundaryGraph(move(graph.vertices), graph.edges, graph.vertex_kinds, graph.edge_kinds, polylines,
-                             graph.edge_scores, frame.transform, frame.crs)
+        return dataclasses.replace(graph, vertices=move(graph.vertices), edge_polylines=polylines, transform=frame.transform, crs=frame.crs)
     from csboundary.data.ground_truth import as_linestrings
 
     lines = [part for geom in src.lines.geometry for part in as_linestrings(geom)]
