@@ -1,4 +1,4 @@
-"""predict-patch and evaluate-model from the command line, with small untrained weights."""
+"""predict-patch, predict and evaluate-model from the command line, with small untrained weights."""
 
 from __future__ import annotations
 
@@ -70,8 +70,11 @@ def test_evaluate_model_scores_every_patch(bundle, small_city, tmp_path):
     result = run("evaluate-model", str(small_city), "--weights", str(bundle), "--json", str(tmp_path / "e.json"), "--quiet", "--device", "cpu")
     assert result.returncode == 0, result.stderr
     scores = json.loads((tmp_path / "e.json").read_text())
-    assert scores["scale"] == "patch" and scores["counts"]["patches"] == 1
-    assert all(0.0 <= v <= 1.0 for v in scores["metrics"].values() if v is not None)
+    assert scores["patch"]["scale"] == "patch" and scores["patch"]["counts"]["patches"] == 1
+    assert scores["city"]["scale"] == "city"
+    for scale in ("patch", "city"):
+        assert all(0.0 <= v <= 1.0 for v in scores[scale]["metrics"].values() if v is not None)
+    assert "patch" in result.stdout and "city" in result.stdout
 
 
 def test_sixteen_bit_imagery_is_refused(bundle, tmp_path):
@@ -83,3 +86,74 @@ def test_sixteen_bit_imagery_is_refused(bundle, tmp_path):
     path = write_geotiff(tmp_path / "u16.tif", np.full((4, 64, 64), 1000, np.uint16), Affine(0.3, 0, 0, 0, -0.3, 0), "EPSG:32618")
     result = run("predict-patch", str(path), "--out", str(tmp_path / "p"), "--weights", str(bundle))
     assert result.returncode == 2 and "8-bit" in result.stderr and str(path) in result.stderr
+
+
+@pytest.fixture(scope="module")
+def four_patch_city(tmp_path_factory):
+    out = tmp_path_factory.mktemp("c4") / "city"
+    result = run("synth", str(out), "--tiles", "2x2", "--tile-size", "600", "--gsd", "0.3", "--seed", "2", "--split", "test", "--quiet")
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+def test_predict_writes_georeferenced_outputs_and_a_summary(bundle, four_patch_city, tmp_path):
+    import geopandas as gpd
+    import numpy as np
+    import pyogrio
+    import rasterio
+
+    out = tmp_path / "pred"
+    result = run("predict", str(four_patch_city / "tiles"), "--out", str(out), "--weights", str(bundle), "--write-maps", "--quiet", "--device", "cpu")
+    assert result.returncode == 0, result.stderr
+    names = {p.name for p in out.iterdir()}
+    assert names == {"boundaries.gpkg", "boundaries.geojson", "graph.json", "overview.png", "detail.png", "maps.tif", "summary.json"}
+    summary = json.loads((out / "summary.json").read_text())
+    graph = json.loads((out / "graph.json").read_text())
+    assert summary["patches"] == 4 and summary["grid"] == [2, 2] and summary["mosaic_px"] == [1200, 1200]
+    assert summary["counts"]["edges"] == len(graph["edges"]) and summary["counts"]["vertex_pairs_within_1px"] == 0
+    assert set(summary["seconds_per_patch"]) >= {"fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching", "total"}
+    assert summary["area_km2"] == pytest.approx(1200 * 1200 * 0.09 / 1e6)
+    assert {layer for layer, _ in pyogrio.list_layers(out / "boundaries.gpkg")} == {"road_boundaries", "edges"}
+    lines = gpd.read_file(out / "boundaries.gpkg", layer="road_boundaries")
+    assert lines.crs.to_epsg() == 32618
+    with rasterio.open(four_patch_city / "tiles" / sorted(p.name for p in (four_patch_city / "tiles").iterdir())[0]) as src:
+        x0, y1 = src.transform @ (0, 0)
+    if len(lines):  # world coordinates inside the 360 m x 360 m city
+        minx, miny, maxx, maxy = lines.total_bounds
+        assert x0 - 20 <= minx and maxx <= x0 + 380 and y1 - 380 <= miny and maxy <= y1 + 20
+    with rasterio.open(out / "maps.tif") as maps:
+        assert maps.count == 2 and maps.dtypes == ("uint8", "uint8") and (maps.width, maps.height) == (1200, 1200)
+        assert maps.crs.to_epsg() == 32618 and maps.profile["tiled"] and maps.overviews(1)
+        assert maps.descriptions == ("keypoint_probability", "segmentation_probability")
+        assert np.isclose(maps.transform.c, x0) and np.isclose(maps.transform.f, y1)
+
+
+def test_an_interrupted_predict_leaves_no_final_file(bundle, four_patch_city, tmp_path, monkeypatch):
+    from csboundary.data.raster import Mosaic
+    from csboundary.pipeline import map_stitching, run as job
+    from csboundary.pipeline.patch import PatchPredictor
+
+    out = tmp_path / "pred"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")  # from an earlier run: must not vouch for this one
+    calls = []
+    original = map_stitching.StreamingMapAverager.add
+
+    def add_then_interrupt(self, patch, maps):
+        calls.append(patch.index)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return original(self, patch, maps)
+
+    monkeypatch.setattr(map_stitching.StreamingMapAverager, "add", add_then_interrupt)
+    predictor = PatchPredictor.load(bundle, torch.device("cpu"))
+    with Mosaic.open(four_patch_city / "tiles") as mosaic, pytest.raises(KeyboardInterrupt):
+        job.run_prediction(mosaic, predictor, out, write_maps=True, progress=False)
+    assert list(out.iterdir()) == []  # no outputs, no scratch maps, no stale summary
+
+
+def test_predict_on_a_non_raster_is_one_line_error(tmp_path):
+    bad = tmp_path / "notes.tif"
+    bad.write_text("not an image")
+    result = run("predict", str(bad), "--out", str(tmp_path / "o"), "--device", "cpu", "--quiet")
+    assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "notes.tif" in result.stderr
