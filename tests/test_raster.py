@@ -551,3 +551,17 @@ def test_write_geotiff_failure_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         write_geotiff(tmp_path / "w.tif", img, tile_transform(0, 0), CRS, valid=np.ones((40, 60), bool))
     assert os.listdir(tmp_path) == []
+
+
+def test_a_reduced_read_is_the_block_mean_across_tiles(shared_tiles):
+    t = shared_tiles
+    with Mosaic.open(t.directory) as mosaic:
+        small = mosaic.read(mosaic.window, scale=0.5)
+        corner = mosaic.read(PixelWindow(50, 30, 20, 20), scale=0.5)  # straddles all four tiles
+    h, w = t.full.shape[1] // 2, t.full.shape[2] // 2
+    mean = t.full.astype(float).reshape(4, h, 2, w, 2).mean(axis=(2, 4))
+    assert small.data.shape == (4, h, w) and small.valid.all()
+    assert np.abs(small.data - mean).max() <= 0.5  # the block average, rounded to uint8 (band 4 never alpha)
+    assert np.abs(corner.data.astype(float) - mean[:, 15:25, 25:35]).max() <= 0.5
+    with Mosaic.open(t.directory) as mosaic:  # strips of 10 rows stitch into the same picture
+        assert np.array_equal(mosaic._read_reduced(mosaic.window, 0.5, strip_rows=10).data, small.data)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
+import cv2
 import numpy as np
 import rasterio
 from affine import Affine
@@ -192,8 +193,14 @@ class Mosaic:
         return window_from_bounds(self.transform, minx, miny, maxx, maxy)
 
     # -- reading --------------------------------------------------------------------------------
-    def read(self, window: PixelWindow) -> WindowRead:
-        """Read ``window`` (mosaic pixels; may cross tiles and the mosaic edge) as 4 bands + mask."""
+    def read(self, window: PixelWindow, scale: float = 1.0) -> WindowRead:
+        """Read ``window`` (mosaic pixels; may cross tiles and the mosaic edge) as 4 bands + mask.
+
+        ``scale`` < 1 gives a reduced picture of ``round(scale * size)`` pixels (area average),
+        read in strips so that even a whole city's overview never holds the full window.
+        """
+        if scale != 1.0:
+            return self._read_reduced(window, scale)
         dtype = np.dtype(self.tiles[0].dtype)
         data = np.zeros((BANDS, window.height, window.width), dtype=dtype)
         valid = np.zeros((window.height, window.width), dtype=bool)
@@ -204,6 +211,21 @@ class Mosaic:
             pixels, mask = self._read_tile(tile, src)
             data[:, dst_rows, dst_cols] = np.where(mask, pixels, data[:, dst_rows, dst_cols])
             valid[dst_rows, dst_cols] |= mask  # where tiles overlap, a later tile's nodata keeps earlier pixels
+        return WindowRead(window, data, valid)
+
+    def _read_reduced(self, window: PixelWindow, scale: float, strip_rows: int = 1024) -> WindowRead:
+        # Not GDAL's decimated reads: GDAL weights its average by band 4 as if it were alpha.
+        height, width = max(1, round(window.height * scale)), max(1, round(window.width * scale))
+        data = np.zeros((BANDS, height, width), dtype=np.dtype(self.tiles[0].dtype))
+        valid = np.zeros((height, width), dtype=bool)
+        for top in range(0, window.height, strip_rows):
+            r0, r1 = round(top * scale), round(min(top + strip_rows, window.height) * scale)
+            if r1 <= r0:
+                continue
+            strip = self.read(PixelWindow(window.col_off, window.row_off + top, window.width, min(strip_rows, window.height - top)))
+            pixels = cv2.resize(np.moveaxis(strip.data, 0, -1), (width, r1 - r0), interpolation=cv2.INTER_AREA)
+            data[:, r0:r1] = np.moveaxis(pixels, -1, 0)
+            valid[r0:r1] = cv2.resize(strip.valid.astype(np.float32), (width, r1 - r0), interpolation=cv2.INTER_AREA) >= 0.5
         return WindowRead(window, data, valid)
 
     def read_world(self, minx: float, miny: float, maxx: float, maxy: float) -> WindowRead:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Protocol
 
 import numpy as np
+import rasterio
 import shapely
 from shapely.geometry import LineString
 from tqdm import tqdm
@@ -30,6 +31,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig, stitch_patch_graphs, to_mosaic
 from csboundary.pipeline.map_stitching import StreamingMapAverager
 
+GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow with the city
 STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching")
 
 
@@ -88,14 +90,15 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
         patch_graphs[patch.index] = to_mosaic(graph, patch)
         bar.update(1)
 
-    for start in range(0, len(patches), batch_size):
-        batch = patches[start : start + batch_size]
-        reads = timed("read", lambda: [mosaic.read(p.expanded) for p in batch])
-        maps = timed("fpn", model.patch_maps, batch, [r.data for r in reads])
-        for patch, read, patch_maps in zip(batch, reads, maps):
-            patch_maps = patch_maps * read.valid[None]  # no keypoints where there is no image
-            for ready, stitched in timed("map_stitching", averager.add, patch, patch_maps):
-                graph_of(ready, stitched)
+    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
+        for start in range(0, len(patches), batch_size):
+            batch = patches[start : start + batch_size]
+            reads = timed("read", lambda: [mosaic.read(p.expanded) for p in batch])
+            maps = timed("fpn", model.patch_maps, batch, [r.data for r in reads])
+            for patch, read, patch_maps in zip(batch, reads, maps):
+                patch_maps = patch_maps * read.valid[None]  # no keypoints where there is no image
+                for ready, stitched in timed("map_stitching", averager.add, patch, patch_maps):
+                    graph_of(ready, stitched)
     bar.close()
     crs = mosaic.crs.to_string() if mosaic.crs is not None else None
     with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:

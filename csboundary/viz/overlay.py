@@ -60,12 +60,11 @@ def render_window(
     stay visible; ``grid`` adds the patch grid (cores red, expanded windows yellow); ``layers``
     are more (lines, colour) pairs drawn on top (e.g. a prediction over the ground truth).
     """
-    read = mosaic.read(window)
-    rgb = to_display(read.data, read.valid)
     scale = 1.0
     if max_size and max(window.width, window.height) > max_size:
         scale = max_size / max(window.width, window.height)
-        rgb = cv2.resize(rgb, (max(1, round(window.width * scale)), max(1, round(window.height * scale))), interpolation=cv2.INTER_AREA)
+    read = mosaic.read(window, scale=scale)  # read reduced in strips: a city overview never holds the full image
+    rgb = to_display(read.data, read.valid)
     thickness = 2 if scale > 0.5 else 1
     world_box = box(*_world_bounds(mosaic, window))
 

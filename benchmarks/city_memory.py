@@ -1,0 +1,64 @@
+"""Peak memory of city-scale inference for cities of 1x1, 2x2 and 3x3 tiles (issue 6: from 1x1 to
+3x3 it must grow by less than 20 %, i.e. memory is bounded by a band of patches, not the city).
+
+Each size runs `csboundary predict` with the shipped weights in a fresh process (so peaks do not
+mix) and reports that process's peak resident memory, the averager's peak map memory, and the
+time. Cities are synthesized (test split, seed 0) into CACHE unless already there.
+
+Usage: .venv/bin/python benchmarks/city_memory.py [--tile-size 5000] [--sizes 1,2,3] [--cache data/cities]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+CHILD = """
+import json, resource, sys, time
+from csboundary.data.raster import Mosaic
+from csboundary.models.device import resolve_device
+from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.run import run_prediction
+start = time.perf_counter()
+with Mosaic.open(sys.argv[1]) as mosaic:
+    _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2], progress=False)
+print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "map_memory_peak_mb": summary["map_memory_peak_mb"], "patches": summary["patches"],
+                  "seconds": time.perf_counter() - start, "edges": summary["counts"]["edges"]}))
+"""
+
+
+def city(cache: Path, n: int, tile_size: int) -> Path:
+    path = cache / f"test-s0-{n}x{n}-{tile_size}"
+    if not (path / "city.json").exists():
+        subprocess.run([sys.executable, "-m", "csboundary", "synth", str(path), "--seed", "0", "--split", "test",
+                        "--tiles", f"{n}x{n}", "--tile-size", str(tile_size), "--quiet"], check=True)
+    return path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tile-size", type=int, default=5000)
+    parser.add_argument("--sizes", default="1,2,3")
+    parser.add_argument("--cache", type=Path, default=Path("data/cities"))
+    args = parser.parse_args()
+    rows = []
+    for n in (int(v) for v in args.sizes.split(",")):
+        tiles = city(args.cache, n, args.tile_size) / "tiles"
+        with tempfile.TemporaryDirectory() as out:
+            done = subprocess.run([sys.executable, "-c", CHILD, str(tiles), out], check=True, capture_output=True, text=True)
+        row = {"tiles": f"{n}x{n}", **json.loads(done.stdout.strip().splitlines()[-1])}
+        rows.append(row)
+        print(f"{row['tiles']:>4s} tiles of {args.tile_size} px: {row['patches']:4d} patches, peak RSS {row['peak_rss_mb']:7.1f} MB "
+              f"(maps held {row['map_memory_peak_mb']:5.1f} MB), {row['seconds']:6.1f} s", flush=True)
+    if len(rows) > 1:
+        growth = rows[-1]["peak_rss_mb"] / rows[0]["peak_rss_mb"] - 1
+        print(f"peak RSS growth {rows[0]['tiles']} -> {rows[-1]['tiles']}: {100 * growth:+.1f} % (limit +20 %)")
+
+
+if __name__ == "__main__":
+    main()
