@@ -85,9 +85,12 @@ def test_demo_predicts_and_scores_a_city_with_the_shipped_weights(tmp_path):
     result = run("demo", "--out", str(tmp_path / "demo"), "--device", "cpu")
     assert result.returncode == 0, result.stderr
     scores = json.loads((tmp_path / "demo" / "scores.json").read_text())
-    assert scores["scale"] == "patch" and scores["counts"]["patches_scored"] == 9
-    values = [v for v in scores["metrics"].values() if v is not None]
-    assert values and all(0.0 <= v <= 1.0 for v in values)
-    assert scores["metrics"]["f1@5"] > 0.5  # the shipped weights find most curbs of a test city
-    for name in ("overview.png", "patch.png", "prediction.gpkg", "prediction.graph.json"):
-        assert (tmp_path / "demo" / name).stat().st_size > 0
+    assert scores["patch"]["scale"] == "patch" and scores["patch"]["counts"]["patches_scored"] == 9
+    assert scores["city"]["scale"] == "city"
+    for scale in ("patch", "city"):
+        values = [v for v in scores[scale]["metrics"].values() if v is not None]
+        assert values and all(0.0 <= v <= 1.0 for v in values)
+        assert scores[scale]["metrics"]["f1@5"] > 0.5  # the shipped weights find most curbs of a test city
+    assert "patch" in result.stdout and "city" in result.stdout and "km2/h" in result.stdout
+    for name in ("overview.png", "detail.png", "boundaries.gpkg", "boundaries.geojson", "graph.json", "summary.json"):
+        assert (tmp_path / "demo" / "prediction" / name).stat().st_size > 0
