@@ -199,7 +199,7 @@ def labels(
 
 @app.command()
 def train(
-    model: str = typer.Argument(..., help="fpn or afanet."),
+    model: str = typer.Argument(..., help="fpn | afanet | a baseline: orientation-refine | sat2graph | icurb."),
     config: Path = typer.Option(..., "--config", help="Training config JSON (see configs/)."),
     out: Path = typer.Option(..., "--out", help="Run folder: checkpoints, train.log."),
     resume: Optional[Path] = typer.Option(None, help="Checkpoint (*-last.pt) to resume from."),
@@ -208,14 +208,15 @@ def train(
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
-    """Train the FPN or AfANet on synthetic cities (built on first use under the config's cache)."""
+    """Train the FPN, AfANet or a baseline on synthetic cities (built on first use under the config's cache)."""
     import json as _json
 
     from csboundary.models.device import resolve_device
+    from csboundary.models.baselines import METHODS, baseline_module
     from csboundary.models.train import TrainConfig, train_afanet, train_fpn
 
-    if model not in ("fpn", "afanet"):
-        raise typer.BadParameter("model must be fpn or afanet")
+    if model not in ("fpn", "afanet", *METHODS):
+        raise typer.BadParameter(f"model must be one of fpn, afanet, {', '.join(METHODS)}")
     if not config.exists():
         raise InputError(config, "file not found")
     try:
@@ -232,7 +233,7 @@ def train(
 
     with atomic_path(out / "config.json") as tmp:
         tmp.write_text(_json.dumps(cfg.to_dict(), indent=2) + "\n")
-    runner = train_fpn if model == "fpn" else train_afanet
+    runner = {"fpn": train_fpn, "afanet": train_afanet}.get(model) or baseline_module(model).train
     weights = runner(cfg, out, resolve_device(device), str(resume) if resume else None, progress=not quiet)
     typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
 

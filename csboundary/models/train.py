@@ -60,6 +60,8 @@ class TrainConfig:
     vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1
     max_vertices: int = 160
     max_pos_weight: float = 30.0
+    # baselines (csboundary.models.baselines): method-specific settings, documented per method
+    options: dict = field(default_factory=dict)
 
     @classmethod
     def from_file(cls, path: str | Path) -> "TrainConfig":

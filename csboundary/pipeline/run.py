@@ -22,12 +22,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import rasterio
 
 from csboundary.data.atomic import atomic_path
 from csboundary.data.grid import GridConfig
 from csboundary.data.raster import Mosaic
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.city import STAGES, CityResult, PatchModel, predict_city
+from csboundary.pipeline.city import GDAL_CACHE_MB, STAGES, CityResult, PatchModel, predict_city
 from csboundary.pipeline.map_output import StitchedMapWriter
 from csboundary.pipeline.outputs import write_graph_outputs
 
@@ -47,18 +48,21 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
     start = time.perf_counter()
     with contextlib.ExitStack() as stack:
+        stack.enter_context(rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB))  # overviews read every tile too
         writer = stack.enter_context(StitchedMapWriter(out / "maps.tif", mosaic)) if write_maps else None
         result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress, on_window=writer)
         if writer is not None:
             writer.close()
-    written_at = time.perf_counter()
-    files = write_graph_outputs(result.graph, out)
-    files.update(write_overlays(mosaic, result, out, ground_truth))
+        rss_after_prediction = peak_rss_mb()
+        written_at = time.perf_counter()
+        files = write_graph_outputs(result.graph, out)
+        files.update(write_overlays(mosaic, result, out, ground_truth))
     if write_maps:
         files["maps"] = out / "maps.tif"
     seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
     seconds["total"] = time.perf_counter() - start
     summary = summarize(mosaic, result, seconds, files, settings or {})
+    summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
     with atomic_path(out / SUMMARY) as tmp:
         tmp.write_text(json.dumps(summary, indent=1) + "\n")
     return result, summary
@@ -113,6 +117,13 @@ def stage_table(summary: dict) -> str:
     parts = ", ".join(f"{k.replace('_', ' ')} {per[k]:.3f}" for k in STAGES)
     return (f"{summary['patches']} patches, {summary['area_km2']:.3f} km2 in {summary['seconds']['total']:.1f} s "
             f"({summary['km2_per_hour']} km2/h); s/patch: {parts}")
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory so far, in MB (Linux reports kB)."""
+    import resource
+
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
 
 
 def count_close_pairs(vertices: np.ndarray, radius: float = 1.0) -> int:
