@@ -14,6 +14,8 @@ The model is anything with the three steps of :class:`PatchModel`: the trained n
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -33,6 +35,20 @@ from csboundary.pipeline.map_stitching import StreamingMapAverager
 
 GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow with the city
 STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching")
+
+
+def _heap_trimmer():
+    """glibc's ``malloc_trim``, or a no-op elsewhere. Patch-sized arrays freed in a varying order
+    fragment the heap, and glibc keeps the freed pages: without trimming, resident memory grew by
+    ~3.5 MB per patch (474 -> 826 MB over 100 patches); with it, it stays flat (~480 MB)."""
+    try:
+        trim = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return lambda: None
+    return lambda: trim(0)
+
+
+_trim_heap = _heap_trimmer()
 
 
 class PatchModel(Protocol):
@@ -88,6 +104,7 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
         found = timed("vertex_extraction", model.extract, maps)
         graph = timed("afanet", model.connect, patch, image, maps, found)
         patch_graphs[patch.index] = to_mosaic(graph, patch)
+        _trim_heap()
         bar.update(1)
 
     with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
