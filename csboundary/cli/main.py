@@ -366,6 +366,43 @@ def predict_patch(
 
 
 @app.command()
+def benchmark(
+    out: Path = typer.Option(Path("docs/benchmark"), help="Folder for tables.md, table*.csv, fig7-comparison.png, benchmark.json, predictions/."),
+    city: Optional[Path] = typer.Option(None, help="Test city with ground truth (default: the test-split city seed 1, 1x1 tile of 5000 px, built on first use)."),
+    weights_dir: Optional[Path] = typer.Option(None, help="Weights folder (default: the package's shipped weights)."),
+    methods: Optional[str] = typer.Option(None, help="Comma-separated subset of: " + "csboundary, no-global, no-local, orientation-refine, sat2graph, icurb."),
+    seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
+    device: str = typer.Option("auto", help="auto | cpu | cuda."),
+    quiet: bool = typer.Option(False, help="No progress bars."),
+) -> None:
+    """The paper's comparison (Tables I-IV, Fig. 7): every method predicts one test city through the
+    same pipeline and metrics; training times come from the logs beside the weights."""
+    import json as _json
+
+    from csboundary.data.atomic import atomic_path
+    from csboundary.models.checkpoint import code_version
+    from csboundary.models.device import resolve_device
+    from csboundary.models.training_data import CitySpec
+    from csboundary.pipeline.benchmark import METHODS, run_benchmark
+    from csboundary.pipeline.patch import shipped_weights
+
+    chosen = [m.strip() for m in methods.split(",")] if methods else None
+    unknown = set(chosen or []) - {m.key for m in METHODS}
+    if unknown:
+        raise typer.BadParameter(f"unknown method(s) {', '.join(sorted(unknown))}", param_hint="--methods")
+    city_dir = city or CitySpec("test", 1, (1, 1), 5000).ensure("data/cities")
+    weights = weights_dir or shipped_weights().parent
+    results = run_benchmark(Path(city_dir), out, Path(weights), resolve_device(device), chosen, seed, progress=not quiet)
+    record = {"command": "csboundary " + " ".join(sys.argv[1:]), "code_version": code_version(), "city": str(city_dir), "weights": str(weights),
+              "results": {k: {"method": r["method"].name, **({"missing": r["missing"]} if "missing" in r else
+                              {"scores": {s: v["metrics"] for s, v in r["scores"].items()}, "training": r["training"],
+                               "inference_seconds": r["summary"]["seconds"]})} for k, r in results.items()}}
+    with atomic_path(out / "benchmark.json") as tmp:
+        tmp.write_text(_json.dumps(record, indent=1, default=float) + "\n")
+    typer.echo((out / "tables.md").read_text())
+
+
+@app.command()
 def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),
     seed: int = typer.Option(0, min=0, help="City seed (test split)."),
