@@ -57,7 +57,7 @@ def _ablation(variant: str):
 
         shipped = PatchPredictor.load(weights_dir / "csboundary-synthetic.pt", device)
         predictor = PatchPredictor.load(weights_dir / "ablation" / f"afanet-no-{variant}.pt", device,
-                                        fpn_weights=weights_dir / "ablation" / "fpn.pt")
+                                        fpn_weights=weights_dir / "csboundary-synthetic.pt")  # the same FPN
         predictor.edge_threshold, predictor.max_degree = shipped.edge_threshold, shipped.max_degree
         return predictor
 
