@@ -370,7 +370,7 @@ def benchmark(
     out: Path = typer.Option(Path("docs/benchmark"), help="Folder for tables.md, table*.csv, fig7-comparison.png, benchmark.json, predictions/."),
     city: Optional[Path] = typer.Option(None, help="Test city with ground truth (default: the test-split city seed 1, 1x1 tile of 5000 px, built on first use)."),
     weights_dir: Optional[Path] = typer.Option(None, help="Weights folder (default: the package's shipped weights)."),
-    methods: Optional[str] = typer.Option(None, help="Comma-separated subset of: " + "csboundary, no-global, no-local, orientation-refine, sat2graph, icurb."),
+    methods: Optional[str] = typer.Option(None, help="Comma-separated subset of: " + "csboundary, orientation-refine, sat2graph, icurb, ablation-full, no-global, no-local."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bars."),
