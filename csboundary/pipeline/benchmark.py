@@ -16,7 +16,8 @@ Weights are looked up in ``weights_dir`` (the package's shipped ``weights/``; ba
 
 Table III's "epoch" is one pass over the train city's area (10000 x 10000 px for the shipped
 recipe) in training samples: ``area / (batch * crop^2)`` steps for the dense networks,
-``area / window^2`` for AfANet, whose every step sees one 1100 px window.
+``area / window^2`` for AfANet, whose every step sees one 1100 px window, and
+``area / (batch * roi^2)`` for the iCurb agent's batches of ROIs.
 """
 
 from __future__ import annotations
@@ -107,8 +108,9 @@ def steps_per_epoch(config: dict) -> float:
     if config["model"] == "afanet":
         return area / config["window"] ** 2
     options = config.get("options", {})
-    per_step = options.get("pixels_per_step") or config["batch"] * config["crop"] ** 2
-    return area / per_step
+    if config["model"] == "icurb":  # a batch of ROIs drawn from the DAgger buffer
+        return area / (options.get("batch", 64) * options.get("roi", 64) ** 2)
+    return area / (config["batch"] * config["crop"] ** 2)
 
 
 def run_benchmark(city_dir: Path, out: Path, weights_dir: Path, device, methods=None, seed: int = 0, progress: bool = True) -> dict:
