@@ -27,10 +27,8 @@ def evaluate(
         raise typer.BadParameter("must be city or patch", param_hint="--scale")
     if apls not in ("paper", "symmetric"):
         raise typer.BadParameter("must be paper or symmetric", param_hint="--apls")
-    from csboundary.data.atomic import atomic_path
     from csboundary.metrics import MetricConfig
     from csboundary.metrics import evaluate as run_metrics
-    from csboundary.metrics.aggregate import nan_to_none
     from csboundary.metrics.io import grid_for, load_pair
 
     try:

@@ -159,25 +159,13 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     valid_batches = [_fpn_batch(valid_city, valid_rng, config, train=False) for _ in range(config.validation_samples)]
     step, history = _maybe_resume(resume, "fpn", model, optimizer, rng)
     log.write(event="start", model="fpn", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
-    model.train()
-    bar = tqdm(total=config.steps, initial=step, desc="train fpn", unit="step", disable=not progress)
-    while step < config.steps:
+
+    def loss_at(step: int):
         image, target, valid = _fpn_batch(train_city, rng, config, train=True)
-        lr = _cosine_lr(config, step)
-        for group in optimizer.param_groups:
-            group["lr"] = lr
-        loss = fpn_loss(model(image.to(device)), target.to(device), valid.to(device), config)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        step += 1
-        bar.update(1)
-        bar.set_postfix(loss=f"{loss.item():.4f}")
-        if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **validate_fpn(model, valid_batches, device, config)}
-            _record(out_dir, "fpn", metrics, model, model_config, config, step, history, optimizer, rng, log)
-    bar.close()
-    return _finish(out_dir, "fpn", model, model_config, config, step, history, log)
+        return fpn_loss(model(image.to(device)), target.to(device), valid.to(device), config), {}
+
+    return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
+                    lambda step: validate_fpn(model, valid_batches, device, config), progress)
 
 
 # -- AfANet -------------------------------------------------------------------------------------------
@@ -279,6 +267,31 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
 
 
 # -- shared -------------------------------------------------------------------------------------------
+
+
+def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path, optimizer, rng: np.random.Generator, step: int,
+             history: list, log: RunLog, loss_at, validate, progress: bool = True) -> Path:
+    """The loop every dense trainer shares: cosine learning rate, one optimizer step per
+    ``loss_at(step) -> (loss, extras)``, a validation (``validate(step) -> dict``, logged with the
+    extras) and a resumable checkpoint every ``validate_every`` steps, the final weights at the end."""
+    model.train()
+    bar = tqdm(total=config.steps, initial=step, desc=f"train {kind}", unit="step", disable=not progress)
+    while step < config.steps:
+        lr = _cosine_lr(config, step)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        loss, extras = loss_at(step)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        step += 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{loss.item():.4f}", **{k: f"{v:.3g}" if isinstance(v, float) else v for k, v in extras.items()})
+        if step % config.validate_every == 0 or step == config.steps:
+            metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **extras, **validate(step)}
+            _record(out_dir, kind, metrics, model, model_config, config, step, history, optimizer, rng, log)
+    bar.close()
+    return _finish(out_dir, kind, model, model_config, config, step, history, log)
 
 
 def _model_config(cls, overrides: dict):

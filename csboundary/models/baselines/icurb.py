@@ -44,7 +44,6 @@ from scipy import ndimage
 from shapely.geometry import LineString
 from skimage.morphology import skeletonize
 from torch import nn
-from tqdm import tqdm
 
 from csboundary.graph import BoundaryGraph
 from csboundary.labels.boundaries import Boundary
@@ -52,7 +51,7 @@ from csboundary.labels.select import near_window
 from csboundary.models.afanet import crop_rois
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _cosine_lr, _finish, _maybe_resume, _record, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, seed_everything
 from csboundary.models.training_data import TrainingCity
 from csboundary.pipeline.maps import image_tensor, predict_mosaic_maps, predict_probabilities, unit_bands
 from csboundary.pipeline.patch import shipped_weights
@@ -481,8 +480,8 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     step, history = _maybe_resume(resume, KIND, agent, optimizer, rng)
     buffer = ReplayBuffer(opts["buffer"], model_config.roi)  # not checkpointed: rebuilt after a resume
     log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in agent.parameters()), config=config.to_dict())
-    bar = tqdm(total=config.steps, initial=step, desc="train icurb", unit="step", disable=not progress)
-    while step < config.steps:
+
+    def loss_at(step: int):
         beta = max(opts["beta_min"], 1 - (1 - opts["beta_min"]) * step / max(1.0, opts["beta_decay"] * config.steps))
         for attempt in range(200):
             if buffer.size >= opts["batch"] and (attempt > 0 or step % opts["rollout_every"]):
@@ -498,19 +497,7 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
             raise RuntimeError("no ground-truth boundary crosses the training windows")
         agent.train()
         x, offset, stop = buffer.batch(rng.integers(0, buffer.size, opts["batch"]), device)
-        lr = _cosine_lr(config, step)
-        for group in optimizer.param_groups:
-            group["lr"] = lr
-        loss = _imitation_loss(agent, x, offset, stop, opts["stop_pos_weight"])
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        step += 1
-        bar.update(1)
-        bar.set_postfix(loss=f"{loss.item():.4f}", beta=f"{beta:.2f}", buffer=buffer.size)
-        if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "train_loss": loss.item(), "lr": lr, "beta": beta, "buffer": buffer.size,
-                       **validate(agent, cities["valid"], valid_windows, model_config, opts, device)}
-            _record(out_dir, KIND, metrics, agent, model_config, config, step, history, optimizer, rng, log)
-    bar.close()
-    return _finish(out_dir, KIND, agent, model_config, config, step, history, log)
+        return _imitation_loss(agent, x, offset, stop, opts["stop_pos_weight"]), {"beta": beta, "buffer": buffer.size}
+
+    return optimize(KIND, agent, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
+                    lambda step: validate(agent, cities["valid"], valid_windows, model_config, opts, device), progress)

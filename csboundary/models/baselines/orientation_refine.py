@@ -24,14 +24,13 @@ import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
-from tqdm import tqdm
 
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 from csboundary.labels.rasterize import orientation_label
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _cosine_lr, _finish, _maybe_resume, _model_config, _record, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
 from csboundary.models.training_data import TrainingCity
 from csboundary.pipeline.maps import image_tensor
 
@@ -179,34 +178,22 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     step, history = _maybe_resume(resume, KIND, model, optimizer, rng)
     stage2_from = round(config.steps * (1 - options.refine_fraction))
     log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
-    bar = tqdm(total=config.steps, initial=step, desc=f"train {KIND}", unit="step", disable=not progress)
-    model.train()
-    while step < config.steps:
+
+    def loss_at(step: int):
         image, seg, orient, valid = (t.to(device) for t in _batch(train_city, rng, config, options, True))
-        lr = _cosine_lr(config, step)
-        for group in optimizer.param_groups:
-            group["lr"] = lr
         if step < stage2_from:
-            loss = stage1_loss(model.stage1(image), seg, orient, valid, options)
-        else:
-            with torch.no_grad():
-                predicted = torch.sigmoid(model.stage1(image)[:, :1])
-            corrupted = torch.from_numpy(np.stack([corrupt(s, rng) for s in seg.cpu().numpy()]))[:, None].to(device)
-            use_own = torch.from_numpy(rng.random(len(seg)) < 0.5).to(device).view(-1, 1, 1, 1)
-            hint = torch.where(use_own, predicted, corrupted)
-            loss = _seg_loss(model.refiner(torch.cat([image, hint], 1))[:, 0], seg, valid, options.pos_weight)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        step += 1
-        bar.update(1)
-        bar.set_postfix(loss=f"{loss.item():.4f}", stage=1 if step <= stage2_from else 2)
-        if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "stage": 1 if step <= stage2_from else 2, "train_loss": loss.item(), "lr": lr,
-                       **validate(model.stage1, model.refiner if step > stage2_from else None, valid_batches, device)}
-            _record(out_dir, KIND, metrics, model, model.config, config, step, history, optimizer, rng, log)
-    bar.close()
-    return _finish(out_dir, KIND, model, model.config, config, step, history, log)
+            return stage1_loss(model.stage1(image), seg, orient, valid, options), {"stage": 1}
+        with torch.no_grad():
+            predicted = torch.sigmoid(model.stage1(image)[:, :1])
+        corrupted = torch.from_numpy(np.stack([corrupt(s, rng) for s in seg.cpu().numpy()]))[:, None].to(device)
+        use_own = torch.from_numpy(rng.random(len(seg)) < 0.5).to(device).view(-1, 1, 1, 1)
+        hint = torch.where(use_own, predicted, corrupted)
+        return _seg_loss(model.refiner(torch.cat([image, hint], 1))[:, 0], seg, valid, options.pos_weight), {"stage": 2}
+
+    def check(step: int) -> dict:  # the refiner is judged once it has been trained
+        return validate(model.stage1, model.refiner if step > stage2_from else None, valid_batches, device)
+
+    return optimize(KIND, model, model.config, config, out_dir, optimizer, rng, step, history, log, loss_at, check, progress)
 
 
 @dataclass

@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-from tqdm import tqdm
 
 from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
@@ -44,7 +43,7 @@ from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _cosine_lr, _finish, _maybe_resume, _model_config, _record, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
 from csboundary.models.training_data import TrainingCity, augment
 from csboundary.pipeline.maps import image_tensor, unit_bands
 from csboundary.pipeline.patch import graph_from_adjacency, shipped_weights
@@ -289,25 +288,13 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     valid_batches = [_batch(valid_city, valid_rng, config, options, train=False) for _ in range(config.validation_samples)]
     step, history = _maybe_resume(resume, KIND, model, optimizer, rng)
     log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
-    model.train()
-    bar = tqdm(total=config.steps, initial=step, desc="train sat2graph", unit="step", disable=not progress)
-    while step < config.steps:
+
+    def loss_at(step: int):
         image, target, mask, _ = _batch(train_city, rng, config, options, train=True)
-        lr = _cosine_lr(config, step)
-        for group in optimizer.param_groups:
-            group["lr"] = lr
-        loss = sat2graph_loss(model(image.to(device)), target.to(device), mask.to(device), options)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        step += 1
-        bar.update(1)
-        bar.set_postfix(loss=f"{loss.item():.4f}")
-        if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **validate(model, valid_batches, device, options)}
-            _record(out_dir, KIND, metrics, model, model_config, config, step, history, optimizer, rng, log)
-    bar.close()
-    return _finish(out_dir, KIND, model, model_config, config, step, history, log)
+        return sat2graph_loss(model(image.to(device)), target.to(device), mask.to(device), options), {}
+
+    return optimize(KIND, model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
+                    lambda step: validate(model, valid_batches, device, options), progress)
 
 
 # -- inference ------------------------------------------------------------------------------------
