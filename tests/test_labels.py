@@ -9,7 +9,7 @@ import pytest
 from affine import Affine
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shapely.geometry import LineString, box
+from shapely.geometry import box
 
 from csboundary.data.grid import PatchGrid
 from csboundary.data.synth.streets import _open
@@ -17,7 +17,7 @@ from csboundary.data.windows import PixelWindow
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.boundaries import Boundary, boundaries_from_world
 from csboundary.labels.config import LabelConfig
-from csboundary.labels.keypoints import CORNER, INTERSECTION, ISOLATED, boundary_keypoints, compute_keypoints, curvature_keypoints
+from csboundary.labels.keypoints import INTERSECTION, boundary_keypoints, compute_keypoints, curvature_keypoints
 from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.rasterize import keypoint_heat, orientation_label, segmentation_label
 from csboundary.labels.select import boundary_bounds
