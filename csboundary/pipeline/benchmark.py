@@ -77,8 +77,9 @@ def _baseline(method: str):
 
 METHODS = [
     Method("OrientationRefine", "orientation-refine", "segmentation", _baseline("orientation-refine"), ["baselines/orientation-refine-train.log"]),
-    Method("Sat2Graph", "sat2graph", "graph generation", _baseline("sat2graph"), ["baselines/sat2graph-train.log"]),
-    Method("Enhanced-iCurb", "icurb", "iterative", _baseline("icurb"), ["baselines/icurb-train.log"]),
+    # Sat2Graph's vertices and iCurb's segmentation input come from csBoundary's FPN: its training counts too
+    Method("Sat2Graph", "sat2graph", "graph generation", _baseline("sat2graph"), ["fpn-train.log", "baselines/sat2graph-train.log"]),
+    Method("Enhanced-iCurb", "icurb", "iterative", _baseline("icurb"), ["fpn-train.log", "baselines/icurb-train.log"]),
     Method("csBoundary", "csboundary", "graph generation (ours)", _csboundary, ["fpn-train.log", "afanet-train.log"]),
     Method("csBoundary (ablation budget)", "ablation-full", "ablation", _ablation("ablation-full"), ["fpn-train.log", "ablation/afanet-ablation-full-train.log"], "ablation"),
     Method("csBoundary w/o global feature", "no-global", "ablation", _ablation("no-global"), ["fpn-train.log", "ablation/afanet-no-global-train.log"], "ablation"),
