@@ -65,6 +65,14 @@ class CityLabels:
             "keypoint_heat": keypoint_heat(self.keypoints, self.bounds, window, c.heat_sigma_px),
         }
 
+    def network_targets(self, window) -> np.ndarray:
+        """(2, h, w) float32 keypoint heat and segmentation of a window: what the FPN learns to
+        predict (and what the ground-truth oracle feeds the pipeline in its place)."""
+        c = self.config
+        heat = keypoint_heat(self.keypoints, self.bounds, window, c.heat_sigma_px)
+        seg = segmentation_label(self.boundaries, self.bounds, window, c.segmentation_width)
+        return np.stack([heat, seg.astype(np.float32)]).astype(np.float32)
+
     def patch_graph(self, patch: Patch) -> BoundaryGraph:
         return patch_graph(self.keypoints, self.bounds, patch, self.crs)
 

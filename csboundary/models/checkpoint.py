@@ -39,6 +39,17 @@ def save_checkpoint(path: str | Path, kind: str, **content: Any) -> Path:
     return Path(path)
 
 
+def load_fpn(source: str | Path | dict, device: torch.device | str = "cpu"):
+    """csBoundary's FPN, in eval mode on ``device``, from an ``fpn`` checkpoint or a bundle (a
+    path, or a payload already loaded)."""
+    from csboundary.models.fpn import FPN, FPNConfig
+
+    payload = source if isinstance(source, dict) else load_checkpoint(source, ("fpn", "bundle"), map_location=device)
+    fpn = FPN(FPNConfig.from_dict(payload["fpn_config"])).to(device).eval()
+    fpn.load_state_dict(payload["fpn"])
+    return fpn
+
+
 def load_checkpoint(path: str | Path, kinds: tuple[str, ...], map_location="cpu") -> dict[str, Any]:
     """Load a checkpoint and check that it holds one of ``kinds``; errors name the file."""
     path = Path(path)

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+from csboundary.models.checkpoint import load_checkpoint, load_fpn, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.training_data import CitySpec, TrainingCity, augment
 from csboundary.pipeline.maps import predict_mosaic_maps
@@ -77,9 +77,7 @@ class TrainConfig:
                 if "tiles" in spec:
                     spec["tiles"] = tuple(spec["tiles"])
                 data[key] = CitySpec(**spec)
-        unknown = set(data) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown training option(s): {', '.join(sorted(unknown))}")
+        reject_unknown(data, cls.__dataclass_fields__, "training")
         return cls(**data)
 
     def to_dict(self) -> dict:
@@ -222,9 +220,7 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     log = RunLog(out_dir / "train.log")
     if not config.fpn_weights:
         raise ValueError("AfANet training needs fpn_weights: the trained FPN whose maps it reads")
-    fpn_payload = load_checkpoint(config.fpn_weights, ("fpn", "bundle"), map_location=device)
-    fpn = FPN(FPNConfig.from_dict(fpn_payload["fpn_config"])).to(device)
-    fpn.load_state_dict(fpn_payload["fpn"])
+    fpn = load_fpn(config.fpn_weights, device)
     cities = {}
     for name, spec in (("train", config.train_city), ("valid", config.valid_city)):
         city = TrainingCity(spec.ensure(config.cache))
@@ -294,11 +290,16 @@ def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path,
     return _finish(out_dir, kind, model, model_config, config, step, history, log)
 
 
+def reject_unknown(keys, allowed, what: str) -> None:
+    """Configs are JSON written by hand: a misspelt key is an error, not a silent default."""
+    unknown = set(keys) - set(allowed)
+    if unknown:
+        raise ValueError(f"unknown {what} option(s): {', '.join(sorted(unknown))}")
+
+
 def _model_config(cls, overrides: dict):
     """A model config from the training config's overrides; a misspelt key is an error."""
-    unknown = set(overrides) - set(cls.__dataclass_fields__)
-    if unknown:
-        raise ValueError(f"unknown {cls.__name__} option(s): {', '.join(sorted(unknown))}")
+    reject_unknown(overrides, cls.__dataclass_fields__, cls.__name__)
     return cls.from_dict(overrides)
 
 

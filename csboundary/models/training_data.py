@@ -18,7 +18,6 @@ from csboundary.data.windows import PixelWindow
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
-from csboundary.labels.rasterize import keypoint_heat, segmentation_label
 from csboundary.labels.writer import CityLabels
 from csboundary.pipeline.maps import unit_bands
 
@@ -65,10 +64,7 @@ class TrainingCity:
     def fpn_sample(self, window: PixelWindow) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Image (4, s, s) float32 in [0, 1]; targets (2, s, s): keypoint heat, segmentation; valid (s, s)."""
         read = self.mosaic.read(window)
-        lab = self.labels
-        heat = keypoint_heat(lab.keypoints, lab.bounds, window, self.config.heat_sigma_px)
-        seg = segmentation_label(lab.boundaries, lab.bounds, window, self.config.segmentation_width)
-        return unit_bands(read.data), np.stack([heat, seg.astype(np.float32)]), read.valid
+        return unit_bands(read.data), self.labels.network_targets(window), read.valid
 
     def gt_vertices(self, window: PixelWindow) -> np.ndarray:
         """Ground-truth keypoints inside ``window`` as global pixel coordinates (M, 2)."""

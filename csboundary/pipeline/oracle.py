@@ -19,7 +19,6 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
-from csboundary.labels.rasterize import keypoint_heat, segmentation_label
 from csboundary.labels.writer import CityLabels
 from csboundary.pipeline.patch import graph_from_adjacency
 
@@ -35,14 +34,7 @@ class OracleModel:
         return cls(CityLabels.build(lines, mosaic, config))
 
     def patch_maps(self, patches: list[Patch], images: list[np.ndarray]) -> list[np.ndarray]:
-        lab, c = self.labels, self.labels.config
-        return [
-            np.stack([
-                keypoint_heat(lab.keypoints, lab.bounds, p.expanded, c.heat_sigma_px),
-                segmentation_label(lab.boundaries, lab.bounds, p.expanded, c.segmentation_width),
-            ]).astype(np.float32)
-            for p in patches
-        ]
+        return [self.labels.network_targets(p.expanded) for p in patches]
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         return extract_vertices(maps[0], self.vertices)

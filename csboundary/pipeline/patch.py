@@ -18,8 +18,8 @@ from shapely.geometry import LineString
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint
-from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.models.checkpoint import load_checkpoint, load_fpn
+from csboundary.models.fpn import FPN
 from csboundary.pipeline.maps import image_tensor, predict_probabilities
 
 SHIPPED_WEIGHTS = "csboundary-synthetic.pt"
@@ -53,9 +53,7 @@ class PatchPredictor:
         ``fpn_weights``."""
         path = Path(weights) if weights else shipped_weights()
         payload = load_checkpoint(path, ("bundle", "afanet"), map_location=device)
-        fpn_payload = payload if payload["kind"] == "bundle" else load_checkpoint(fpn_weights or payload["train_config"]["fpn_weights"], ("fpn", "bundle"), map_location=device)
-        fpn = FPN(FPNConfig.from_dict(fpn_payload["fpn_config"])).to(device).eval()
-        fpn.load_state_dict(fpn_payload["fpn"])
+        fpn = load_fpn(payload if payload["kind"] == "bundle" else fpn_weights or payload["train_config"]["fpn_weights"], device)
         afanet = AfANet(AfANetConfig.from_dict(payload["afanet_config"])).to(device).eval()
         afanet.load_state_dict(payload["afanet"])
         settings = payload.get("inference", {})

@@ -49,9 +49,9 @@ from csboundary.graph import BoundaryGraph
 from csboundary.labels.boundaries import Boundary
 from csboundary.labels.select import near_window
 from csboundary.models.afanet import crop_rois
-from csboundary.models.checkpoint import load_checkpoint
-from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, seed_everything
+from csboundary.models.checkpoint import load_checkpoint, load_fpn
+from csboundary.models.fpn import FPN
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity
 from csboundary.pipeline.maps import image_tensor, predict_mosaic_maps, predict_probabilities, unit_bands
 from csboundary.pipeline.patch import shipped_weights
@@ -84,9 +84,7 @@ class ICurbConfig:
 
 def split_options(options: dict) -> tuple[ICurbConfig, dict]:
     """TrainConfig.options -> (agent config, training options); a misspelt key is an error."""
-    unknown = set(options) - set(ICurbConfig.__dataclass_fields__) - set(TRAIN_OPTIONS)
-    if unknown:
-        raise ValueError(f"unknown icurb option(s): {', '.join(sorted(unknown))}")
+    reject_unknown(options, {*ICurbConfig.__dataclass_fields__, *TRAIN_OPTIONS}, "icurb")
     return ICurbConfig.from_dict(options), {k: options.get(k, v) for k, v in TRAIN_OPTIONS.items()}
 
 
@@ -348,10 +346,7 @@ def border_starts(seg: np.ndarray, threshold: float, border_px: int, frame=None)
 
 def _load_fpn(path: str | Path | None, device: torch.device) -> FPN:
     """csBoundary's FPN from an ``fpn`` checkpoint or a bundle (default: the shipped bundle)."""
-    payload = load_checkpoint(Path(path) if path else shipped_weights(), ("fpn", "bundle"), map_location=device)
-    fpn = FPN(FPNConfig.from_dict(payload["fpn_config"])).to(device).eval()
-    fpn.load_state_dict(payload["fpn"])
-    return fpn
+    return load_fpn(path or shipped_weights(), device)
 
 
 class Model:

@@ -30,7 +30,7 @@ from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 from csboundary.labels.rasterize import orientation_label
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity
 from csboundary.pipeline.maps import image_tensor
 
@@ -49,9 +49,7 @@ class Options:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Options":
-        unknown = set(data) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown orientation-refine option(s): {', '.join(sorted(unknown))}")
+        reject_unknown(data, cls.__dataclass_fields__, "orientation-refine")
         return cls(**data)
 
 

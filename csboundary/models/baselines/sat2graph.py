@@ -41,9 +41,9 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint
+from csboundary.models.checkpoint import load_checkpoint, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity, augment
 from csboundary.pipeline.maps import image_tensor, unit_bands
 from csboundary.pipeline.patch import graph_from_adjacency, shipped_weights
@@ -72,9 +72,7 @@ class Sat2GraphOptions:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Sat2GraphOptions":
-        unknown = set(data) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown sat2graph option(s): {', '.join(sorted(unknown))}")
+        reject_unknown(data, cls.__dataclass_fields__, "sat2graph")
         return cls(**data)
 
 
@@ -319,9 +317,7 @@ class Model:
         payload = load_checkpoint(path, (KIND,), map_location=device)
         net = FPN(FPNConfig.from_dict(payload[f"{KIND}_config"])).to(device).eval()
         net.load_state_dict(payload[KIND])
-        keypoint = load_checkpoint(keypoint_weights or shipped_weights(), ("bundle", "fpn"), map_location=device)
-        keypoint_fpn = FPN(FPNConfig.from_dict(keypoint["fpn_config"])).to(device).eval()
-        keypoint_fpn.load_state_dict(keypoint["fpn"])
+        keypoint_fpn = load_fpn(keypoint_weights or shipped_weights(), device)
         return cls(net, keypoint_fpn, device, Sat2GraphOptions.from_dict(payload["train_config"].get("options", {})))
 
     @torch.no_grad()
