@@ -16,7 +16,7 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet",))
     provenance = {
-        name: {k: payload.get(k) for k in ("code_version", "train_config", "step", "validation")}
+        name: {k: payload.get(k) for k in ("code_version", "code_version_at_start", "train_config", "step", "validation")}
         for name, payload in (("fpn", fpn), ("afanet", afanet))
     }
     return save_checkpoint(

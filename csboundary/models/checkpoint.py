@@ -42,10 +42,10 @@ def save_checkpoint(path: str | Path, kind: str, **content: Any) -> Path:
 def load_fpn(source: str | Path | dict, device: torch.device | str = "cpu"):
     """csBoundary's FPN, in eval mode on ``device``, from an ``fpn`` checkpoint or a bundle (a
     path, or a payload already loaded)."""
-    from csboundary.models.fpn import FPN, FPNConfig
+    from csboundary.models.fpn import fpn_for_weights
 
     payload = source if isinstance(source, dict) else load_checkpoint(source, ("fpn", "bundle"), map_location=device)
-    fpn = FPN(FPNConfig.from_dict(payload["fpn_config"])).to(device).eval()
+    fpn = fpn_for_weights(payload["fpn_config"]).to(device).eval()
     fpn.load_state_dict(payload["fpn"])
     return fpn
 

@@ -8,6 +8,16 @@ segmentation (paper IV-B). No convolution runs at full resolution: on CPU that a
 than the rest of the network, and logits at stride 2 resolve 3 px boundaries after upsampling.
 Fully convolutional: trains on crops, infers on 1100x1100 patches (any size; padded internally
 to a multiple of the total stride).
+
+Two bottom-up paths (``FPNConfig.backbone``):
+
+* ``resnet``: the from-scratch path above (the first shipped model; the baselines' trunks).
+* ``efficientnet-lite0``: the ImageNet-pretrained encoder of
+  :mod:`csboundary.models.efficientnet_lite`, run on the patch resized by ``encoder_scale``
+  (default 0.5: at 0.3 m/px a street is still tens of pixels wide, the encoder sees twice the
+  context and costs a quarter as much). Its levels at strides 4-32 (of its input) feed the same
+  top-down path; a light full-resolution stem (two convolutions at stride 2, from scratch) gives
+  the head the pixel detail that a 3 px boundary needs.
 """
 
 from __future__ import annotations
@@ -29,6 +39,9 @@ class FPNConfig:
     pyramid: int = 48  # channels of the top-down path
     stem: int = 24  # channels of the stride-2 stem
     out_channels: int = 2
+    backbone: str = "resnet"  # resnet (from scratch) | efficientnet-lite0 (ImageNet-pretrained)
+    encoder_scale: float = 0.5  # efficientnet-lite0 only: the encoder sees the patch resized by this
+    pretrained: bool = True  # efficientnet-lite0 only: start from the ImageNet weights (training)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -57,7 +70,39 @@ class BasicBlock(nn.Module):
         return F.relu(self.body(x) + self.skip(x))
 
 
-class FPN(nn.Module):
+BACKBONES = ("resnet", "efficientnet-lite0")
+
+
+def fpn_for_weights(config: dict) -> nn.Module:
+    """An FPN to load trained weights into: built from a checkpoint's config without reading the
+    ImageNet weights (they would be overwritten at once)."""
+    return FPN(FPNConfig.from_dict({**config, "pretrained": False}))
+
+
+def FPN(config: FPNConfig = FPNConfig()) -> nn.Module:
+    """The FPN of ``config.backbone`` (both map (B, 4, H, W) in [0, 1] to (B, out, H, W) logits)."""
+    if config.backbone == "resnet":
+        return ResNetFPN(config)
+    if config.backbone == "efficientnet-lite0":
+        return LiteFPN(config)
+    raise ValueError(f"unknown FPN backbone {config.backbone!r}; expected one of {', '.join(BACKBONES)}")
+
+
+def top_down(features: list[torch.Tensor], lateral: nn.ModuleList, smooth: nn.ModuleList) -> torch.Tensor:
+    """FPN top-down path: lateral 1x1 maps plus the upsampled coarser level, each smoothed, all
+    summed at the finest level's resolution."""
+    top = lateral[-1](features[-1])
+    pyramid = [smooth[-1](top)]
+    for level in range(len(features) - 2, -1, -1):
+        top = lateral[level](features[level]) + F.interpolate(top, size=features[level].shape[-2:], mode="nearest")
+        pyramid.insert(0, smooth[level](top))
+    fused = pyramid[0]
+    for p in pyramid[1:]:
+        fused = fused + F.interpolate(p, size=fused.shape[-2:], mode="bilinear", align_corners=False)
+    return fused
+
+
+class ResNetFPN(nn.Module):
     def __init__(self, config: FPNConfig = FPNConfig()):
         super().__init__()
         self.config = config
@@ -84,14 +129,41 @@ class FPN(nn.Module):
         for stage in self.stages:
             y = stage(y)
             features.append(y)
-        top = self.lateral[-1](features[-1])
-        pyramid = [self.smooth[-1](top)]
-        for level in range(len(features) - 2, -1, -1):
-            top = self.lateral[level](features[level]) + F.interpolate(top, size=features[level].shape[-2:], mode="nearest")
-            pyramid.insert(0, self.smooth[level](top))
-        fused = pyramid[0]
-        for p in pyramid[1:]:
-            fused = fused + F.interpolate(p, size=fused.shape[-2:], mode="bilinear", align_corners=False)
+        fused = top_down(features, self.lateral, self.smooth)
+        half = F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False)
+        logits = self.head(torch.cat([half, stem], dim=1))
+        logits = F.interpolate(logits, scale_factor=2, mode="bilinear", align_corners=False)
+        return logits[..., :h, :w]
+
+
+class LiteFPN(nn.Module):
+    """EfficientNet-Lite0 bottom-up path (ImageNet-pretrained) under the same top-down path and head."""
+
+    def __init__(self, config: FPNConfig):
+        super().__init__()
+        from csboundary.models.efficientnet_lite import LITE0_CHANNELS, EfficientNetLite0, pretrained_lite0
+
+        if config.encoder_scale not in (1.0, 0.5, 0.25):
+            raise ValueError(f"encoder_scale must be 1, 0.5 or 0.25, got {config.encoder_scale}")
+        self.config = c = config
+        self.encoder = pretrained_lite0(c.in_channels) if c.pretrained else EfficientNetLite0(c.in_channels)
+        levels = (4, 8, 16, 32)
+        self.lateral = nn.ModuleList(nn.Conv2d(LITE0_CHANNELS[s], c.pyramid, 1) for s in levels)
+        self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in levels)
+        self.stem = nn.Sequential(conv_bn_relu(c.in_channels, c.stem, 2), conv_bn_relu(c.stem, c.stem))
+        self.head = nn.Sequential(conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1))
+        self.stride = round(32 / c.encoder_scale)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        """(B, in_channels, H, W) in [0, 1] -> (B, out_channels, H, W) logits."""
+        h, w = image.shape[-2:]
+        pad_h, pad_w = (-h) % self.stride, (-w) % self.stride
+        x = F.pad(image, (0, pad_w, 0, pad_h), mode="replicate") if pad_h or pad_w else image
+        factor = round(1 / self.config.encoder_scale)
+        small = F.avg_pool2d(x, factor) if factor > 1 else x  # box filter: antialiased, exact, exports anywhere
+        features = self.encoder(small)[1:]  # strides 4..32 of the encoder's input
+        fused = top_down(features, self.lateral, self.smooth)
+        stem = self.stem((x - 0.5) / 0.25)
         half = F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False)
         logits = self.head(torch.cat([half, stem], dim=1))
         logits = F.interpolate(logits, scale_factor=2, mode="bilinear", align_corners=False)

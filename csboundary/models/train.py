@@ -24,10 +24,13 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
+from csboundary.data import city as layout
+from csboundary.errors import InputError
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint, load_fpn, save_checkpoint
+from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.models.augmentation import AugmentConfig
 from csboundary.models.training_data import CitySpec, TrainingCity, augment
 from csboundary.pipeline.maps import predict_mosaic_maps
 
@@ -46,6 +49,10 @@ class TrainConfig:
     weight_decay: float = 1e-4
     validate_every: int = 250
     validation_samples: int = 8
+    extra_train_cities: list = field(default_factory=list)  # city directories (imported, from masks, a user's own) trained on beside train_city
+    augment: dict = field(default_factory=lambda: {"enabled": False})  # AugmentConfig overrides; {} = every augmentation at its defaults
+    snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
+    autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides
     crop: int = 256
@@ -84,7 +91,27 @@ class TrainConfig:
         return asdict(self)
 
 
+def training_cities(config: TrainConfig) -> list[TrainingCity]:
+    """The synthetic ``train_city`` (built on first use) and every ``extra_train_cities`` directory."""
+    paths = [config.train_city.ensure(config.cache), *config.extra_train_cities]
+    for path in config.extra_train_cities:
+        if not layout.is_city_dir(path):
+            raise InputError(path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)")
+    return [TrainingCity(p) for p in paths]
+
+
+def autocast(config: TrainConfig, device: torch.device):
+    """bfloat16 autocast when the config asks for it, else a no-op context."""
+    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=config.autocast_bf16)
+
+
+_RUN_CODE_VERSION: dict[str, str] = {}
+
+
 def seed_everything(seed: int) -> None:
+    """Seed every random stream and stamp the code version of the run's start (provenance:
+    the code that trained the weights, not the code around when they were saved)."""
+    _RUN_CODE_VERSION["at_start"] = code_version()
     random.seed(seed)
     np.random.seed(seed)
     torch.manual_seed(seed)
@@ -114,12 +141,18 @@ def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, co
     return (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
 
 
-def _fpn_batch(city: TrainingCity, rng: np.random.Generator, config: TrainConfig, train: bool):
+def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, train: bool):
+    """``config.batch`` samples, each from a city drawn in proportion to its area; training
+    samples augmented (:mod:`csboundary.models.augmentation`), validation samples as they are."""
+    areas = np.array([c.mosaic.width * c.mosaic.height for c in cities], float)
+    augmentation = _model_config(AugmentConfig, config.augment)
     images, targets, valids = [], [], []
     for _ in range(config.batch):
-        image, target, valid = city.fpn_sample(city.random_window(rng, config.crop))
+        city = cities[int(rng.choice(len(cities), p=areas / areas.sum()))] if len(cities) > 1 else cities[0]
         if train:
-            image, target, valid = augment(rng, image, target, valid)
+            image, target, valid = city.augmented_fpn_sample(rng, config.crop, augmentation)
+        else:
+            image, target, valid = city.fpn_sample(city.random_window(rng, config.crop))
         images.append(image)
         targets.append(target)
         valids.append(valid)
@@ -147,20 +180,22 @@ def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, 
 def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
-    train_city = TrainingCity(config.train_city.ensure(config.cache))
+    train_cities = training_cities(config)
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
     model_config = _model_config(FPNConfig, config.fpn)
     model = FPN(model_config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
-    valid_batches = [_fpn_batch(valid_city, valid_rng, config, train=False) for _ in range(config.validation_samples)]
+    valid_batches = [_fpn_batch([valid_city], valid_rng, config, train=False) for _ in range(config.validation_samples)]
     step, history = _maybe_resume(resume, "fpn", model, optimizer, rng)
-    log.write(event="start", model="fpn", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    log.write(event="start", model="fpn", step=step, code_version=_RUN_CODE_VERSION["at_start"], parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
 
     def loss_at(step: int):
-        image, target, valid = _fpn_batch(train_city, rng, config, train=True)
-        return fpn_loss(model(image.to(device)), target.to(device), valid.to(device), config), {}
+        image, target, valid = _fpn_batch(train_cities, rng, config, train=True)
+        with autocast(config, device):
+            logits = model(image.to(device))
+        return fpn_loss(logits.float(), target.to(device), valid.to(device), config), {}
 
     return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
                     lambda step: validate_fpn(model, valid_batches, device, config), progress)
@@ -236,7 +271,7 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
     rng = np.random.default_rng(config.seed)
     step, history = _maybe_resume(resume, "afanet", model, optimizer, rng)
-    log.write(event="start", model="afanet", step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    log.write(event="start", model="afanet", step=step, code_version=_RUN_CODE_VERSION["at_start"], parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
     model.train()
     bar = tqdm(total=config.steps, initial=step, desc="train afanet", unit="step", disable=not progress)
     while step < config.steps:
@@ -317,6 +352,8 @@ def _record(out_dir: Path, kind: str, metrics: dict, model, model_config, config
     history.append(metrics)
     log.write(event="validate", **metrics)
     _save(out_dir / f"{kind}-last.pt", kind, model, model_config, config, step, history, optimizer, rng)
+    if config.snapshots:
+        _save(out_dir / f"{kind}-step{step}.pt", kind, model, model_config, config, step, history, None)
 
 
 def _finish(out_dir: Path, kind: str, model, model_config, config, step, history, log: RunLog) -> Path:
@@ -334,6 +371,7 @@ def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step:
         "train_config": config.to_dict(),
         "step": step,
         "validation": history,
+        "code_version_at_start": _RUN_CODE_VERSION.get("at_start", code_version()),
     }
     if optimizer is not None:
         content["optimizer"] = optimizer.state_dict()

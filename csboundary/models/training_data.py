@@ -16,6 +16,8 @@ from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
 from csboundary.labels.adjacency import adjacency_label
+from csboundary.models.augmentation import AugmentConfig, draw_geometry, photometric, source_side, warp
+from csboundary.models.augmentation import flip_rotate90 as augment  # noqa: F401  (the baselines' flips)
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.writer import CityLabels
@@ -66,6 +68,19 @@ class TrainingCity:
         read = self.mosaic.read(window)
         return unit_bands(read.data), self.labels.network_targets(window), read.valid
 
+    def augmented_fpn_sample(self, rng: np.random.Generator, crop: int, config: AugmentConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``fpn_sample`` of a random ``crop`` window, rotated by any angle, scaled, flipped and
+        re-lit (see :mod:`csboundary.models.augmentation`): the source window is read large
+        enough that the rotated crop holds imagery wherever the city does."""
+        angle, scale = draw_geometry(rng, config)
+        side = source_side(crop, angle, scale) if (angle or scale != 1) else crop
+        image, target, valid = self.fpn_sample(self.random_window(rng, side))
+        if side != crop:
+            image, target = warp(image, angle, scale, crop), warp(target, angle, scale, crop)
+            valid = warp(valid.astype(np.uint8), angle, scale, crop, nearest=True).astype(bool)
+        image, target, valid = augment(rng, image, target, valid)
+        return photometric(rng, image, config), target, valid
+
     def gt_vertices(self, window: PixelWindow) -> np.ndarray:
         """Ground-truth keypoints inside ``window`` as global pixel coordinates (M, 2)."""
         graph, _ = window_graph(self.labels.keypoints, self.labels.bounds, window)
@@ -87,16 +102,3 @@ class TrainingCity:
     def adjacency(self, vertices: np.ndarray, window: PixelWindow) -> np.ndarray:
         lab = self.labels
         return adjacency_label(vertices, lab.boundaries, lab.bounds, window, self.config.snap_tolerance_px)
-
-
-def augment(rng: np.random.Generator, *arrays: np.ndarray) -> list[np.ndarray]:
-    """The same random flip / 90-degree rotation applied to every (..., h, w) array."""
-    k = int(rng.integers(4))
-    flip = bool(rng.integers(2))
-    out = []
-    for a in arrays:
-        a = np.rot90(a, k, axes=(-2, -1))
-        if flip:
-            a = a[..., ::-1]
-        out.append(np.ascontiguousarray(a))
-    return out
