@@ -59,3 +59,27 @@ def test_afanet_trains_on_fpn_maps(fpn_run, tmp_path):
 def test_misspelt_model_option_is_an_error(tmp_path):
     with pytest.raises(ValueError, match="unknown FPNConfig option"):
         train_fpn(config(tmp_path, fpn={"width": [8, 8, 8, 8]}), tmp_path / "run", torch.device("cpu"), progress=False)
+
+
+def test_pretrained_fpn_trains_with_augmentation_on_an_extra_city(tmp_path):
+    """The shipped recipe in miniature: EfficientNet-Lite0 FPN, every augmentation, a synthetic
+    city plus a city directory of the user's (here: the valid city standing in for one)."""
+    from csboundary.models.training_data import CitySpec
+
+    extra = CitySpec(split="valid", seed=3, tiles=(1, 1), tile_size=300).ensure(tmp_path / "cities")
+    cfg = config(tmp_path, fpn={"backbone": "efficientnet-lite0"}, augment={}, extra_train_cities=[str(extra)], steps=2, crop=64)
+    weights = train_fpn(cfg, tmp_path / "run", torch.device("cpu"), progress=False)
+    payload = load_checkpoint(weights, ("fpn",))
+    assert payload["fpn_config"]["backbone"] == "efficientnet-lite0"
+    assert payload["train_config"]["extra_train_cities"] == [str(extra)]
+    assert payload["code_version_at_start"]
+    start = json.loads((tmp_path / "run" / "train.log").read_text().splitlines()[0])
+    assert start["code_version"] == payload["code_version_at_start"]
+
+
+def test_extra_city_that_is_not_a_city_is_an_error(tmp_path):
+    from csboundary.errors import InputError
+
+    cfg = config(tmp_path, extra_train_cities=[str(tmp_path)])
+    with pytest.raises(InputError, match="not a city directory"):
+        train_fpn(cfg, tmp_path / "run", torch.device("cpu"), progress=False)

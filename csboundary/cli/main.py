@@ -16,6 +16,8 @@ import typer
 from csboundary.errors import InputError, InputWarning
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="City-scale road-boundary graphs from aerial imagery.")
+SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check; default: the weights')."
+LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit; default: the weights')."
 
 
 def _parse_tiles(text: str) -> tuple[int, int]:
@@ -67,6 +69,66 @@ def import_topo_boundary_cmd(
     missing = report["missing_patches"]
     typer.echo(f"{out}: {len(report['tiles_written'])} tile(s) written; {len(missing)} missing patch(es)"
                + (f": {', '.join(missing[:10])}{' ...' if len(missing) > 10 else ''}" if missing else ""))
+
+
+@app.command("import-masks")
+def import_masks_cmd(
+    source: Path = typer.Argument(..., help="Folder of images and their label masks."),
+    out: Path = typer.Option(..., "--out", help="Folder for one city per image, plus set.json listing them."),
+    gsd: Optional[float] = typer.Option(None, help="Pixel size of the images in metres (needed when they carry no georeference)."),
+    target_gsd: float = typer.Option(0.152, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
+    image_pattern: str = typer.Option("{id}_image.png", help="Image file names; {id} is the part shared with the mask."),
+    mask_pattern: str = typer.Option("{id}_edge.png", help="Mask file names."),
+    kind: str = typer.Option("edge", help="edge: the mask marks road-edge lines | surface: it marks the road surface."),
+    channel: int = typer.Option(1, min=1, help="Band of the mask file to read (1-based)."),
+    threshold: float = typer.Option(128, help="Mask pixels above this value are labelled."),
+    invert: bool = typer.Option(False, "--invert", help="Label pixels below the threshold instead (dark lines on white)."),
+    ids: Optional[str] = typer.Option(None, help="Comma-separated ids to import (default: every pair found)."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """Images + raster masks (road edge or road surface) -> cities with vector ground truth at the
+    model's pixel size, for evaluate-set, evaluate-model and training."""
+    import math as _math
+
+    from csboundary.data.mask_import import MaskRule, import_masks
+
+    if gsd is not None and (not _math.isfinite(gsd) or gsd <= 0):
+        raise typer.BadParameter(f"--gsd must be a positive number of metres, got {gsd}")
+    if not _math.isfinite(target_gsd) or target_gsd <= 0:
+        raise typer.BadParameter(f"--target-gsd must be a positive number of metres, got {target_gsd}")
+    try:
+        rule = MaskRule(kind=kind, channel=channel - 1, threshold=threshold, invert=invert)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc))
+    report = import_masks(source, out, gsd=gsd, rule=rule, image_pattern=image_pattern, mask_pattern=mask_pattern,
+                          target_gsd=target_gsd, ids=ids.split(",") if ids else None, progress=not quiet)
+    total = sum(c["boundaries"] for c in report["cities"])
+    typer.echo(f"{out}: {len(report['cities'])} cities, {total} boundary lines, at {target_gsd:g} m/px (set.json lists them)")
+
+
+@app.command("evaluate-set")
+def evaluate_set_cmd(
+    set_dir: Path = typer.Argument(..., help="A folder of labelled cities (import-masks output, or city directories)."),
+    weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write per-city and mean scores as JSON here."),
+    seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
+    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
+    device: str = typer.Option("auto", help="auto | cpu | cuda."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """Score a model on every city of a validation set (city scale) and print the per-city and
+    mean scores: how to select and compare models on real labelled imagery."""
+    from csboundary.cli.evaluate import write_scores
+    from csboundary.pipeline.evaluate_set import evaluate_set, format_set
+
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    result = evaluate_set(set_dir, predictor, seed=seed, progress=not quiet)
+    result["weights"] = str(weights or "shipped")
+    typer.echo(format_set(result))
+    if json_out is not None:
+        write_scores(json_out, result)
 
 
 def _parse_ints(text: str, count: int, option: str, form: str) -> list[int]:
@@ -244,11 +306,13 @@ def bundle_weights(
     afanet: Path = typer.Option(..., help="Trained AfANet checkpoint (afanet.pt)."),
     out: Path = typer.Option(..., "--out", help="Bundle to write (e.g. csboundary/weights/csboundary-synthetic.pt)."),
     edge_threshold: float = typer.Option(0.5, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
+    min_edge_support: float = typer.Option(0.0, min=0.0, max=1.0, help="Default mean boundary probability along an AfANet edge (0 = no check)."),
+    max_edge_length: float = typer.Option(0.0, min=0.0, help="Default longest AfANet edge in pixels (0 = no limit)."),
 ) -> None:
     """Bundle a trained FPN and AfANet (weights + provenance) into one weights file."""
     from csboundary.models.bundle import make_bundle
 
-    path = make_bundle(fpn, afanet, out, edge_threshold)
+    path = make_bundle(fpn, afanet, out, edge_threshold, min_support=min_edge_support, max_length_px=max_edge_length)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
 
 
@@ -259,6 +323,8 @@ def evaluate_model(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
     edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
@@ -270,7 +336,7 @@ def evaluate_model(
     from csboundary.pipeline.city import predict_city
     from csboundary.pipeline.run import evaluate_run
 
-    predictor = _load_predictor(weights, device, edge_threshold)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
     layout.read_meta(city)
     mosaic, lines = _open_inputs([city], None)
     with mosaic:
@@ -283,14 +349,23 @@ def evaluate_model(
         write_scores(json_out, scores)
 
 
-def _load_predictor(weights: Optional[Path], device: str, edge_threshold: Optional[float] = None):
+def _load_predictor(weights: Optional[Path], device: str, edge_threshold: Optional[float] = None,
+                    min_edge_support: Optional[float] = None, max_edge_length: Optional[float] = None, fpn_weights: Optional[Path] = None):
+    """The predictor of a weights bundle, with the command line's overrides of its inference settings."""
+    import dataclasses
+
     from csboundary.models.device import resolve_device
     from csboundary.pipeline.patch import PatchPredictor
 
-    predictor = PatchPredictor.load(weights, resolve_device(device))
+    predictor = PatchPredictor.load(weights, resolve_device(device), fpn_weights)
     if edge_threshold is not None:
         predictor.edge_threshold = edge_threshold
+    if min_edge_support is not None:
+        predictor.support = dataclasses.replace(predictor.support, min_support=min_edge_support)
+    if max_edge_length is not None:
+        predictor.support = dataclasses.replace(predictor.support, max_length_px=max_edge_length)
     return predictor
+
 
 
 @app.command()
@@ -299,6 +374,8 @@ def predict(
     out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
     edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
@@ -308,7 +385,7 @@ def predict(
     city graph, written in the input's CRS."""
     from csboundary.pipeline.run import run_prediction, stage_table
 
-    predictor = _load_predictor(weights, device, edge_threshold)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
     mosaic, _ = _open_inputs(inputs, None)
     settings = {"weights": str(weights or "shipped"), "edge_threshold": predictor.edge_threshold, "batch_size": batch_size,
                 "device": str(predictor.device)}
@@ -325,6 +402,8 @@ def predict_patch(
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
     edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
 ) -> None:
@@ -333,14 +412,10 @@ def predict_patch(
 
     from csboundary.data.atomic import atomic_path
     from csboundary.data.raster import Mosaic
-    from csboundary.models.device import resolve_device
-    from csboundary.pipeline.patch import PatchPredictor
     from csboundary.viz.labels import draw_patch_labels
     from csboundary.viz.overlay import to_display, write_png
 
-    predictor = PatchPredictor.load(weights, resolve_device(device), fpn_weights)
-    if edge_threshold is not None:
-        predictor.edge_threshold = edge_threshold
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, fpn_weights)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
     with Mosaic.open(image) as mosaic:

@@ -31,7 +31,7 @@ from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.augmentation import AugmentConfig
-from csboundary.models.training_data import CitySpec, TrainingCity, augment
+from csboundary.models.training_data import CitySpec, TrainingCity
 from csboundary.pipeline.maps import predict_mosaic_maps
 
 

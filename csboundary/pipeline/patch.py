@@ -16,6 +16,7 @@ import torch
 from shapely.geometry import LineString
 
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.checkpoint import load_checkpoint, load_fpn
@@ -46,6 +47,7 @@ class PatchPredictor:
     vertices: VertexConfig = field(default_factory=VertexConfig)
     edge_threshold: float = 0.5
     max_degree: int | None = 2
+    support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
 
     @classmethod
     def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
@@ -57,7 +59,9 @@ class PatchPredictor:
         afanet = AfANet(AfANetConfig.from_dict(payload["afanet_config"])).to(device).eval()
         afanet.load_state_dict(payload["afanet"])
         settings = payload.get("inference", {})
-        return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2))
+        support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px") if k in settings})
+        return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
+                   support=support)
 
     def maps(self, image: np.ndarray) -> np.ndarray:
         return predict_probabilities(self.fpn, image, self.device)
@@ -79,6 +83,8 @@ class PatchPredictor:
         tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(np.ascontiguousarray(maps)).to(self.device)], dim=0)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
         probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
+        for i, j in unsupported_pairs(found.vertices, probs, maps[1], self.edge_threshold, self.support):
+            probs[i, j] = probs[j, i] = 0.0
         return graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree)
 
     def graph(self, image: np.ndarray, maps: np.ndarray | None = None) -> BoundaryGraph:

