@@ -30,7 +30,7 @@ from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.augmentation import AugmentConfig
+from csboundary.models.augmentation import AugmentConfig, photometric
 from csboundary.models.training_data import CitySpec, TrainingCity
 from csboundary.pipeline.maps import predict_mosaic_maps
 
@@ -214,8 +214,13 @@ def adjacency_loss(logits: torch.Tensor, label: torch.Tensor, max_pos_weight: fl
     return F.binary_cross_entropy_with_logits(logits[off], label[off], pos_weight=pos_weight)
 
 
-def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: str, config: TrainConfig, vertex_config: VertexConfig):
+def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: str, config: TrainConfig, vertex_config: VertexConfig,
+                   augmentation: AugmentConfig | None = None):
+    """One AfANet example: the 6-channel tensor (image bands re-lit by ``augmentation`` when given;
+    the FPN maps as predicted), vertices in window pixels and their adjacency label."""
     tensor = city.afanet_tensor(window)
+    if augmentation is not None and augmentation.enabled:
+        tensor[:4] = photometric(rng, tensor[:4], augmentation)
     if stage == "gt":
         vertices = city.gt_vertices(window)
         vertices = vertices + rng.normal(0, config.vertex_jitter_px, vertices.shape)
@@ -256,12 +261,12 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     if not config.fpn_weights:
         raise ValueError("AfANet training needs fpn_weights: the trained FPN whose maps it reads")
     fpn = load_fpn(config.fpn_weights, device)
-    cities = {}
-    for name, spec in (("train", config.train_city), ("valid", config.valid_city)):
-        city = TrainingCity(spec.ensure(config.cache))
+    train_cities = training_cities(config)
+    cities = {"valid": TrainingCity(config.valid_city.ensure(config.cache))}
+    for city in (*train_cities, cities["valid"]):
         city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)
-        cities[name] = city
     del fpn
+    augmentation = _model_config(AugmentConfig, config.augment)
     model_config = _model_config(AfANetConfig, config.afanet)
     model = AfANet(model_config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -276,7 +281,8 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     bar = tqdm(total=config.steps, initial=step, desc="train afanet", unit="step", disable=not progress)
     while step < config.steps:
         stage = "gt" if step < config.gt_steps else "pred"
-        tensor, vertices, label = _afanet_sample(cities["train"], cities["train"].random_window(rng, config.window), rng, stage, config, vertex_config)
+        city = train_cities[int(rng.integers(len(train_cities)))] if len(train_cities) > 1 else train_cities[0]
+        tensor, vertices, label = _afanet_sample(city, city.random_window(rng, config.window), rng, stage, config, vertex_config, augmentation)
         step += 1
         bar.update(1)
         if len(vertices) >= 2:
