@@ -45,7 +45,7 @@ def load_fpn(source: str | Path | dict, device: torch.device | str = "cpu"):
     from csboundary.models.fpn import fpn_for_weights
 
     payload = source if isinstance(source, dict) else load_checkpoint(source, ("fpn", "bundle"), map_location=device)
-    fpn = fpn_for_weights(payload["fpn_config"]).to(device).eval()
+    fpn = fpn_for_weights(payload["fpn_config"]).to(device).eval().to(memory_format=torch.channels_last)
     fpn.load_state_dict(payload["fpn"])
     return fpn
 

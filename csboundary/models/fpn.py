@@ -153,6 +153,17 @@ class LiteFPN(nn.Module):
         self.stem = nn.Sequential(conv_bn_relu(c.in_channels, c.stem, 2), conv_bn_relu(c.stem, c.stem))
         self.head = nn.Sequential(conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1))
         self.stride = round(32 / c.encoder_scale)
+        self.freeze_encoder_bn = False  # set by training: keep the encoder's ImageNet batch statistics
+
+    def train(self, mode: bool = True) -> "LiteFPN":
+        """As ``nn.Module.train``, but with ``freeze_encoder_bn`` the encoder's batch norms stay in
+        eval mode: their ImageNet statistics are not pulled towards the synthetic cities'."""
+        super().train(mode)
+        if mode and self.freeze_encoder_bn:
+            for module in self.encoder.modules():
+                if isinstance(module, nn.BatchNorm2d):
+                    module.eval()
+        return self
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         """(B, in_channels, H, W) in [0, 1] -> (B, out_channels, H, W) logits."""

@@ -52,6 +52,8 @@ class TrainConfig:
     extra_train_cities: list = field(default_factory=list)  # city directories (imported, from masks, a user's own) trained on beside train_city
     augment: dict = field(default_factory=lambda: {"enabled": False})  # AugmentConfig overrides; {} = every augmentation at its defaults
     snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
+    encoder_lr_scale: float = 1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
+    freeze_encoder_bn: bool = False  # pretrained FPN encoder: keep its batch-norm statistics (ImageNet's, not the synthetic cities')
     autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides
@@ -89,6 +91,18 @@ class TrainConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
+    """Optimizer groups: a pretrained encoder at ``encoder_lr_scale`` of the rate, the rest at 1
+    (``lr_scale`` is read by the schedule); sets the encoder's batch-norm freeze."""
+    encoder = getattr(model, "encoder", None)
+    if encoder is None:
+        return [{"params": list(model.parameters()), "lr_scale": 1.0}]
+    model.freeze_encoder_bn = config.freeze_encoder_bn
+    inside = {id(p) for p in encoder.parameters()}
+    return [{"params": list(encoder.parameters()), "lr_scale": config.encoder_lr_scale},
+            {"params": [p for p in model.parameters() if id(p) not in inside], "lr_scale": 1.0}]
 
 
 def training_cities(config: TrainConfig) -> list[TrainingCity]:
@@ -184,7 +198,7 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
     model_config = _model_config(FPNConfig, config.fpn)
     model = FPN(model_config).to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    optimizer = torch.optim.Adam(fpn_parameter_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_fpn_batch([valid_city], valid_rng, config, train=False) for _ in range(config.validation_samples)]
@@ -316,7 +330,7 @@ def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path,
     while step < config.steps:
         lr = _cosine_lr(config, step)
         for group in optimizer.param_groups:
-            group["lr"] = lr
+            group["lr"] = lr * group.get("lr_scale", 1.0)
         loss, extras = loss_at(step)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()

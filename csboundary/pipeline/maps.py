@@ -40,7 +40,8 @@ def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device) -
     (B, 4, h, w) -> (B, 2, h, w)."""
     model.eval()
     batch = image_tensor(image, device)
-    logits = model(batch if batch.ndim == 4 else batch[None])
+    # channels-last: 1.3-2.3x faster convolutions on CPU (benchmarks/fpn_speed.py), same values
+    logits = model((batch if batch.ndim == 4 else batch[None]).contiguous(memory_format=torch.channels_last))
     probs = torch.sigmoid(logits).float().cpu().numpy()
     return probs if batch.ndim == 4 else probs[0]
 
