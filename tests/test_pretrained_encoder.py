@@ -75,3 +75,19 @@ def test_unknown_backbone_and_scale_are_errors():
         FPN(FPNConfig(backbone="vgg"))
     with pytest.raises(ValueError, match="encoder_scale"):
         FPN(FPNConfig(backbone="efficientnet-lite0", encoder_scale=0.7, pretrained=False))
+
+
+def test_frozen_encoder_batch_norm_keeps_imagenet_statistics_while_training():
+    from csboundary.models.train import TrainConfig, fpn_parameter_groups
+
+    model = FPN(LITE)
+    groups = fpn_parameter_groups(model, TrainConfig(encoder_lr_scale=0.1, freeze_encoder_bn=True))
+    assert [g["lr_scale"] for g in groups] == [0.1, 1.0]
+    assert sum(len(g["params"]) for g in groups) == len(list(model.parameters()))
+    model.train()
+    before = model.encoder.stem[1].running_mean.clone()
+    head_before = model.head[0][1].running_mean.clone()
+    model(torch.rand(2, 4, 64, 64))
+    assert torch.equal(model.encoder.stem[1].running_mean, before)  # encoder statistics frozen
+    assert not torch.equal(model.head[0][1].running_mean, head_before)  # the rest still learns its own
+    assert model.head.training and not model.encoder.stem[1].training

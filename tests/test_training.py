@@ -67,12 +67,15 @@ def test_pretrained_fpn_trains_with_augmentation_on_an_extra_city(tmp_path):
     from csboundary.models.training_data import CitySpec
 
     extra = CitySpec(split="valid", seed=3, tiles=(1, 1), tile_size=300).ensure(tmp_path / "cities")
-    cfg = config(tmp_path, fpn={"backbone": "efficientnet-lite0"}, augment={}, extra_train_cities=[str(extra)], steps=2, crop=64)
+    cfg = config(tmp_path, fpn={"backbone": "efficientnet-lite0"}, augment={}, extra_train_cities=[str(extra)], steps=2, crop=64,
+                 encoder_lr_scale=0.1, freeze_encoder_bn=True)
     weights = train_fpn(cfg, tmp_path / "run", torch.device("cpu"), progress=False)
     payload = load_checkpoint(weights, ("fpn",))
     assert payload["fpn_config"]["backbone"] == "efficientnet-lite0"
     assert payload["train_config"]["extra_train_cities"] == [str(extra)]
     assert payload["code_version_at_start"]
+    encoder_group, rest = load_checkpoint(tmp_path / "run" / "fpn-last.pt", ("fpn",))["optimizer"]["param_groups"]
+    assert encoder_group["lr"] == pytest.approx(0.1 * rest["lr"])
     start = json.loads((tmp_path / "run" / "train.log").read_text().splitlines()[0])
     assert start["code_version"] == payload["code_version_at_start"]
 
