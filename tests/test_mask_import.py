@@ -118,3 +118,36 @@ def test_evaluate_set_of_an_empty_folder_is_a_one_line_error(tmp_path):
     done = run_cli("evaluate-set", str(tmp_path / "empty"), "--device", "cpu")
     assert done.returncode == 2
     assert done.stderr.strip().startswith("error:") and "Traceback" not in done.stderr
+
+
+def test_make_city_links_tiles_and_reprojects_the_ground_truth(tiles, tmp_path):
+    """A user's tiles + curbs in another CRS -> a city whose ground truth is in the tiles' CRS."""
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    from csboundary.data.user_city import make_city
+
+    line = LineString([(500001.0, 4399990.0), (500050.0, 4399990.0)])
+    curbs = gpd.GeoDataFrame(geometry=[line], crs="EPSG:32618").to_crs("EPSG:4326")
+    curbs.to_file(tmp_path / "curbs.geojson", driver="GeoJSON")
+    meta = make_city([tiles.directory], tmp_path / "curbs.geojson", tmp_path / "city")
+    assert meta["boundaries"] == 1 and meta["width"] == 120 and meta["height"] == 80
+    linked = sorted((tmp_path / "city" / "tiles").iterdir())
+    assert len(linked) == 4 and all(p.is_symlink() for p in linked)
+    (back,) = read_ground_truth(layout.ground_truth_path(tmp_path / "city")).geometry
+    assert np.allclose(np.asarray(back.coords), np.asarray(line.coords), atol=1e-3)
+
+
+def test_make_city_refuses_ground_truth_without_crs_or_off_the_tiles(tiles, tmp_path):
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    gpd.GeoDataFrame(geometry=[LineString([(500001.0, 4399990.0), (500050.0, 4399990.0)])]).to_file(tmp_path / "nocrs.gpkg")
+    done = run_cli("make-city", str(tiles.directory), "--ground-truth", str(tmp_path / "nocrs.gpkg"), "--out", str(tmp_path / "city"))
+    assert done.returncode == 2 and "has no CRS" in done.stderr and "Traceback" not in done.stderr
+    # plain GeoJSON is WGS84 by definition: UTM numbers read as degrees land nowhere near the tiles
+    (tmp_path / "curbs.geojson").write_text('{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, '
+                                            '"geometry": {"type": "LineString", "coordinates": [[10, 10], [11, 11]]}}]}')
+    done = run_cli("make-city", str(tiles.directory), "--ground-truth", str(tmp_path / "curbs.geojson"), "--out", str(tmp_path / "city"))
+    assert done.returncode == 2 and "no boundary lies on the tiles" in done.stderr
+    assert not (tmp_path / "city" / "city.json").exists()

@@ -106,6 +106,20 @@ def import_masks_cmd(
     typer.echo(f"{out}: {len(report['cities'])} cities, {total} boundary lines, at {target_gsd:g} m/px (set.json lists them)")
 
 
+@app.command("make-city")
+def make_city_cmd(
+    tiles: list[Path] = typer.Argument(..., help="GeoTIFF tile(s) or a folder of them (one pixel grid, one CRS)."),
+    ground_truth: Path = typer.Option(..., "--ground-truth", help="Road boundaries as lines (GeoPackage, GeoJSON, Shapefile...) with a CRS."),
+    out: Path = typer.Option(..., "--out", help="City directory to write (tiles are linked, not copied)."),
+) -> None:
+    """Your own GeoTIFFs + vector road boundaries -> a city directory, for evaluate-model,
+    evaluate-set, benchmark --city and training (extra_train_cities)."""
+    from csboundary.data.user_city import make_city
+
+    meta = make_city(tiles, ground_truth, out)
+    typer.echo(f"{out}: {len(meta['tiles'])} tile(s), {meta['width']}x{meta['height']} px at {meta['gsd']:g} m, {meta['boundaries']} boundaries")
+
+
 @app.command("evaluate-set")
 def evaluate_set_cmd(
     set_dir: Path = typer.Argument(..., help="A folder of labelled cities (import-masks output, or city directories)."),
