@@ -1,0 +1,43 @@
+"""Scores of one weights bundle on validation sets for a grid of edge-support settings.
+
+    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300]
+
+Each SET is a folder of cities (``csboundary import-masks``) scored with ``evaluate-set``'s mean,
+or one city directory scored at city scale. Prints one row per setting (F1@5, APLS, TLTS per
+set): the measurement behind the shipped ``min_support`` / ``max_length_px`` (docs/real-imagery.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+import torch
+
+from csboundary.data import city as layout
+from csboundary.pipeline.evaluate_set import evaluate_city_dir, evaluate_set
+from csboundary.pipeline.patch import PatchPredictor
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("weights")
+    parser.add_argument("sets", nargs="+")
+    parser.add_argument("--support", default="0,0.2,0.3,0.4")
+    parser.add_argument("--length", default="0,300")
+    args = parser.parse_args()
+    predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
+    print("support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    for support in (float(v) for v in args.support.split(",")):
+        for length in (float(v) for v in args.length.split(",")):
+            predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length)
+            row = []
+            for s in args.sets:
+                m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
+                row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
+            print(f"{support:7.2f} {length:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+
+
+if __name__ == "__main__":
+    main()
