@@ -1,6 +1,6 @@
 """Scores of one weights bundle on validation sets for a grid of edge-support settings.
 
-    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300]
+    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--vertex-threshold 0.5]
 
 Each SET is a folder of cities (``csboundary import-masks``) scored with ``evaluate-set``'s mean,
 or one city directory scored at city scale. Prints one row per setting (F1@5, APLS, TLTS per
@@ -26,17 +26,19 @@ def main() -> None:
     parser.add_argument("sets", nargs="+")
     parser.add_argument("--support", default="0,0.2,0.3,0.4")
     parser.add_argument("--length", default="0,300")
+    parser.add_argument("--vertex-threshold", default="0.5", help="keypoint probability of vertex extraction")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-    print("support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
-    for support in (float(v) for v in args.support.split(",")):
-        for length in (float(v) for v in args.length.split(",")):
-            predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length)
-            row = []
-            for s in args.sets:
-                m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
-                row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
-            print(f"{support:7.2f} {length:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+    print("vthr support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    grid = [(float(t), float(s), float(n)) for t in args.vertex_threshold.split(",") for s in args.support.split(",") for n in args.length.split(",")]
+    for vthr, support, length in grid:
+        predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
+        predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length)
+        row = []
+        for s in args.sets:
+            m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
+            row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
+        print(f"{vthr:4.2f} {support:7.2f} {length:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,23 @@
+"""Copy a city with its tiles reduced to RGB (bands 1-3): how a model is scored on RGB-only imagery.
+
+Usage: .venv/bin/python scripts/rgb_city.py CITY OUT
+"""
+
+import shutil
+import sys
+from pathlib import Path
+
+import rasterio
+
+from csboundary.data import city as layout
+from csboundary.data.geotiff import write_geotiff
+
+src, dst = Path(sys.argv[1]), Path(sys.argv[2])
+layout.begin_city(dst)
+for tile in sorted(layout.tiles_dir(src).glob("*.tif")):
+    with rasterio.open(tile) as ds:
+        write_geotiff(layout.tiles_dir(dst) / tile.name, ds.read([1, 2, 3]), ds.transform, ds.crs.to_string())
+shutil.copy(layout.ground_truth_path(src), layout.ground_truth_path(dst))
+meta = layout.read_meta(src)
+meta["notes"] = f"RGB copy of {src} (NIR dropped) made by scripts/rgb_city.py"
+layout.write_meta(dst, meta)
