@@ -22,7 +22,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 # (repeats, kernel, stride, expand ratio, output channels) per stage, after the 32-channel stem.
@@ -123,9 +122,3 @@ def pretrained_lite0(in_channels: int = 4) -> EfficientNetLite0:
     model.load_state_dict(imagenet_state_dict(in_channels), strict=True)
     return model
 
-
-def nchw_pad(x: torch.Tensor, multiple: int) -> torch.Tensor:
-    """Pad the bottom and right of (B, C, H, W) to a multiple of ``multiple`` (edge values)."""
-    h, w = x.shape[-2:]
-    ph, pw = (-h) % multiple, (-w) % multiple
-    return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
