@@ -66,7 +66,7 @@ def test_weights_round_trip_without_reading_imagenet_again(tmp_path, monkeypatch
     assert isinstance(loaded, LiteFPN)
     x = torch.rand(1, 4, 64, 64)
     with torch.no_grad():
-        assert torch.equal(loaded(x), model(x))
+        assert torch.allclose(loaded(x), model(x), atol=1e-5)  # loaded channels-last: same values up to summation order
     assert isinstance(fpn_for_weights(LITE.to_dict()), LiteFPN)
 
 
