@@ -27,18 +27,22 @@ def main() -> None:
     parser.add_argument("--support", default="0,0.2,0.3,0.4")
     parser.add_argument("--length", default="0,300")
     parser.add_argument("--vertex-threshold", default="0.5", help="keypoint probability of vertex extraction")
+    parser.add_argument("--edge-threshold", default="", help="AfANet edge probability (default: the bundle's)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-    print("vthr support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
-    grid = [(float(t), float(s), float(n)) for t in args.vertex_threshold.split(",") for s in args.support.split(",") for n in args.length.split(",")]
-    for vthr, support, length in grid:
+    print("edge vthr support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    edges = [float(e) for e in args.edge_threshold.split(",")] if args.edge_threshold else [predictor.edge_threshold]
+    grid = [(e, float(t), float(s), float(n)) for e in edges for t in args.vertex_threshold.split(",") for s in args.support.split(",")
+            for n in args.length.split(",")]
+    for edge, vthr, support, length in grid:
+        predictor.edge_threshold = edge
         predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
         predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length)
         row = []
         for s in args.sets:
             m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
             row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
-        print(f"{vthr:4.2f} {support:7.2f} {length:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 
 if __name__ == "__main__":
