@@ -1,0 +1,64 @@
+"""A city directory from a user's own GeoTIFF tiles and vector road boundaries.
+
+The training, evaluation and benchmark commands read cities (:mod:`csboundary.data.city`). A
+user with labelled imagery of their own (tiles plus curbs digitised in a GIS) gets one with
+``csboundary make-city``: the tiles are checked as one mosaic (same CRS, pixel size, grid) and
+linked, not copied (a city's imagery can be gigabytes), and the boundaries are reprojected into
+the tiles' CRS and written as the city's ground truth.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from shapely.geometry import box
+
+from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, write_meta
+from csboundary.data.ground_truth import read_ground_truth, write_ground_truth
+from csboundary.data.mask_import import MODEL_GSD
+from csboundary.data.raster import Mosaic
+from csboundary.data.windows import pixel_to_world
+from csboundary.errors import InputError, InputWarning
+
+SOURCE = "user"
+
+
+def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path) -> dict[str, Any]:
+    """Check ``tiles`` and ``ground_truth``, then write the city ``out`` (tiles linked); returns its metadata."""
+    with Mosaic.open(tiles) as mosaic:
+        paths = [Path(t.path).resolve() for t in mosaic.tiles]
+        crs = mosaic.crs
+        gsd = abs(mosaic.transform.a)
+        size = (mosaic.width, mosaic.height)
+        xs, ys = pixel_to_world(mosaic.transform, np.array([0.0, size[0]]), np.array([0.0, size[1]]))
+    if crs is None:
+        raise InputError(paths[0], "has no CRS: the ground truth cannot be placed on it")
+    names = [p.name for p in paths]
+    if len(set(names)) != len(names):
+        duplicate = next(n for n in names if names.count(n) > 1)
+        raise InputError(duplicate, "two tiles share this file name; rename one")
+    frame = read_ground_truth(ground_truth, crs)
+    if frame.crs is None:
+        raise InputError(ground_truth, "has no CRS: cannot tell whether it matches the tiles")
+    if len(frame) == 0:
+        raise InputError(ground_truth, "holds no road boundaries")
+    if not frame.intersects(box(xs.min(), ys.min(), xs.max(), ys.max())).any():
+        raise InputError(ground_truth, f"no boundary lies on the tiles (checked in {crs}); is its CRS right?")
+    if abs(gsd / MODEL_GSD - 1) > 0.15:
+        warnings.warn(f"{paths[0]}: pixel size {gsd:g} differs from the model's {MODEL_GSD:g} m; resample the tiles "
+                      "(e.g. gdalwarp -tr) so training sees objects at the size it predicts them", InputWarning, stacklevel=2)
+    out = begin_city(out)
+    folder = tiles_dir(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    for path in paths:
+        os.symlink(path, folder / path.name)
+    write_ground_truth(ground_truth_path(out), frame)
+    meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "width": size[0], "height": size[1], "tiles": names,
+            "tile_sources": [str(p) for p in paths], "ground_truth_source": str(Path(ground_truth).resolve()),
+            "boundaries": len(frame), "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
+    write_meta(out, meta)
+    return meta
