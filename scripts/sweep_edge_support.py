@@ -28,8 +28,10 @@ def main() -> None:
     parser.add_argument("--length", default="0,300")
     parser.add_argument("--vertex-threshold", default="0.5", help="keypoint probability of vertex extraction")
     parser.add_argument("--edge-threshold", default="", help="AfANet edge probability (default: the bundle's)")
+    parser.add_argument("--crossings", type=int, default=0, help="grid-crossing vertices every N px (0 = off)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
+    predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
     print("edge vthr support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
     edges = [float(e) for e in args.edge_threshold.split(",")] if args.edge_threshold else [predictor.edge_threshold]
     grid = [(e, float(t), float(s), float(n)) for e in edges for t in args.vertex_threshold.split(",") for s in args.support.split(",")

@@ -16,6 +16,7 @@ import torch
 from shapely.geometry import LineString
 
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.crossings import CrossingConfig, crossing_points
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
@@ -48,6 +49,7 @@ class PatchPredictor:
     edge_threshold: float = 0.5
     max_degree: int | None = 2
     support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
+    crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
 
     @classmethod
     def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
@@ -60,8 +62,9 @@ class PatchPredictor:
         afanet.load_state_dict(payload["afanet"])
         settings = payload.get("inference", {})
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px") if k in settings})
+        crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
         return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support)
+                   support=support, crossings=crossings)
 
     def maps(self, image: np.ndarray) -> np.ndarray:
         return predict_probabilities(self.fpn, image, self.device)
@@ -71,8 +74,16 @@ class PatchPredictor:
         return list(predict_probabilities(self.fpn, np.stack(images), self.device))
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
-        """Vertices (and corner edges) of a patch's keypoint map."""
-        return extract_vertices(maps[0], self.vertices)
+        """Vertices (and corner edges) of a patch's keypoint map, plus, when ``crossings`` is on,
+        the boundary map's crossings with the grid lines (:mod:`csboundary.graph.crossings`)."""
+        found = extract_vertices(maps[0], self.vertices)
+        covered = [found.vertices, *(p for p in (found.edge_polylines or []) if p is not None)]  # corner runs already trace their stretch
+        extra = crossing_points(maps[1], self.crossings, np.concatenate(covered) if self.crossings.spacing_px > 0 else None)
+        if not len(extra):
+            return found
+        return BoundaryGraph(np.concatenate([found.vertices, extra]), found.edges,
+                             vertex_kinds=list(found.vertex_kinds or []) + ["isolated"] * len(extra),
+                             edge_kinds=found.edge_kinds, edge_polylines=found.edge_polylines, edge_scores=found.edge_scores)
 
     @torch.no_grad()
     def connect(self, patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
