@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from csboundary.data import city as layout
 from csboundary.errors import InputError
+from csboundary.graph.crossings import CrossingConfig, crossing_points
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn, save_checkpoint
@@ -67,6 +68,7 @@ class TrainConfig:
     window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
     gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
     vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1
+    crossing_spacing_px: int = 0  # AfANet stage 2: also the FPN segmentation's grid-crossing vertices (csboundary.graph.crossings)
     max_vertices: int = 160
     max_pos_weight: float = 30.0
     # baselines (csboundary.models.baselines): method-specific settings, documented per method
@@ -240,7 +242,11 @@ def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: 
         vertices = vertices + rng.normal(0, config.vertex_jitter_px, vertices.shape)
     else:
         graph = extract_vertices(tensor[4], vertex_config)
-        vertices = graph.vertices + np.array([window.col_off, window.row_off])
+        local = graph.vertices
+        if config.crossing_spacing_px > 0:
+            covered = np.concatenate([local, *(p for p in (graph.edge_polylines or []) if p is not None)])
+            local = np.concatenate([local, crossing_points(tensor[5], CrossingConfig(spacing_px=config.crossing_spacing_px), covered)])
+        vertices = local + np.array([window.col_off, window.row_off])
     if len(vertices) > config.max_vertices:
         vertices = vertices[np.sort(rng.choice(len(vertices), config.max_vertices, replace=False))]
     label = city.adjacency(vertices, window)
