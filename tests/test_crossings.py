@@ -37,3 +37,22 @@ def test_lines_sit_at_the_offset_every_spacing(offset):
     points = crossing_points(m, CrossingConfig(spacing_px=100, offset_px=offset, min_distance_px=1))
     assert sorted(p[1] for p in points) == [y + 0.5 for y in range(offset, 300, 100)]
     assert all(p[0] == 11.5 for p in points)
+
+
+def test_bundle_carries_the_crossing_setting(tmp_path):
+    import torch
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+    from csboundary.pipeline.patch import PatchPredictor, shipped_weights
+
+    shipped = load_checkpoint(shipped_weights(), ("bundle",))
+    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
+    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", 0.3, min_support=0.2, crossing_spacing_px=250)
+    predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
+    assert predictor.crossings.spacing_px == 250 and predictor.support.min_support == 0.2
+    maps = np.zeros((2, 400, 400), np.float32)
+    maps[1, 119:122, :] = 1.0  # a boundary and no keypoint at all: the crossings are the vertices
+    assert sorted(map(tuple, np.round(predictor.extract(maps).vertices, 1))) == [(50.5, 120.5), (300.5, 120.5)]
+    assert PatchPredictor.load(shipped_weights(), torch.device("cpu")).crossings.spacing_px == 0

@@ -13,9 +13,10 @@ from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
 
 
 def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, edge_threshold: float = 0.5, max_degree: int = 2,
-                min_support: float = 0.0, max_length_px: float = 0.0) -> Path:
+                min_support: float = 0.0, max_length_px: float = 0.0, crossing_spacing_px: int = 0) -> Path:
     """One weights file: both models, their provenance and the inference settings (edge threshold,
-    degree cap, edge-support check; see :mod:`csboundary.graph.edge_support`)."""
+    degree cap, edge-support check, grid-crossing vertices; see :mod:`csboundary.graph.edge_support`
+    and :mod:`csboundary.graph.crossings`)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet",))
     provenance = {
@@ -29,6 +30,7 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
         fpn_config=fpn["fpn_config"],
         afanet=afanet["afanet"],
         afanet_config=afanet["afanet_config"],
-        inference={"edge_threshold": edge_threshold, "max_degree": max_degree, "min_support": min_support, "max_length_px": max_length_px},
+        inference={"edge_threshold": edge_threshold, "max_degree": max_degree, "min_support": min_support, "max_length_px": max_length_px,
+                   "crossing_spacing_px": crossing_spacing_px},
         provenance=provenance,
     )
