@@ -51,6 +51,15 @@ def crossing_points(boundary: np.ndarray, config: CrossingConfig, existing: np.n
     return np.array(kept, float).reshape(-1, 2)
 
 
+def added_crossings(found, boundary: np.ndarray, config: CrossingConfig) -> np.ndarray:
+    """(K, 2) crossings of ``boundary`` away from the extracted graph ``found``: its vertices and
+    its corner runs' polylines (a run already traces the stretch it covers)."""
+    if config.spacing_px <= 0:
+        return np.zeros((0, 2))
+    covered = np.concatenate([found.vertices, *(p for p in (found.edge_polylines or []) if p is not None)])
+    return crossing_points(boundary, config, covered)
+
+
 def _run_centres(line: np.ndarray) -> list[float]:
     """Centres (indices) of the runs of True in a 1-D boolean array."""
     padded = np.concatenate([[False], line.astype(bool), [False]])

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from csboundary.data import city as layout
 from csboundary.errors import InputError
-from csboundary.graph.crossings import CrossingConfig, crossing_points
+from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn, save_checkpoint
@@ -157,15 +157,15 @@ def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, co
     return (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
 
 
-def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, train: bool):
-    """``config.batch`` samples, each from a city drawn in proportion to its area; training
-    samples augmented (:mod:`csboundary.models.augmentation`), validation samples as they are."""
+def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None):
+    """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
+    (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
+    otherwise (validation)."""
     areas = np.array([c.mosaic.width * c.mosaic.height for c in cities], float)
-    augmentation = _model_config(AugmentConfig, config.augment)
     images, targets, valids = [], [], []
     for _ in range(config.batch):
         city = cities[int(rng.choice(len(cities), p=areas / areas.sum()))] if len(cities) > 1 else cities[0]
-        if train:
+        if augmentation is not None:
             image, target, valid = city.augmented_fpn_sample(rng, config.crop, augmentation)
         else:
             image, target, valid = city.fpn_sample(city.random_window(rng, config.crop))
@@ -203,12 +203,13 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     optimizer = torch.optim.Adam(fpn_parameter_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
-    valid_batches = [_fpn_batch([valid_city], valid_rng, config, train=False) for _ in range(config.validation_samples)]
+    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None) for _ in range(config.validation_samples)]
+    augmentation = _model_config(AugmentConfig, config.augment)
     step, history = _maybe_resume(resume, "fpn", model, optimizer, rng)
     log.write(event="start", model="fpn", step=step, code_version=_RUN_CODE_VERSION["at_start"], parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
 
     def loss_at(step: int):
-        image, target, valid = _fpn_batch(train_cities, rng, config, train=True)
+        image, target, valid = _fpn_batch(train_cities, rng, config, augmentation)
         with autocast(config, device):
             logits = model(image.to(device))
         return fpn_loss(logits.float(), target.to(device), valid.to(device), config), {}
@@ -242,10 +243,7 @@ def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: 
         vertices = vertices + rng.normal(0, config.vertex_jitter_px, vertices.shape)
     else:
         graph = extract_vertices(tensor[4], vertex_config)
-        local = graph.vertices
-        if config.crossing_spacing_px > 0:
-            covered = np.concatenate([local, *(p for p in (graph.edge_polylines or []) if p is not None)])
-            local = np.concatenate([local, crossing_points(tensor[5], CrossingConfig(spacing_px=config.crossing_spacing_px), covered)])
+        local = np.concatenate([graph.vertices, added_crossings(graph, tensor[5], CrossingConfig(spacing_px=config.crossing_spacing_px))])
         vertices = local + np.array([window.col_off, window.row_off])
     if len(vertices) > config.max_vertices:
         vertices = vertices[np.sort(rng.choice(len(vertices), config.max_vertices, replace=False))]

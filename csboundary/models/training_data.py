@@ -16,11 +16,11 @@ from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
 from csboundary.labels.adjacency import adjacency_label
-from csboundary.models.augmentation import AugmentConfig, draw_geometry, photometric, source_side, warp
-from csboundary.models.augmentation import flip_rotate90 as augment  # noqa: F401  (the baselines' flips)
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.writer import CityLabels
+from csboundary.models.augmentation import AugmentConfig, draw_geometry, photometric, source_side, warp
+from csboundary.models.augmentation import flip_rotate90 as augment  # also the baselines' flips
 from csboundary.pipeline.maps import unit_bands
 
 

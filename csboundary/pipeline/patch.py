@@ -16,7 +16,7 @@ import torch
 from shapely.geometry import LineString
 
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.crossings import CrossingConfig, crossing_points
+from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
@@ -77,8 +77,7 @@ class PatchPredictor:
         """Vertices (and corner edges) of a patch's keypoint map, plus, when ``crossings`` is on,
         the boundary map's crossings with the grid lines (:mod:`csboundary.graph.crossings`)."""
         found = extract_vertices(maps[0], self.vertices)
-        covered = [found.vertices, *(p for p in (found.edge_polylines or []) if p is not None)]  # corner runs already trace their stretch
-        extra = crossing_points(maps[1], self.crossings, np.concatenate(covered) if self.crossings.spacing_px > 0 else None)
+        extra = added_crossings(found, maps[1], self.crossings)
         if not len(extra):
             return found
         return BoundaryGraph(np.concatenate([found.vertices, extra]), found.edges,
