@@ -20,3 +20,10 @@ class InputError(Exception):
 
 class InputWarning(UserWarning):
     """Input is usable only after a documented fallback (e.g. no CRS, 3-band RGB)."""
+
+
+def reject_unknown(keys, allowed, what: str) -> None:
+    """Configs are JSON written by hand: a misspelt key is an error, not a silent default."""
+    unknown = set(keys) - set(allowed)
+    if unknown:
+        raise ValueError(f"unknown {what} option(s): {', '.join(sorted(unknown))}")

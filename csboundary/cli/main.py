@@ -38,18 +38,24 @@ def synth(
     tile_size: int = typer.Option(5000, min=64, help="Tile side in pixels."),
     gsd: float = typer.Option(0.152, min=0.01, help="Ground sampling distance, metres per pixel."),
     split: str = typer.Option("train", help="train | valid | test."),
+    style: str = typer.Option("classic", help="City style: classic, grid, downtown, suburb, rural, irregular, or mix (one drawn from the seed); see docs/styles.md."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
     """Synthesize an aerial city with exact vector road-boundary ground truth."""
     from csboundary.data.synth.city import synthesize_city
-    from csboundary.data.synth.config import SPLITS, SynthConfig
+    from csboundary.data.synth.config import SPLITS
+    from csboundary.data.synth.styles import MIX, STYLES, draw_style, style_config
 
     if split not in SPLITS:
         raise typer.BadParameter(f"split must be one of {', '.join(SPLITS)}", param_hint="--split")
-    meta = synthesize_city(out, seed, split, _parse_tiles(tiles), SynthConfig(tile_size=tile_size, gsd=gsd), progress=not quiet)
+    if style != MIX and style not in STYLES:
+        raise typer.BadParameter(f"unknown style {style!r}; choose one of {', '.join(STYLES)} or {MIX}", param_hint="--style")
+    if style == MIX:
+        style = draw_style(split, seed)
+    meta = synthesize_city(out, seed, split, _parse_tiles(tiles), style_config(style, tile_size=tile_size, gsd=gsd), progress=not quiet)
     counts = meta["counts"]
     typer.echo(
-        f"{out}: {len(meta['tiles'])} tile(s) of {tile_size}x{tile_size} px, {counts['boundaries']} boundaries "
+        f"{out}: {style} city, {len(meta['tiles'])} tile(s) of {tile_size}x{tile_size} px, {counts['boundaries']} boundaries "
         f"({counts['boundary_km']} km), render {max(meta['seconds']['render_per_tile']):.1f} s/tile"
     )
 

@@ -25,14 +25,14 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from csboundary.data import city as layout
-from csboundary.errors import InputError
+from csboundary.errors import InputError, reject_unknown
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.augmentation import AugmentConfig, photometric
-from csboundary.models.training_data import CitySpec, TrainingCity
+from csboundary.models.training_data import CitySpec, TrainingCity, WorldsConfig
 from csboundary.pipeline.maps import predict_mosaic_maps
 
 
@@ -43,7 +43,8 @@ class TrainConfig:
     model: str = "fpn"  # fpn | afanet
     seed: int = 0
     cache: str = "data/cities"
-    train_city: CitySpec = field(default_factory=CitySpec)
+    train_city: CitySpec | None = field(default_factory=CitySpec)  # null: train on ``worlds`` (and extra cities) only
+    worlds: dict = field(default_factory=dict)  # WorldsConfig: many fresh cities of a style mix; {} = none
     valid_city: CitySpec = field(default_factory=lambda: CitySpec(split="valid", seed=0, tiles=(1, 1)))
     steps: int = 2500
     lr: float = 1e-3
@@ -83,8 +84,9 @@ class TrainConfig:
     def from_dict(cls, data: dict) -> "TrainConfig":
         data = dict(data)
         for key in ("train_city", "valid_city"):
-            if key in data:
+            if key in data and data[key] is not None:
                 spec = dict(data[key])
+                reject_unknown(spec, CitySpec.__dataclass_fields__, key)
                 if "tiles" in spec:
                     spec["tiles"] = tuple(spec["tiles"])
                 data[key] = CitySpec(**spec)
@@ -108,8 +110,14 @@ def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
 
 
 def training_cities(config: TrainConfig) -> list[TrainingCity]:
-    """The synthetic ``train_city`` (built on first use) and every ``extra_train_cities`` directory."""
-    paths = [config.train_city.ensure(config.cache), *config.extra_train_cities]
+    """The synthetic ``train_city`` and ``worlds`` cities (built on first use) and every
+    ``extra_train_cities`` directory."""
+    specs = [config.train_city] if config.train_city is not None else []
+    if config.worlds:
+        specs += WorldsConfig.from_dict(config.worlds).specs()
+    if not specs and not config.extra_train_cities:
+        raise ValueError("the training config names no training city (train_city, worlds or extra_train_cities)")
+    paths = [spec.ensure(config.cache, progress=len(specs) == 1) for spec in specs] + list(config.extra_train_cities)
     for path in config.extra_train_cities:
         if not layout.is_city_dir(path):
             raise InputError(path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)")
@@ -347,13 +355,6 @@ def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path,
             _record(out_dir, kind, metrics, model, model_config, config, step, history, optimizer, rng, log)
     bar.close()
     return _finish(out_dir, kind, model, model_config, config, step, history, log)
-
-
-def reject_unknown(keys, allowed, what: str) -> None:
-    """Configs are JSON written by hand: a misspelt key is an error, not a silent default."""
-    unknown = set(keys) - set(allowed)
-    if unknown:
-        raise ValueError(f"unknown {what} option(s): {', '.join(sorted(unknown))}")
 
 
 def _model_config(cls, overrides: dict):

@@ -6,7 +6,7 @@ windows anywhere in a city, not fixed grid patches: more variety for the same im
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +15,7 @@ from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
+from csboundary.errors import reject_unknown
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
@@ -32,19 +33,52 @@ class CitySpec:
     seed: int = 0
     tiles: tuple[int, int] = (2, 2)
     tile_size: int = 5000
+    style: str = "classic"  # csboundary.data.synth.styles.STYLES
 
     def path(self, cache: str | Path) -> Path:
         rows, cols = self.tiles
-        return Path(cache) / f"{self.split}-s{self.seed}-{rows}x{cols}-{self.tile_size}"
+        style = "" if self.style == "classic" else f"{self.style}-"
+        return Path(cache) / f"{self.split}-{style}s{self.seed}-{rows}x{cols}-{self.tile_size}"
 
-    def ensure(self, cache: str | Path) -> Path:
+    def ensure(self, cache: str | Path, progress: bool = True) -> Path:
         from csboundary.data.synth.city import synthesize_city
-        from csboundary.data.synth.config import SynthConfig
+        from csboundary.data.synth.styles import style_config
 
         path = self.path(cache)
         if not layout.is_city_dir(path):
-            synthesize_city(path, self.seed, self.split, tuple(self.tiles), SynthConfig(tile_size=self.tile_size))
+            synthesize_city(path, self.seed, self.split, tuple(self.tiles), style_config(self.style, tile_size=self.tile_size), progress)
         return path
+
+
+@dataclass(frozen=True)
+class WorldsConfig:
+    """Many fresh synthetic cities to train on, their styles drawn from a configurable mix.
+
+    City ``i`` is (split "train", seed ``first_seed + i``) in the style ``draw_style`` picks for
+    it from ``styles`` (name -> weight), so the set is reproducible and a style left out of the
+    mix is never seen; cities are built under the training cache on first use.
+    """
+
+    styles: dict = field(default_factory=dict)  # style -> weight; {} = csboundary.data.synth.styles.DEFAULT_MIX
+    cities: int = 24
+    tiles: tuple[int, int] = (1, 1)
+    tile_size: int = 2500
+    first_seed: int = 1000
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "WorldsConfig":
+        reject_unknown(data, cls.__dataclass_fields__, "worlds")
+        data = dict(data)
+        if "tiles" in data:
+            data["tiles"] = tuple(data["tiles"])
+        return cls(**data)
+
+    def specs(self) -> list[CitySpec]:
+        from csboundary.data.synth.styles import draw_style
+
+        weights = self.styles or None
+        return [CitySpec("train", seed, self.tiles, self.tile_size, draw_style("train", seed, weights))
+                for seed in range(self.first_seed, self.first_seed + self.cities)]
 
 
 class TrainingCity:

@@ -6,7 +6,7 @@ A city is a function of (config, split, seed, tiles): the same arguments give th
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import geopandas as gpd
@@ -19,7 +19,7 @@ from csboundary.data import city as layout
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
 from csboundary.data.synth.config import SynthConfig, city_rng
-from csboundary.data.synth.render import TileFrame, render_tile
+from csboundary.data.synth.render import CameraLook, TileFrame, apply_look, render_tile, resample
 from csboundary.data.synth.scene import Scene, build_scene
 from csboundary.data.synth.streets import build_network
 
@@ -35,6 +35,7 @@ class SyntheticCity:
     seed: int
     tiles: tuple[int, int]
     scene: Scene
+    look: CameraLook = CameraLook()
 
     @property
     def size_m(self) -> tuple[float, float]:
@@ -63,7 +64,28 @@ class SyntheticCity:
 
     def render(self, row: int, col: int) -> np.ndarray:
         rng = city_rng(self.split, self.seed, 1, row, col)
-        return render_tile(self.scene, self.frame(row, col), rng, self.config.noise_sigma)
+        frame = self.frame(row, col)
+        if self.look.source_gsd is not None:  # render at the sensor's pixel size, then resample
+            size = max(1, round(frame.size * frame.gsd / self.look.source_gsd))
+            sensor = TileFrame(frame.x0, frame.y1, size, frame.size * frame.gsd / size)
+            image = resample(render_tile(self.scene, sensor, rng, self.config.noise_sigma), frame.size)
+        else:
+            image = render_tile(self.scene, frame, rng, self.config.noise_sigma)
+        return apply_look(image, self.look)
+
+
+def draw_look(config: SynthConfig, split: str, seed: int) -> CameraLook:
+    """The city's camera look, from its own random stream (the default config draws nothing)."""
+    rng = city_rng(split, seed, 2)
+    source = float(rng.uniform(*config.source_gsd)) if config.source_gsd is not None else None
+    cast = config.colour_cast
+    return CameraLook(
+        source_gsd=source,
+        haze=float(rng.uniform(*config.haze)),
+        saturation=float(rng.uniform(*config.saturation)),
+        gamma=float(rng.uniform(*config.gamma)),
+        gains=tuple(float(g) for g in (rng.uniform(1 - cast, 1 + cast, 4) if cast else np.ones(4))),  # type: ignore[arg-type]
+    )
 
 
 def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]) -> SyntheticCity:
@@ -75,7 +97,7 @@ def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]
     side = config.tile_size * config.gsd
     network = build_network(config, rng, cols * side, rows * side)
     scene = build_scene(config, rng, network)
-    return SyntheticCity(config, split, seed, tiles, scene)
+    return SyntheticCity(config, split, seed, tiles, scene, draw_look(config, split, seed))
 
 
 def synthesize_city(
@@ -104,6 +126,8 @@ def synthesize_city(
     meta = {
         "source": "synthetic",
         "generator": f"csboundary {__version__}",
+        "style": config.style,
+        "look": asdict(city.look),
         "split": split,
         "seed": seed,
         "tiles": records,

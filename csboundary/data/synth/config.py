@@ -57,12 +57,56 @@ class SynthConfig:
     crosswalk_share: float = 0.6
     # appearance
     noise_sigma: float = 5.0  # per-pixel sensor noise, digital numbers
+    # ---- style knobs (csboundary/data/synth/styles.py); the defaults reproduce the original
+    # grid city byte for byte, so every knob draws random numbers only when it is switched on.
+    style: str = "grid"  # the style this config was built from (recorded in city.json)
+    layout: str = "grid"  # grid | suburb (collectors + curvy local streets, T-junctions, cul-de-sacs)
+    bearing_deg: tuple[float, float] = (-35.0, 35.0)  # range of the grid's bearing
+    avenue_curve_share: float = 0.0  # avenues that curve like the curved cross streets
+    roundabout_share: float = 0.0  # crossings of two streets turned into a roundabout
+    roundabout_radius: tuple[float, float] = (13.0, 20.0)  # outer radius of the ring road
+    bulb_island_share: float = 0.0  # cul-de-sac bulbs (radius >= 8 m) with a planted centre island
+    branch_spacing: tuple[float, float] = (70.0, 140.0)  # suburb: local streets along a collector
+    branch_length: tuple[float, float] = (60.0, 160.0)  # suburb: local street length
+    loop_share: float = 0.3  # suburb: local streets that come back to their collector (a crescent)
+    raised_curb: bool = True  # False: rural edge, asphalt straight onto a shoulder and verge
+    shoulder_width: tuple[float, float] = (0.0, 0.0)  # gravel shoulder outside the asphalt (no curb)
+    verge_share: float = 0.0  # blocks with a grass strip between curb and sidewalk
+    verge_width: tuple[float, float] = (1.0, 3.0)
+    gutter_share: float = 0.0  # blocks with a concrete gutter pan on the road side of the curb
+    gutter_width: tuple[float, float] = (0.4, 0.8)
+    edge_line_share: float = 0.0  # streets with white edge lines near the asphalt's edge
+    lane_paint_share: float = 1.0  # streets whose lane markings are painted at all
+    road_materials: tuple[str, ...] = ("asphalt",)  # keys of scene.ROAD_MATERIALS, one drawn per city
+    sidewalk_materials: tuple[str, ...] = ("concrete",)  # keys of scene.SIDEWALK_MATERIALS
+    roof_palette: str = "grey"  # keys of scene.ROOF_PALETTES
+    house_height: tuple[float, float] = (6.0, 16.0)
+    house_width: tuple[float, float] = (5.0, 14.0)
+    house_setback: tuple[float, float] = (0.0, 3.0)
+    house_gap_share: float = 0.35  # houses followed by a gap (detached houses when high)
+    house_gap: tuple[float, float] = (0.5, 4.0)
+    building_share: float = 1.0  # places along a block where a building is attempted
+    tower_share: float = 0.0  # buildings that are towers
+    tower_height: tuple[float, float] = (40.0, 150.0)
+    street_tree_share: float = 0.75  # blocks with street trees
+    street_tree_setback: tuple[float, float] = (0.3, 0.6)  # crown centre from the curb, in sidewalk widths
+    sun_reach: tuple[float, float] = (0.25, 0.6)  # shadow length per metre of height
+    paved_yard_share: float = 0.0  # residential blocks whose yards are paved (plazas, courtyards)
+    field_share: float = 0.0  # rural: blocks that are crop fields instead of lots and houses
+    # camera look, drawn once per city from its own random stream
+    source_gsd: tuple[float, float] | None = None  # sensor pixel size (m), resampled to ``gsd``
+    haze: tuple[float, float] = (0.0, 0.0)  # blend towards a bright grey-blue veil
+    saturation: tuple[float, float] = (1.0, 1.0)
+    gamma: tuple[float, float] = (1.0, 1.0)
+    colour_cast: float = 0.0  # +- per-band gain change of the whole city
 
     def to_dict(self) -> dict:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> "SynthConfig":
+        """Rebuild a recorded config; keys this version does not know are ignored (older
+        ``city.json`` files carry fewer keys, which then take their defaults)."""
         known = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items() if k in cls.__dataclass_fields__}
         return cls(**known)
 

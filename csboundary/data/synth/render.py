@@ -57,10 +57,10 @@ def _contours(frame: TileFrame, polygon) -> list[np.ndarray]:
 class _Canvas:
     """The colour image (rows, cols, 4) and a roughness map drawn in step with it."""
 
-    def __init__(self, frame: TileFrame):
+    def __init__(self, frame: TileFrame, road=ASPHALT):
         self.frame = frame
         self.image = np.empty((frame.size, frame.size, 4), np.uint8)
-        self.image[:] = ASPHALT
+        self.image[:] = road
         self.rough = np.full((frame.size, frame.size), 4, np.uint8)
         x0, y0, x1, y1 = frame.bounds
         pad = 12.0
@@ -92,7 +92,7 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
     ``rng`` drives only per-tile appearance (illumination, colour, noise), so geometry is the
     same whichever tiles are rendered and in which order.
     """
-    canvas = _Canvas(frame)
+    canvas = _Canvas(frame, scene.road)
     for item in scene.markings:
         canvas.fill(item.polygon, item.colour, item.roughness)
     for item in scene.ground:
@@ -119,7 +119,7 @@ def _cast_shadows(canvas: _Canvas, scene: Scene) -> None:
     shade = np.zeros(canvas.rough.shape, np.uint8)
     sx, sy = scene.sun
     for b in scene.buildings:
-        if not canvas.visible(b.footprint.buffer(b.height * 0.7)):
+        if not canvas.visible(b.footprint.buffer(b.height * np.hypot(sx, sy) + 1.0)):
             continue
         base = np.asarray(b.footprint.exterior.coords)
         moved = base + np.array([sx, sy]) * b.height
@@ -177,3 +177,49 @@ def _smooth_noise(rng: np.random.Generator, size: int, scale: float) -> np.ndarr
     if coarse == size:
         return field
     return cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC)
+
+
+@dataclass(frozen=True)
+class CameraLook:
+    """How the sensor and the air change a city's pixels, drawn once per city.
+
+    ``source_gsd`` is the sensor's pixel size: the tile is rendered at it and resampled to the
+    city's pixel size (a coarse sensor upsampled looks soft, a fine one downsampled looks crisp).
+    """
+
+    source_gsd: float | None = None
+    haze: float = 0.0
+    saturation: float = 1.0
+    gamma: float = 1.0
+    gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+
+    @property
+    def is_identity(self) -> bool:
+        return self.haze == 0 and self.saturation == 1 and self.gamma == 1 and self.gains == (1.0, 1.0, 1.0, 1.0)
+
+
+HAZE_VEIL = np.array([196, 202, 212, 180], np.float32)  # a bright, slightly blue veil (NIR less)
+
+
+def apply_look(image: np.ndarray, look: CameraLook) -> np.ndarray:
+    """(4, H, W) uint8 -> same, with saturation, gamma, per-band gains and haze applied."""
+    if look.is_identity:
+        return image
+    x = image.astype(np.float32)
+    if look.saturation != 1:
+        grey = x[:3].mean(axis=0, keepdims=True)
+        x[:3] = grey + (x[:3] - grey) * look.saturation
+    if look.gamma != 1:
+        x = 255.0 * (np.clip(x, 0, 255) / 255.0) ** look.gamma
+    x *= np.asarray(look.gains, np.float32)[:, None, None]
+    if look.haze:
+        x = x * (1 - look.haze) + HAZE_VEIL[:, None, None] * look.haze
+    return np.clip(x, 0, 255).astype(np.uint8)
+
+
+def resample(image: np.ndarray, size: int) -> np.ndarray:
+    """(4, h, w) uint8 -> (4, size, size): area averaging when shrinking, cubic when enlarging."""
+    if image.shape[1] == size:
+        return image
+    interpolation = cv2.INTER_AREA if image.shape[1] > size else cv2.INTER_CUBIC
+    return np.stack([cv2.resize(band, (size, size), interpolation=interpolation) for band in image])

@@ -18,7 +18,7 @@ from shapely.ops import substring
 
 from csboundary.data.ground_truth import as_linestrings
 from csboundary.data.synth.config import SynthConfig
-from csboundary.data.synth.streets import StreetNetwork
+from csboundary.data.synth.streets import StreetNetwork, rng_share
 
 Colour = tuple[int, int, int, int]  # R, G, B, NIR
 
@@ -30,6 +30,24 @@ SOIL: Colour = (122, 108, 88, 128)
 PARKING: Colour = (92, 92, 95, 82)
 WHITE_PAINT: Colour = (226, 226, 220, 200)
 YELLOW_PAINT: Colour = (214, 176, 64, 165)
+GRAVEL: Colour = (140, 128, 110, 125)
+# Per-city material choices (config ``road_materials`` / ``sidewalk_materials`` / ``roof_palette``).
+ROAD_MATERIALS: dict[str, Colour] = {
+    "asphalt": ASPHALT,
+    "asphalt_new": (46, 48, 52, 44),
+    "asphalt_old": (118, 117, 113, 104),
+    "asphalt_warm": (98, 90, 82, 80),
+    "concrete_road": (150, 148, 141, 134),
+}
+SIDEWALK_MATERIALS: dict[str, Colour] = {
+    "concrete": CONCRETE,
+    "concrete_dark": (132, 129, 123, 118),
+    "pavers_red": (152, 108, 92, 118),
+    "pavers_grey": (141, 139, 134, 126),
+    "asphalt_walk": (96, 96, 98, 86),
+}
+ROOF_PALETTES = ("grey", "warm", "dark", "mixed")
+CROP_COLOURS: tuple[Colour, ...] = ((96, 128, 60, 215), (150, 140, 84, 170), (118, 100, 74, 120), (70, 104, 48, 225), (176, 160, 104, 160))
 CAR_COLOURS: tuple[Colour, ...] = (
     (235, 235, 232, 205), (25, 26, 30, 30), (160, 163, 168, 140), (100, 102, 108, 90),
     (150, 30, 30, 70), (35, 55, 120, 60), (40, 70, 50, 70), (225, 185, 40, 160), (200, 200, 205, 175),
@@ -79,6 +97,7 @@ class Scene:
     buildings: list[Building] = field(default_factory=list)
     trees: list[Tree] = field(default_factory=list)
     sun: tuple[float, float] = (0.5, -0.3)  # shadow offset per metre of height (x, y)
+    road: Colour = ASPHALT  # the roadway's material, painted under everything
 
 
 def _jitter(rng: np.random.Generator, colour: Colour, amount: float) -> Colour:
@@ -119,8 +138,13 @@ def _frontage(ring: LineString, spacing_fn, step_back: float = 3.0):
 def build_scene(cfg: SynthConfig, rng: np.random.Generator, network: StreetNetwork) -> Scene:
     """Populate every block and street of ``network``."""
     angle = rng.uniform(0, 2 * math.pi)
-    reach = rng.uniform(0.25, 0.6)
+    reach = rng.uniform(*cfg.sun_reach)
     scene = Scene(network, sun=(reach * math.cos(angle), reach * math.sin(angle)))
+    if cfg.road_materials != ("asphalt",):
+        scene.road = _jitter(rng, ROAD_MATERIALS[cfg.road_materials[int(rng.integers(len(cfg.road_materials)))]], 0.06)
+    sidewalk_colour = CONCRETE
+    if cfg.sidewalk_materials != ("concrete",):
+        sidewalk_colour = SIDEWALK_MATERIALS[cfg.sidewalk_materials[int(rng.integers(len(cfg.sidewalk_materials)))]]
     roadway = network.roadway
     shapely.prepare(roadway)
     _add_markings(cfg, rng, scene)
@@ -136,7 +160,7 @@ def build_scene(cfg: SynthConfig, rng: np.random.Generator, network: StreetNetwo
                         if inner.contains(q):
                             scene.trees.append(_tree(rng, q.x, q.y, rng.uniform(1.8, 3.0)))
     for block in network.blocks:
-        _populate_block(cfg, rng, scene, block.polygon, roadway)
+        _populate_block(cfg, rng, scene, block.polygon, roadway, sidewalk_colour)
     _add_moving_cars(cfg, rng, scene)
     return scene
 
@@ -151,17 +175,45 @@ def _tree_colour(rng: np.random.Generator) -> Colour:
     return _jitter(rng, (58, 86, 44, 190), 0.15)
 
 
-def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, roadway) -> None:
+def _edge_strips(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, sidewalk_colour: Colour) -> float:
+    """Paint what lies between the road and a block's interior; return its width in metres.
+
+    Raised curb (default): a gutter pan on the road side (``gutter_share``), then the block in
+    sidewalk material, then a grass verge between curb and sidewalk (``verge_share``). No curb
+    (rural): a gravel shoulder on the block side and grass or soil behind it. The ground truth is
+    the block's outline in every case: the curb, or the asphalt's edge.
+    """
+    if not cfg.raised_curb:
+        shoulder = rng.uniform(*cfg.shoulder_width)
+        scene.ground.append(Painted(block, _jitter(rng, GRAVEL if rng.random() < 0.6 else SOIL, 0.1), 12))
+        return shoulder
+    if rng_share(rng, cfg.gutter_share):
+        gutter = block.buffer(rng.uniform(*cfg.gutter_width), quad_segs=8).difference(block)
+        scene.ground.append(Painted(gutter, _jitter(rng, CONCRETE, 0.08), 4))
+    if cfg.sidewalk_materials == ("concrete",):
+        scene.ground.append(Painted(block, _jitter(rng, CONCRETE, 0.06), 5))
+    else:
+        scene.ground.append(Painted(block, _jitter(rng, sidewalk_colour, 0.06), 5))
+    verge = rng.uniform(*cfg.verge_width) if rng_share(rng, cfg.verge_share) else 0.0
+    if verge > 0:
+        strip = block.difference(block.buffer(-verge))
+        scene.ground.append(Painted(strip, _jitter(rng, GRASS, 0.1), 14))
+    return verge
+
+
+def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, roadway, sidewalk_colour: Colour = CONCRETE) -> None:
     sidewalk = rng.uniform(*cfg.sidewalk_width)
-    scene.ground.append(Painted(block, _jitter(rng, CONCRETE, 0.06), 5))
+    sidewalk += _edge_strips(cfg, rng, scene, block, sidewalk_colour)
     inner = block.buffer(-sidewalk)
     u = rng.random()
     kind = "park" if u < cfg.park_share else "lot" if u < cfg.park_share + cfg.lot_share else "residential"
+    if kind == "residential" and rng_share(rng, cfg.field_share):
+        kind = "field"
     ring = LineString(shapely.orient_polygons(block).exterior.coords)  # counter-clockwise: left = inside
 
     # Driveways cross the sidewalk: paved like a road but not a road boundary.
     driveways: list[Polygon] = []
-    if kind != "park":
+    if kind not in ("park", "field"):
         for p, d, left in _frontage(ring, lambda: rng.uniform(*cfg.driveway_spacing)):
             if rng.random() < 0.5:
                 w, depth = rng.uniform(2.8, 4.0), sidewalk + rng.uniform(3.0, 8.0)
@@ -170,12 +222,17 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
         for part in getattr(inner, "geoms", [inner]):
             if part.geom_type != "Polygon" or part.area < 20:
                 continue
+            if kind == "field":
+                scene.ground.append(Painted(part, _jitter(rng, CROP_COLOURS[int(rng.integers(len(CROP_COLOURS)))], 0.1), 18))
+                continue
             ground = {"park": GRASS, "lot": PARKING, "residential": SOIL if rng.random() < 0.4 else GRASS}[kind]
-            scene.ground.append(Painted(part, _jitter(rng, ground, 0.08), 14 if ground in (GRASS, SOIL) else 6))
+            if kind == "residential" and rng_share(rng, cfg.paved_yard_share):
+                ground = _jitter(rng, CONCRETE if rng.random() < 0.5 else PARKING, 0.1)
+            scene.ground.append(Painted(part, _jitter(rng, ground, 0.08), 14 if ground in (GRASS, SOIL) else 6))  # type: ignore[arg-type]
             if kind == "park":
                 _add_trees_in(rng, scene, part, density=rng.uniform(0.004, 0.012))
             else:
-                _add_buildings(rng, scene, part, kind, driveways)
+                _add_buildings(cfg, rng, scene, part, kind, driveways)
                 if kind == "residential":
                     _add_trees_in(rng, scene, part, density=rng.uniform(0.0, 0.004))
     for driveway in driveways:
@@ -183,11 +240,11 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
             scene.ground.append(Painted(driveway, _jitter(rng, CONCRETE if rng.random() < 0.6 else ASPHALT, 0.08), 5))
 
     # Street trees along the curb; big crowns overhang the road.
-    if rng.random() < 0.75:
+    if rng.random() < cfg.street_tree_share:
         density = rng.uniform(0.3, 1.0)
         for p, d, left in _frontage(ring, lambda: rng.uniform(*cfg.street_tree_spacing)):
             if rng.random() < density:
-                c = p + left * sidewalk * rng.uniform(0.3, 0.6)
+                c = p + left * max(sidewalk, 2.0) * rng.uniform(*cfg.street_tree_setback)
                 scene.trees.append(_tree(rng, c[0], c[1], rng.uniform(*cfg.street_tree_radius)))
 
     # Parked cars along the curb, on the road side.
@@ -220,7 +277,24 @@ def _add_trees_in(rng: np.random.Generator, scene: Scene, area: Polygon, density
         scene.trees.append(_tree(rng, x, y, rng.uniform(2.0, 6.0)))
 
 
-def _add_buildings(rng: np.random.Generator, scene: Scene, area: Polygon, kind: str, keep_clear: list[Polygon]) -> None:
+def _roof(rng: np.random.Generator, palette: str) -> Colour:
+    """A roof colour: grey concrete and tar (the original palette), warm tiles and shingles, or dark."""
+    if palette == "mixed":
+        palette = ("grey", "warm", "dark")[int(rng.integers(3))]
+    if palette == "warm":
+        base = ((168, 84, 60), (130, 96, 80), (110, 70, 55), (150, 130, 110))[int(rng.integers(4))]
+        rgb = [int(np.clip(c * rng.uniform(0.8, 1.15), 0, 255)) for c in base]
+        return (*rgb, int(np.clip(sum(rgb) / 3 * 0.9, 0, 255)))  # type: ignore[return-value]
+    if palette == "dark":
+        g = rng.uniform(35, 80)
+        return (int(g), int(g), int(g + rng.uniform(0, 8)), int(g * 0.9))
+    grey = rng.uniform(70, 225)
+    tint = rng.uniform(-10, 10, 3)
+    roof = tuple(int(np.clip(grey + tint[i] + (25 if rng.random() < 0.1 and i == 0 else 0), 0, 255)) for i in range(3))
+    return (*roof, int(np.clip(grey * 0.9, 0, 255)))  # type: ignore[return-value]
+
+
+def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon, kind: str, keep_clear: list[Polygon]) -> None:
     """Row of buildings along each side of the lot, set back from the sidewalk."""
     usable = area.buffer(-0.5)
     if usable.is_empty:
@@ -241,21 +315,23 @@ def _add_buildings(rng: np.random.Generator, scene: Scene, area: Polygon, kind: 
         left = np.array([-d[1], d[0]])
         t = rng.uniform(0.5, 3.0)
         while t < length:
-            w = rng.uniform(15, 40) if wide else rng.uniform(5, 14)
+            w = rng.uniform(15, 40) if wide else rng.uniform(*cfg.house_width)
             depth = rng.uniform(15, 35) if wide else rng.uniform(10, 24)
-            setback = rng.uniform(8, 25) if wide else rng.uniform(0.0, 3.0)
+            setback = rng.uniform(8, 25) if wide else rng.uniform(*cfg.house_setback)
             footprint = _rect(a + d * t + left * setback, d, left, min(w, length - t), depth)
-            t += w + (rng.uniform(0.5, 4.0) if rng.random() < 0.35 else 0.1)  # mostly row houses
+            t += w + (rng.uniform(*cfg.house_gap) if rng.random() < cfg.house_gap_share else 0.1)  # mostly row houses
             if footprint.area < 25 or not usable.contains(footprint):
                 continue
             if placed and shapely.intersects(np.array(placed, dtype=object), footprint).any():
                 continue
+            if cfg.building_share < 1 and rng.random() >= cfg.building_share:
+                continue
             placed.append(footprint)
-            grey = rng.uniform(70, 225)
-            tint = rng.uniform(-10, 10, 3)
-            roof = tuple(int(np.clip(grey + tint[i] + (25 if rng.random() < 0.1 and i == 0 else 0), 0, 255)) for i in range(3))
-            roof = (*roof, int(np.clip(grey * 0.9, 0, 255)))
-            building = Building(footprint, rng.uniform(8, 40) if wide else rng.uniform(6, 16), roof)  # type: ignore[arg-type]
+            roof = _roof(rng, cfg.roof_palette)
+            height = rng.uniform(8, 40) if wide else rng.uniform(*cfg.house_height)
+            if rng_share(rng, cfg.tower_share):
+                height = rng.uniform(*cfg.tower_height)
+            building = Building(footprint, height, roof)
             if rng.random() < 0.35:
                 c = np.array(footprint.centroid.coords[0]) + rng.uniform(-0.2, 0.2, 2) * min(w, depth)
                 building.detail = _centred_rect(c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35))
@@ -275,7 +351,7 @@ def _add_markings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> N
         for piece in pieces:
             if piece.length < 6:
                 continue
-            _lane_lines(rng, scene, s, piece)
+            _lane_lines(cfg, rng, scene, s, piece)
             for at_end in (False, True):
                 if rng.random() < cfg.crosswalk_share and piece.length > 20:
                     _crosswalk(rng, scene, piece, s.width, at_end)
@@ -294,8 +370,14 @@ def _dashes(line: LineString, dash: float, gap: float) -> list[LineString]:
     return out
 
 
-def _lane_lines(rng: np.random.Generator, scene: Scene, street, piece: LineString) -> None:
+def _lane_lines(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, street, piece: LineString) -> None:
     paint = 0.15
+    if rng_share(rng, cfg.edge_line_share):  # solid white lines just inside the asphalt's edge
+        for side in (-1, 1):
+            for line in _offset(piece, side * (street.width / 2 - rng.uniform(0.25, 0.5))):
+                scene.markings.append(Painted(line.buffer(paint / 2 + 0.03, cap_style="flat"), WHITE_PAINT, 3))
+    if cfg.lane_paint_share < 1 and rng.random() >= cfg.lane_paint_share:
+        return
     if street.kind == "boulevard":
         for side in (-1, 1):
             for line in _offset(piece, side * (street.median / 2 + 3.4)):

@@ -36,7 +36,7 @@ class Street:
 
     centreline: LineString
     width: float
-    kind: str  # avenue | boulevard | street | curved | diagonal | dead_end
+    kind: str  # avenue | boulevard | street | curved | diagonal | dead_end | local
     median: float = 0.0
     bulb_radius: float = 0.0  # cul-de-sac bulb at the centreline's end
 
@@ -89,6 +89,19 @@ def _line(centre: np.ndarray, along: np.ndarray, across: np.ndarray, offset: flo
     return LineString(pts)
 
 
+def rng_share(rng: np.random.Generator, share: float) -> bool:
+    """True with probability ``share``; draws nothing when ``share`` is 0, so a switched-off
+    style knob leaves the random stream (and hence the city) unchanged."""
+    return share > 0 and rng.random() < share
+
+
+def _bend(rng: np.random.Generator, amplitude: tuple[float, float], cap: float):
+    """A sideways sine shift ``bend(t)`` of amplitude drawn from ``amplitude`` (at most ``cap``)."""
+    amp = min(rng.uniform(*amplitude), cap)
+    wavelength, phase = rng.uniform(250, 500), rng.uniform(0, 2 * math.pi)
+    return lambda t: amp * np.sin(2 * math.pi * t / wavelength + phase)
+
+
 def _split_between(line: LineString, cutters: list[LineString]) -> list[LineString]:
     """Pieces of ``line`` between consecutive crossings with ``cutters`` (ends included)."""
     cuts = {0.0, line.length}
@@ -106,13 +119,14 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     m = cfg.margin
     centre = np.array([width / 2, height / 2])
     half = math.hypot(width + 2 * m, height + 2 * m) / 2 + 40.0
-    bearing = rng.uniform(-math.radians(35), math.radians(35))
+    bearing = rng.uniform(math.radians(cfg.bearing_deg[0]), math.radians(cfg.bearing_deg[1]))
     along, across = _unit(bearing), _unit(bearing + math.pi / 2)
 
     streets: list[Street] = []
     avenues: list[LineString] = []
     for offset in _spaced_offsets(rng, half, cfg.avenue_spacing):
-        line = _line(centre, along, across, offset, half)
+        bend = _bend(rng, cfg.curve_amplitude, 0.22 * cfg.avenue_spacing[0]) if rng_share(rng, cfg.avenue_curve_share) else None
+        line = _line(centre, along, across, offset, half, bend)
         w = rng.uniform(*cfg.avenue_width)
         if rng.random() < cfg.boulevard_share:
             streets.append(Street(line, w + rng.uniform(*cfg.boulevard_extra_width), "boulevard", median=rng.uniform(*cfg.median_width)))
@@ -128,10 +142,7 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         gap = min(abs(offset - offsets[j]) for j in (i - 1, i + 1) if 0 <= j < len(offsets)) if len(offsets) > 1 else 100.0
         bend, kind = None, "street"
         if rng.random() < cfg.curved_street_share:
-            amp = min(rng.uniform(*cfg.curve_amplitude), 0.22 * gap)
-            wavelength, phase = rng.uniform(250, 500), rng.uniform(0, 2 * math.pi)
-            bend = lambda t, a=amp, wl=wavelength, ph=phase: a * np.sin(2 * math.pi * t / wl + ph)  # noqa: E731
-            kind = "curved"
+            bend, kind = _bend(rng, cfg.curve_amplitude, 0.22 * gap), "curved"
         line = _line(centre, direction, normal, offset, half, bend)
         w = rng.uniform(*cfg.street_width)
         for piece in _split_between(line, avenues):
@@ -160,6 +171,12 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         line = _line(through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + np.linalg.norm(through - centre), bend)
         streets.append(Street(line, rng.uniform(*cfg.street_width) + 1.0, "diagonal"))
 
+    if cfg.layout == "suburb":
+        first = local_streets(cfg, rng, streets, streets)
+        streets.extend(first + local_streets(cfg, rng, first, streets + first))  # side streets of side streets
+    elif cfg.layout != "grid":
+        raise ValueError(f"layout must be grid or suburb, got {cfg.layout!r}")
+
     domain = box(-m - 20, -m - 20, width + m + 20, height + m + 20)
     clipped = []
     for s in streets:
@@ -167,6 +184,99 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         for part in as_linestrings(line):
             clipped.append(Street(part, s.width, s.kind, s.median, s.bulb_radius if part.coords[-1] == s.centreline.coords[-1] else 0.0))
     return clipped
+
+
+def local_streets(cfg: SynthConfig, rng: np.random.Generator, parents: list[Street], existing: list[Street]) -> list[Street]:
+    """Suburban local streets: curvy branches leaving a parent street at a T-junction and ending
+    in a dead end or cul-de-sac bulb, and crescents that come back to the same parent.
+
+    A candidate is kept only if it stays ``clearance`` metres from every other street, so the
+    blocks between them hold a row of houses on each side.
+    """
+    clearance = 28.0
+    kept: list[Polygon] = []  # clearance zones of accepted local streets
+    out: list[Street] = []
+    for parent in parents:
+        foreign = [s.centreline for s in existing if s is not parent]
+        zone = shapely.union_all([line.buffer(clearance) for line in foreign]) if foreign else Polygon()
+        shapely.prepare(zone)
+        t = rng.uniform(*cfg.branch_spacing) / 2
+        while t < parent.centreline.length - 20:
+            p = np.array(parent.centreline.interpolate(t).coords[0])
+            q = np.array(parent.centreline.interpolate(min(t + 2.0, parent.centreline.length)).coords[0])
+            d = (q - p) / max(np.linalg.norm(q - p), 1e-9)
+            side = 1.0 if rng.random() < 0.5 else -1.0
+            normal = np.array([-d[1], d[0]]) * side
+            w = rng.uniform(*cfg.street_width)
+            span = rng.uniform(60, 120)
+            if rng.random() < cfg.loop_share and t + span < parent.centreline.length - 20:
+                end = np.array(parent.centreline.interpolate(t + span).coords[0])
+                line, bulb = _crescent(p, end, normal, rng.uniform(*cfg.branch_length) * 0.6), 0.0
+            else:
+                line = _curvy_branch(rng, p, normal, rng.uniform(*cfg.branch_length))
+                bulb = w * rng.uniform(0.8, 1.1) if rng.random() < cfg.cul_de_sac_share else 0.0
+            t += rng.uniform(*cfg.branch_spacing)
+            away = line.difference(Point(p).buffer(parent.width / 2 + 2.0))
+            body = away.buffer(w / 2 + 2.0 + bulb)
+            if zone.intersects(away) or (kept and shapely.intersects(np.array(kept, dtype=object), body).any()):
+                continue
+            kept.append(line.buffer(clearance * 0.6 + bulb))
+            out.append(Street(line, w, "local" if bulb == 0.0 else "dead_end", bulb_radius=bulb))
+    return out
+
+
+def _curvy_branch(rng: np.random.Generator, start: np.ndarray, heading: np.ndarray, length: float) -> LineString:
+    """A street leaving ``start`` along ``heading`` and turning gently (up to ~60 degrees)."""
+    turn = math.radians(rng.uniform(-60, 60)) / max(length, 1.0)  # curvature, radians per metre
+    angle = math.atan2(heading[1], heading[0])
+    points, p = [start.copy()], start.copy()
+    for _ in range(int(length // 5)):
+        angle += turn * 5
+        p = p + 5 * _unit(angle)
+        points.append(p)
+    return LineString(points)
+
+
+def _crescent(start: np.ndarray, end: np.ndarray, normal: np.ndarray, depth: float) -> LineString:
+    """A U-shaped street from ``start`` into the block, ``depth`` deep, and back out at ``end``."""
+    s = np.linspace(0, math.pi, 40)
+    pts = start + np.outer((1 - np.cos(s)) / 2, end - start) + np.outer(np.sin(s) ** 0.6 * depth, normal)
+    return LineString(pts)
+
+
+def _crossings(streets: list[Street], min_width: float) -> list[tuple[Point, int, int]]:
+    """Points where the centrelines of two streets at least ``min_width`` wide cross."""
+    wide = [i for i, s in enumerate(streets) if s.width >= min_width and s.kind != "boulevard"]
+    out = []
+    for k, i in enumerate(wide):
+        for j in wide[k + 1 :]:
+            hit = streets[i].centreline.intersection(streets[j].centreline)
+            if not hit.is_empty and hit.geom_type == "Point":
+                out.append((hit, i, j))
+    return out
+
+
+def _roundabouts(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street]) -> list[tuple[Polygon, Polygon]]:
+    """(ring disc, central island) at a share of crossings; rings never overlap one another."""
+    out: list[tuple[Polygon, Polygon]] = []
+    for hit, i, j in _crossings(streets, 6.0):
+        if rng.random() >= cfg.roundabout_share:
+            continue
+        outer = rng.uniform(*cfg.roundabout_radius)
+        inner = outer - rng.uniform(6.0, 8.0)
+        if inner < 3.0 or any(hit.distance(o.centroid) < outer + o_r + 30 for o, o_r in ((d, math.sqrt(d.area / math.pi)) for d, _ in out)):
+            continue
+        out.append((hit.buffer(outer, quad_segs=QUAD_SEGS), hit.buffer(inner, quad_segs=QUAD_SEGS)))
+    return out
+
+
+def _bulb_islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street]) -> list[Polygon]:
+    """Planted centre islands in a share of the cul-de-sac bulbs of radius 8 m or more."""
+    out = []
+    for s in streets:
+        if s.bulb_radius >= 8.0 and rng_share(rng, cfg.bulb_island_share):
+            out.append(Point(s.centreline.coords[-1]).buffer(s.bulb_radius - rng.uniform(5.5, 6.5), quad_segs=QUAD_SEGS))
+    return [p for p in out if p.area > math.pi * 2.0**2]
 
 
 def _open(polygon: Polygon, radius: float) -> list[Polygon]:
@@ -224,7 +334,8 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     """Streets -> roadway -> rounded blocks -> islands and medians -> ground-truth boundaries."""
     streets = build_streets(cfg, rng, width, height)
     road_by_street = [s.roadway() for s in streets]
-    raw_roadway = shapely.union_all(road_by_street)
+    rings = _roundabouts(cfg, rng, streets) if cfg.roundabout_share > 0 else []
+    raw_roadway = shapely.union_all(road_by_street + [disc for disc, _ in rings])
     m = cfg.margin
     domain = box(-m, -m, width + m, height + m)
     land = domain.difference(raw_roadway)
@@ -238,6 +349,9 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
 
     roadway = domain.difference(shapely.union_all([b.polygon for b in blocks]))
     islands = _islands(cfg, rng, streets, roadway)
+    if rings or cfg.bulb_island_share > 0:
+        extra = [island for _, island in rings] + _bulb_islands(cfg, rng, streets)
+        islands = [i for i in islands if not any(i.intersects(e.buffer(3.0)) for e in extra)] + extra
     medians = _medians(streets, road_by_street, roadway)
     if islands or medians:
         roadway = roadway.difference(shapely.union_all(islands + medians))
