@@ -59,7 +59,7 @@ class SynthConfig:
     noise_sigma: float = 5.0  # per-pixel sensor noise, digital numbers
     # ---- style knobs (csboundary/data/synth/styles.py); the defaults reproduce the original
     # grid city byte for byte, so every knob draws random numbers only when it is switched on.
-    style: str = "grid"  # the style this config was built from (recorded in city.json)
+    style: str = "classic"  # the style this config was built from (recorded in city.json)
     layout: str = "grid"  # grid | suburb (collectors + curvy local streets, T-junctions, cul-de-sacs)
     bearing_deg: tuple[float, float] = (-35.0, 35.0)  # range of the grid's bearing
     avenue_curve_share: float = 0.0  # avenues that curve like the curved cross streets

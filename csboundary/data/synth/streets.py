@@ -221,7 +221,7 @@ def local_streets(cfg: SynthConfig, rng: np.random.Generator, parents: list[Stre
             if zone.intersects(away) or (kept and shapely.intersects(np.array(kept, dtype=object), body).any()):
                 continue
             kept.append(line.buffer(clearance * 0.6 + bulb))
-            out.append(Street(line, w, "local" if bulb == 0.0 else "dead_end", bulb_radius=bulb))
+            out.append(Street(line, w, "local", bulb_radius=bulb))
     return out
 
 
@@ -307,8 +307,8 @@ def _islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], 
     return islands
 
 
-def _medians(streets: list[Street], road_by_street: list[Polygon], roadway) -> list[Polygon]:
-    """Boulevard medians, interrupted at every crossing street, with rounded noses."""
+def _medians(streets: list[Street], road_by_street: list[Polygon], roadway, avoid: list[Polygon] = ()) -> list[Polygon]:
+    """Boulevard medians, interrupted at every crossing street and roundabout (``avoid``), with rounded noses."""
     medians: list[Polygon] = []
     tree = shapely.STRtree(road_by_street)
     inside = roadway.buffer(-1.0)
@@ -317,7 +317,7 @@ def _medians(streets: list[Street], road_by_street: list[Polygon], roadway) -> l
         if s.median <= 0:
             continue
         strip = s.centreline.buffer(s.median / 2, cap_style="flat")
-        crossing = [road_by_street[j] for j in tree.query(strip) if j != i]
+        crossing = [road_by_street[j] for j in tree.query(strip) if j != i] + [a for a in avoid if a.intersects(strip)]
         if crossing:
             strip = strip.difference(shapely.union_all([c.buffer(3.0) for c in crossing]))
         nose = s.median * 0.45
@@ -352,7 +352,7 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     if rings or cfg.bulb_island_share > 0:
         extra = [island for _, island in rings] + _bulb_islands(cfg, rng, streets)
         islands = [i for i in islands if not any(i.intersects(e.buffer(3.0)) for e in extra)] + extra
-    medians = _medians(streets, road_by_street, roadway)
+    medians = _medians(streets, road_by_street, roadway, [disc for disc, _ in rings])
     if islands or medians:
         roadway = roadway.difference(shapely.union_all(islands + medians))
 
