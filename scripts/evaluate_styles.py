@@ -1,0 +1,65 @@
+"""Score weights bundles on one test city per style (city scale), for the tables of docs/styles.md.
+
+    python scripts/evaluate_styles.py --bundle all=runs/bundles/worlds.pt \
+        --bundle without-suburb=runs/bundles/loso-suburb.pt --out runs/eval/styles.json
+
+Each test city is ``data/cities/test-<style>-s7-2x2-2000`` (``csboundary synth --style STYLE
+--split test --seed 7 --tiles 2x2 --tile-size 2000``; classic is ``test-s7-2x2-2000``), built
+here if missing. Results already in ``--out`` are kept, so an interrupted run continues.
+Prints a markdown table of F1@5 / APLS / TLTS per (bundle, style).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular")
+
+
+def city_dir(style: str, cache: Path) -> Path:
+    name = "test-s7-2x2-2000" if style == "classic" else f"test-{style}-s7-2x2-2000"
+    path = cache / name
+    if not (path / "city.json").exists():
+        cli("synth", str(path), "--style", style, "--split", "test", "--seed", "7", "--tiles", "2x2", "--tile-size", "2000", "--quiet")
+    return path
+
+
+def cli(*args: str) -> None:
+    subprocess.run([sys.executable, "-m", "csboundary", *args], check=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bundle", action="append", required=True, help="NAME=PATH of a weights bundle (repeatable)")
+    parser.add_argument("--styles", default=",".join(STYLES), help="comma-separated styles to score")
+    parser.add_argument("--cache", type=Path, default=Path("data/cities"))
+    parser.add_argument("--out", type=Path, required=True, help="JSON of results (read first: finished cells are kept)")
+    args = parser.parse_args()
+    results = json.loads(args.out.read_text()) if args.out.exists() else {}
+    styles = args.styles.split(",")
+    for item in args.bundle:
+        name, path = item.split("=", 1)
+        for style in styles:
+            if style in results.get(name, {}):
+                continue
+            with tempfile.TemporaryDirectory() as tmp:
+                report = Path(tmp) / "eval.json"
+                cli("evaluate-model", str(city_dir(style, args.cache)), "--weights", path, "--json", str(report), "--quiet")
+                metrics = json.loads(report.read_text())["city"]["metrics"]
+            results.setdefault(name, {})[style] = {k: round(metrics[k], 4) for k in ("f1@5", "apls", "tlts")}
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+            args.out.write_text(json.dumps(results, indent=2) + "\n")
+    print("| model | " + " | ".join(styles) + " |")
+    print("|---|" + "---|" * len(styles))
+    for name, row in results.items():
+        cells = [f"{row[s]['f1@5']:.3f} / {row[s]['apls']:.3f} / {row[s]['tlts']:.3f}" if s in row else "" for s in styles]
+        print(f"| {name} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
