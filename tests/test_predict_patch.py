@@ -27,7 +27,7 @@ def bundle(tmp_path_factory):
     path = tmp_path_factory.mktemp("w") / "bundle.pt"
     save_checkpoint(path, "bundle", fpn=fpn.state_dict(), fpn_config=fpn_config.to_dict(),
                     afanet=AfANet(afanet_config).state_dict(), afanet_config=afanet_config.to_dict(),
-                    inference={"edge_threshold": 0.5, "max_degree": 2})
+                    inference={"edge_threshold": 0.5, "max_degree": 2}, pixel_size_m=0.3)  # the test city's pixel size
     return path
 
 
@@ -77,15 +77,18 @@ def test_evaluate_model_scores_every_patch(bundle, small_city, tmp_path):
     assert "patch" in result.stdout and "city" in result.stdout
 
 
-def test_sixteen_bit_imagery_is_refused(bundle, tmp_path):
+def test_sixteen_bit_imagery_is_stretched_with_a_warning(bundle, tmp_path):
     import numpy as np
     from affine import Affine
 
     from csboundary.data.geotiff import write_geotiff
 
-    path = write_geotiff(tmp_path / "u16.tif", np.full((4, 64, 64), 1000, np.uint16), Affine(0.3, 0, 0, 0, -0.3, 0), "EPSG:32618")
+    ramp = np.tile(np.linspace(0, 4000, 64, dtype=np.uint16), (4, 64, 1))
+    path = write_geotiff(tmp_path / "u16.tif", ramp, Affine(0.3, 0, 0, 0, -0.3, 0), "EPSG:32618")
     result = run("predict-patch", str(path), "--out", str(tmp_path / "p"), "--weights", str(bundle))
-    assert result.returncode == 2 and "8-bit" in result.stderr and str(path) in result.stderr
+    assert result.returncode == 0, result.stderr
+    assert f"{path}: uint16 imagery stretched to 8 bits" in result.stderr
+    assert (tmp_path / "p" / "graph.json").exists()
 
 
 @pytest.fixture(scope="module")

@@ -563,4 +563,4 @@ def test_a_reduced_read_is_the_block_mean_across_tiles(shared_tiles):
     assert np.abs(small.data - mean).max() <= 0.5  # the block average, rounded to uint8 (band 4 never alpha)
     assert np.abs(corner.data.astype(float) - mean[:, 15:25, 25:35]).max() <= 0.5
     with Mosaic.open(t.directory) as mosaic:  # strips of 10 rows stitch into the same picture
-        assert np.array_equal(mosaic._read_reduced(mosaic.window, 0.5, strip_rows=10).data, small.data)
+        assert np.array_equal(mosaic._read_reduced(mosaic.window, 0.5, strip_pixels=10 * mosaic.width).data, small.data)

@@ -9,6 +9,8 @@ from typing import Optional
 
 import typer
 
+from csboundary.cli.options import finite
+
 
 def evaluate(
     pred: Path = typer.Argument(..., help="Predicted boundaries: csboundary graph JSON, GeoPackage or GeoJSON LineStrings."),
@@ -18,7 +20,7 @@ def evaluate(
     seed: int = typer.Option(0, min=0, help="Seed of the sampled vertex pairs; equal seeds give identical results."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Also write every number (and per-patch scores) to this JSON file."),
     raster: Optional[Path] = typer.Option(None, help="City directory, GeoTIFF(s) or tile directory whose pixel grid is the frame (world -> pixels)."),
-    gsd: Optional[float] = typer.Option(None, help="Without a raster: pixel size (world units) of a frame at the inputs' top-left corner."),
+    gsd: Optional[float] = typer.Option(None, callback=finite, help="Without a raster: pixel size (world units) of a frame at the inputs' top-left corner."),
     pixels: bool = typer.Option(False, "--pixels", help="The inputs' coordinates are pixels (col, row), not world coordinates."),
     tau: str = typer.Option("2,5,10", help="Relaxation radii in pixels for precision/recall/F1, comma-separated."),
 ) -> None:
@@ -29,16 +31,28 @@ def evaluate(
         raise typer.BadParameter("must be paper or symmetric", param_hint="--apls")
     from csboundary.metrics import MetricConfig
     from csboundary.metrics import evaluate as run_metrics
+    from csboundary.errors import InputError
     from csboundary.metrics.io import grid_for, load_pair
+    from csboundary.metrics.sampling import RasterTooLarge
 
     try:
         taus = tuple(float(v) for v in tau.split(","))
         config = MetricConfig(taus=taus)
     except ValueError:
         raise typer.BadParameter(f"expected positive numbers such as 2,5,10, got {tau!r}", param_hint="--tau")
+    if gsd is not None and not (math.isfinite(gsd) and gsd > 0):
+        raise typer.BadParameter(f"must be a positive number, got {gsd}", param_hint="--gsd")
+    if json_out is not None:
+        from csboundary.data.atomic import check_output_file
+
+        check_output_file(json_out, (".json",))
     pred_graph, gt_graph, frame = load_pair(pred, gt, raster=raster, gsd=gsd, pixels=pixels)
     grid = grid_for(frame, pred_graph, gt_graph) if scale == "patch" else None
-    result = run_metrics(pred_graph, gt_graph, scale=scale, grid=grid, apls=apls, seed=seed, config=config)
+    extent = (0, 0, frame.width, frame.height) if frame.width else None
+    try:
+        result = run_metrics(pred_graph, gt_graph, scale=scale, grid=grid, apls=apls, seed=seed, config=config, extent=extent)
+    except RasterTooLarge as exc:
+        raise InputError(f"{pred} / {gt}", f"{exc}; give --raster to clip to the imagery") from exc
     result["inputs"] = {"pred": str(pred), "gt": str(gt), "frame": frame.source, "crs": frame.crs}
     typer.echo(format_table(result))
     if json_out is not None:

@@ -6,6 +6,7 @@ documented fallbacks (no CRS, 3-band RGB) as ``warning: ...`` lines.
 
 from __future__ import annotations
 
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -13,6 +14,7 @@ from typing import Optional
 
 import typer
 
+from csboundary.cli.options import finite
 from csboundary.errors import InputError, InputWarning
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="City-scale road-boundary graphs from aerial imagery.")
@@ -36,7 +38,7 @@ def synth(
     seed: int = typer.Option(0, min=0, help="City seed; the split is mixed in, so splits never share a city."),
     tiles: str = typer.Option("1x1", help="Tile grid as ROWSxCOLS."),
     tile_size: int = typer.Option(5000, min=64, help="Tile side in pixels."),
-    gsd: float = typer.Option(0.152, min=0.01, help="Ground sampling distance, metres per pixel."),
+    gsd: float = typer.Option(0.152, callback=finite, min=0.01, help="Ground sampling distance, metres per pixel."),
     split: str = typer.Option("train", help="train | valid | test."),
     style: str = typer.Option("classic", help="City style: classic, grid, downtown, suburb, rural, irregular, or mix (one drawn from the seed); see docs/styles.md."),
     quiet: bool = typer.Option(False, help="No progress bar."),
@@ -52,6 +54,7 @@ def synth(
         raise typer.BadParameter(f"unknown style {style!r}; choose one of {', '.join(STYLES)} or {MIX}", param_hint="--style")
     if style == MIX:
         style = draw_style(split, seed)
+    _no_file_at(out)
     meta = synthesize_city(out, seed, split, _parse_tiles(tiles), style_config(style, tile_size=tile_size, gsd=gsd), progress=not quiet)
     counts = meta["counts"]
     typer.echo(
@@ -71,6 +74,7 @@ def import_topo_boundary_cmd(
     """Reassemble Topo-boundary patches into 5000x5000 tiles with vector ground truth."""
     from csboundary.data.topo_boundary import import_topo_boundary
 
+    _out_dir(out)
     report = import_topo_boundary(root, out, patch_size=patch_size, splits=splits, progress=not quiet)
     missing = report["missing_patches"]
     typer.echo(f"{out}: {len(report['tiles_written'])} tile(s) written; {len(missing)} missing patch(es)"
@@ -81,13 +85,13 @@ def import_topo_boundary_cmd(
 def import_masks_cmd(
     source: Path = typer.Argument(..., help="Folder of images and their label masks."),
     out: Path = typer.Option(..., "--out", help="Folder for one city per image, plus set.json listing them."),
-    gsd: Optional[float] = typer.Option(None, help="Pixel size of the images in metres (needed when they carry no georeference)."),
-    target_gsd: float = typer.Option(0.152, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
+    gsd: Optional[float] = typer.Option(None, callback=finite, help="Pixel size of the images in metres (needed when they carry no georeference)."),
+    target_gsd: float = typer.Option(0.152, callback=finite, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
     image_pattern: str = typer.Option("{id}_image.png", help="Image file names; {id} is the part shared with the mask."),
     mask_pattern: str = typer.Option("{id}_edge.png", help="Mask file names."),
     kind: str = typer.Option("edge", help="edge: the mask marks road-edge lines | surface: it marks the road surface."),
     channel: int = typer.Option(1, min=1, help="Band of the mask file to read (1-based)."),
-    threshold: float = typer.Option(128, help="Mask pixels above this value are labelled."),
+    threshold: float = typer.Option(128, callback=finite, help="Mask pixels above this value are labelled."),
     invert: bool = typer.Option(False, "--invert", help="Label pixels below the threshold instead (dark lines on white)."),
     ids: Optional[str] = typer.Option(None, help="Comma-separated ids to import (default: every pair found)."),
     quiet: bool = typer.Option(False, help="No progress bar."),
@@ -106,6 +110,7 @@ def import_masks_cmd(
         rule = MaskRule(kind=kind, channel=channel - 1, threshold=threshold, invert=invert)
     except ValueError as exc:
         raise typer.BadParameter(str(exc))
+    _out_dir(out)
     report = import_masks(source, out, gsd=gsd, rule=rule, image_pattern=image_pattern, mask_pattern=mask_pattern,
                           target_gsd=target_gsd, ids=ids.split(",") if ids else None, progress=not quiet)
     total = sum(c["boundaries"] for c in report["cities"])
@@ -122,6 +127,7 @@ def make_city_cmd(
     evaluate-set, benchmark --city and training (extra_train_cities)."""
     from csboundary.data.user_city import make_city
 
+    _no_file_at(out)
     meta = make_city(tiles, ground_truth, out)
     typer.echo(f"{out}: {len(meta['tiles'])} tile(s), {meta['width']}x{meta['height']} px at {meta['gsd']:g} m, {meta['boundaries']} boundaries")
 
@@ -132,9 +138,9 @@ def evaluate_set_cmd(
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write per-city and mean scores as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
-    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
+    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
@@ -143,6 +149,8 @@ def evaluate_set_cmd(
     from csboundary.cli.evaluate import write_scores
     from csboundary.pipeline.evaluate_set import evaluate_set, format_set
 
+    if json_out is not None:
+        _out_file(json_out, (".json",))
     predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
     result = evaluate_set(set_dir, predictor, seed=seed, progress=not quiet)
     result["weights"] = str(weights or "shipped")
@@ -167,6 +175,9 @@ def _open_inputs(inputs: list[Path], ground_truth: Optional[Path]):
     from csboundary.data.ground_truth import read_ground_truth
     from csboundary.data.raster import Mosaic
 
+    looks_like_city = len(inputs) == 1 and (layout.tiles_dir(inputs[0]).is_dir() or layout.ground_truth_path(inputs[0]).exists())
+    if looks_like_city:
+        layout.read_meta(inputs[0])  # a city without a readable city.json is an interrupted write, not input
     if len(inputs) == 1 and layout.is_city_dir(inputs[0]):
         mosaic = Mosaic.open(layout.tiles_dir(inputs[0]))
         if ground_truth is None and layout.ground_truth_path(inputs[0]).exists():
@@ -202,6 +213,7 @@ def show(
         raise typer.BadParameter("give one of --window, --bounds, --patch")
     if labels is not None and patch is None:
         raise typer.BadParameter("--labels needs --patch ROW,COL")
+    _out_file(out, (".png",))
     mosaic, lines = _open_inputs(inputs, ground_truth)
     if patch is not None:
         grid_config = GridConfig()
@@ -250,11 +262,26 @@ def show(
             win = mosaic.window_from_bounds(*values)
         else:
             win = mosaic.window
-        if win.is_empty:
-            raise typer.BadParameter(f"window {win} has no pixels")
+        inside = win.intersection(mosaic.window)
+        if inside is None or inside.is_empty:
+            where = f" in {mosaic.crs.to_string()} coordinates" if bounds and mosaic.crs is not None else ""
+            raise InputError(inputs[0], f"the window{where} lies outside the imagery ({mosaic.width}x{mosaic.height} px, bounds {tuple(round(b, 3) for b in mosaic.bounds)})")
+        win = inside  # nothing to draw beyond the imagery; memory stays bounded by it
+        if lines and not _any_line_in(lines, mosaic, win):
+            warnings.warn(f"{ground_truth or inputs[0]}: none of the {len(lines)} boundaries lies in the window (wrong CRS, or a file without one?)",
+                          InputWarning, stacklevel=1)
         rgb = render_window(mosaic, win, lines, max_size=max_size, grid=PatchGrid.for_mosaic(mosaic) if grid else None)
     write_png(out, rgb)
     typer.echo(f"{out}: {win.width}x{win.height} px window, {len(lines)} boundaries")
+
+
+def _any_line_in(lines, mosaic, window) -> bool:
+    import shapely
+
+    x0, y1 = mosaic.pixel_to_world(window.col_off, window.row_off)
+    x1, y0 = mosaic.pixel_to_world(window.col_end, window.row_end)
+    box = shapely.box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+    return any(line.intersects(box) for line in lines)
 
 
 @app.command()
@@ -265,7 +292,7 @@ def labels(
     margin: int = typer.Option(50, min=0, help="Patch margin on every side, px (paper: 50)."),
     aux_spacing: int = typer.Option(250, min=0, help="Auxiliary keypoint grid spacing, px (0 = none)."),
     segmentation_width: int = typer.Option(3, min=1, help="Boundary width in the segmentation label, px."),
-    heat_sigma: float = typer.Option(3.0, min=0.1, help="Gaussian sigma of the keypoint map, px."),
+    heat_sigma: float = typer.Option(3.0, callback=finite, min=0.1, help="Gaussian sigma of the keypoint map, px."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
     """Write every patch's training labels: segmentation, orientation, keypoint map, graph."""
@@ -274,6 +301,7 @@ def labels(
     from csboundary.labels.writer import write_city_labels
 
     config = LabelConfig(grid=GridConfig(core, margin), aux_spacing_px=aux_spacing, segmentation_width=segmentation_width, heat_sigma_px=heat_sigma)
+    _out_dir(out)
     manifest = write_city_labels(city, out, config, progress=not quiet)
     c = manifest["counts"]
     typer.echo(f"{out}: {c['patches']} patches, {c['vertices']} vertices, {c['edges']} edges ({c['corner_edges']} corner) in {manifest['seconds']['total']:.1f} s")
@@ -311,12 +339,14 @@ def train(
         cfg.steps = steps
     if fpn_weights is not None:
         cfg.fpn_weights = str(fpn_weights)
+    resolved = resolve_device(device)
+    _out_dir(out)
     from csboundary.data.atomic import atomic_path
 
     with atomic_path(out / "config.json") as tmp:
         tmp.write_text(_json.dumps(cfg.to_dict(), indent=2) + "\n")
     runner = {"fpn": train_fpn, "afanet": train_afanet}.get(model) or baseline_module(model).train
-    weights = runner(cfg, out, resolve_device(device), str(resume) if resume else None, progress=not quiet)
+    weights = runner(cfg, out, resolved, str(resume) if resume else None, progress=not quiet)
     typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
 
 
@@ -325,14 +355,15 @@ def bundle_weights(
     fpn: Path = typer.Option(..., help="Trained FPN checkpoint (fpn.pt)."),
     afanet: Path = typer.Option(..., help="Trained AfANet checkpoint (afanet.pt)."),
     out: Path = typer.Option(..., "--out", help="Bundle to write (e.g. csboundary/weights/csboundary-synthetic.pt)."),
-    edge_threshold: float = typer.Option(0.5, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
-    min_edge_support: float = typer.Option(0.0, min=0.0, max=1.0, help="Default mean boundary probability along an AfANet edge (0 = no check)."),
-    max_edge_length: float = typer.Option(0.0, min=0.0, help="Default longest AfANet edge in pixels (0 = no limit)."),
+    edge_threshold: float = typer.Option(0.5, callback=finite, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
+    min_edge_support: float = typer.Option(0.0, callback=finite, min=0.0, max=1.0, help="Default mean boundary probability along an AfANet edge (0 = no check)."),
+    max_edge_length: float = typer.Option(0.0, callback=finite, min=0.0, help="Default longest AfANet edge in pixels (0 = no limit)."),
     grid_crossings: int = typer.Option(0, min=0, help="Add vertices where the boundary crosses grid lines this far apart (0 = off; 250 = the label grid)."),
 ) -> None:
     """Bundle a trained FPN and AfANet (weights + provenance) into one weights file."""
     from csboundary.models.bundle import make_bundle
 
+    _out_file(out, (".pt",))
     path = make_bundle(fpn, afanet, out, edge_threshold, min_support=min_edge_support, max_length_px=max_edge_length,
                        crossing_spacing_px=grid_crossings)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
@@ -344,9 +375,9 @@ def evaluate_model(
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
-    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
+    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
@@ -358,11 +389,16 @@ def evaluate_model(
     from csboundary.pipeline.city import predict_city
     from csboundary.pipeline.run import evaluate_run
 
-    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    if json_out is not None:
+        _out_file(json_out, (".json",))
+    from csboundary.data.model_view import model_view
+
     layout.read_meta(city)
     mosaic, lines = _open_inputs([city], None)
-    with mosaic:
-        result = predict_city(mosaic, predictor, batch_size=batch_size, progress=not quiet)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    view = model_view(mosaic, model_gsd=predictor.pixel_size_m)
+    with view.mosaic:
+        result = predict_city(view.mosaic, predictor, batch_size=batch_size, progress=not quiet)
     scores = evaluate_run(result, lines, seed)
     for item in scores.values():
         item["inputs"] = {"pred": f"{weights or 'shipped weights'} on {city}", "gt": str(layout.ground_truth_path(city))}
@@ -395,24 +431,32 @@ def predict(
     inputs: list[Path] = typer.Argument(..., help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
     out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights)."),
-    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
-    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
+    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
+    gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of imagery without a CRS (needed then)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
     """City-scale prediction: patch grid -> FPN -> averaged maps -> vertices -> AfANet -> stitched
-    city graph, written in the input's CRS."""
+    city graph, written in the input's CRS. Any pixel size from 0.03 to 1 m, any CRS (metres,
+    feet, degrees) and 8/16-bit or float imagery are resampled and stretched on the fly
+    (docs/city-inference.md)."""
+    from csboundary.data.model_view import model_view
     from csboundary.pipeline.run import run_prediction, stage_table
 
-    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
     mosaic, _ = _open_inputs(inputs, None)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    view = model_view(mosaic, gsd, predictor.pixel_size_m)
+    _out_dir(out, inputs)
     settings = {"weights": str(weights or "shipped"), "edge_threshold": predictor.edge_threshold, "batch_size": batch_size,
-                "device": str(predictor.device)}
-    with mosaic:
-        _, summary = run_prediction(mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=not quiet, settings=settings)
+                "device": str(predictor.device), "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
+                "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
+    with view.mosaic:
+        _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=not quiet,
+                                    settings=settings, units=view.units)
     c = summary["counts"]
     typer.echo(f"{out}: {c['edges']} edges, {c['vertices']} vertices, {c['boundary_km']} km of boundary\n{stage_table(summary)}")
 
@@ -423,42 +467,43 @@ def predict_patch(
     out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
-    edge_threshold: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
-    min_edge_support: Optional[float] = typer.Option(None, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, min=0.0, help=LENGTH_HELP),
+    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
+    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
+    gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
 ) -> None:
     """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
     import geopandas as gpd
 
-    from csboundary.data.atomic import atomic_path
+    from csboundary.data.atomic import check_output_dir, staging_folder
     from csboundary.data.raster import Mosaic
     from csboundary.viz.labels import draw_patch_labels
     from csboundary.viz.overlay import to_display, write_png
 
+    _out_dir(out, [image] if image.is_dir() else [])
     predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, fpn_weights)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
-    with Mosaic.open(image) as mosaic:
+    from csboundary.data.model_view import model_view
+
+    with model_view(Mosaic.open(image), gsd, predictor.pixel_size_m, assume_model_gsd=True).mosaic as mosaic:
         if mosaic.width > 1100 or mosaic.height > 1100:
-            raise InputError(image, f"is {mosaic.width}x{mosaic.height} px; predict-patch takes at most 1100x1100 (a patch)")
+            raise InputError(image, f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a patch)")
         read = mosaic.read(mosaic.window)
-        if read.data.dtype != "uint8":
-            raise InputError(image, f"is {read.data.dtype}; the networks take 8-bit imagery (rescale to 0-255 first)")
         maps = predictor.maps(read.data)
         graph = predictor.graph(read.data, maps)
         graph.transform, graph.crs = mosaic.transform, (mosaic.crs.to_string() if mosaic.crs else None)
-    out.mkdir(parents=True, exist_ok=True)
-    graph.write_json(out / "graph.json")
     frame = gpd.GeoDataFrame(
         {"kind": graph.edge_kinds or [], "confidence": list(graph.edge_scores) if graph.edge_scores is not None else []},
         geometry=graph.to_linestrings(world=True), crs=graph.crs,
     )
-    with atomic_path(out / "boundaries.geojson") as tmp:
-        frame.to_file(tmp, driver="GeoJSON", engine="pyogrio")
-    arrays = {"segmentation": maps[1] > 0.5, "keypoint_heat": maps[0]}
-    write_png(out / "overlay.png", draw_patch_labels(to_display(read.data, read.valid), arrays, graph))
+    with staging_folder(check_output_dir(out, create=True), last="graph.json") as stage:
+        graph.write_json(stage / "graph.json")
+        frame.to_file(stage / "boundaries.geojson", driver="GeoJSON", engine="pyogrio", layer="boundaries")
+        arrays = {"segmentation": maps[1] > 0.5, "keypoint_heat": maps[0]}
+        write_png(stage / "overlay.png", draw_patch_labels(to_display(read.data, read.valid), arrays, graph))
     typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({sum(k == 'corner' for k in graph.edge_kinds or [])} corner)")
 
 
@@ -487,6 +532,7 @@ def benchmark(
     unknown = set(chosen or []) - {m.key for m in METHODS}
     if unknown:
         raise typer.BadParameter(f"unknown method(s) {', '.join(sorted(unknown))}", param_hint="--methods")
+    _out_dir(out)
     city_dir = city or CitySpec("test", 1, (1, 1), 5000).ensure("data/cities")
     weights = weights_dir or shipped_weights().parent
     results = run_benchmark(Path(city_dir), out, Path(weights), resolve_device(device), chosen, seed, progress=not quiet)
@@ -516,6 +562,7 @@ def demo(
     from csboundary.data.synth.config import SynthConfig
     from csboundary.pipeline.run import evaluate_run, run_prediction, stage_table
 
+    _out_dir(out)
     predictor = _load_predictor(None, device)
     city_dir = out / "city"
     meta = synthesize_city(city_dir, seed, "test", (2, 2), SynthConfig(tile_size=1500))
@@ -536,22 +583,79 @@ def demo(
     )
 
 
+def _out_dir(out: Path, inputs: list[Path] = ()) -> None:
+    """The output folder is checked (and made) before any work; it must not lie inside an input
+    folder, where the next run would read its maps.tif as imagery."""
+    from csboundary.data.atomic import check_output_dir
+
+    resolved = out.resolve()
+    for item in inputs:
+        if item.is_dir() and (resolved == item.resolve() or item.resolve() in resolved.parents):
+            raise InputError(out, f"is inside the input folder {item}; its outputs would be read as imagery next time")
+    check_output_dir(out)
+
+
+def _out_file(path: Path, suffixes: tuple[str, ...]) -> None:
+    from csboundary.data.atomic import check_output_file
+
+    check_output_file(path, suffixes)
+
+
+def _no_file_at(out: Path) -> None:
+    """A folder-making command whose target is an existing file."""
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "exists and is not a folder")
+
+
 def _format_warning(message, category, filename, lineno, line=None) -> str:
     return f"warning: {message}\n"
 
 
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM. A BaseException that is not KeyboardInterrupt, so that click does not
+    turn Ctrl-C into its own exit before the temporaries are cleared and the user told."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _on_signal(signum, frame) -> None:
+    raise Interrupted(signum)
+
+
 def main() -> None:
-    """Console entry point: run the app, turning input errors into one line and exit status 2."""
+    """Console entry point: run the app, turning input errors into one line and exit status 2,
+    and Ctrl-C / SIGTERM into a message and exit 130 / 143 after every temporary is removed."""
     warnings.formatwarning = _format_warning
     warnings.simplefilter("always", InputWarning)
+    signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGTERM, _on_signal)
     try:
-        app()
+        code = app(standalone_mode=False)
+    except typer.Abort:
+        typer.echo("aborted", err=True)
+        sys.exit(1)
+    except typer.TyperException as exc:  # click's usage errors (typer vendors click): one line too
+        if type(exc).__name__ == "NoArgsIsHelpError":
+            exc.show()
+            sys.exit(2)
+        ctx = getattr(exc, "ctx", None)
+        where = f" (see csboundary {ctx.info_name} --help)" if ctx is not None and ctx.parent is not None else ""
+        typer.echo(f"error: {' '.join(exc.format_message().split())}{where}", err=True)
+        sys.exit(getattr(exc, "exit_code", 2))
     except InputError as exc:
         typer.echo(f"error: {exc}", err=True)
         sys.exit(2)
-    except KeyboardInterrupt:
-        typer.echo("interrupted: no partial file was left under a final name", err=True)
-        sys.exit(130)
+    except (OSError, MemoryError) as exc:  # a full disk, a vanished file, no memory: the system's problem, said in one line
+        name = getattr(exc, "filename", None)
+        typer.echo(f"error: {name + ': ' if name else ''}{exc.strerror or exc if isinstance(exc, OSError) else 'out of memory'}", err=True)
+        sys.exit(1)
+    except (Interrupted, KeyboardInterrupt) as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        typer.echo(f"interrupted ({signal.Signals(signum).name}): temporaries removed; no partial file was left under a final name", err=True)
+        sys.exit(128 + signum)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 from csboundary.cli.evaluate import evaluate  # noqa: E402

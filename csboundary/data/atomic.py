@@ -8,8 +8,16 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
+import shutil
 from pathlib import Path
 from typing import Iterator
+
+from csboundary.errors import InputError
+
+# Hidden temporaries of this module and of the map writer: ".<stem>.partial-<pid>..." and
+# ".<stem>.scratch-<pid>...". A run killed with SIGKILL leaves them; the next run clears them.
+TEMPORARY = re.compile(r"^\.[^/]*\.(partial|scratch)-(\d+)")
 
 
 @contextlib.contextmanager
@@ -28,3 +36,97 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def check_output_dir(path: str | Path, create: bool = False) -> Path:
+    """Check that outputs can be written into the folder ``path`` before any work is done (a run
+    of hours must not learn at the end that it cannot write); ``create`` makes it. Raises
+    InputError naming the folder. Without ``create`` nothing is left on disk."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(path, "exists and is not a folder (choose a folder for the outputs)")
+    if create:
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(path, f"cannot create the output folder ({exc.strerror or exc})") from exc
+    existing = path
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(path, f"cannot be created: {existing} is a file")
+    _probe(existing, path)
+    return path
+
+
+def check_output_file(path: str | Path, suffixes: tuple[str, ...] = ()) -> Path:
+    """Check that a file can be written at ``path``: not a folder, one of ``suffixes`` when given,
+    in a writable place (its folder may not exist yet). Raises InputError naming the file."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(path, "is a folder; give a file name")
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise InputError(path, f"needs one of the extensions {', '.join(suffixes)}")
+    existing = path.parent
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(path, f"cannot be written: {existing} is a file")
+    _probe(existing, path)
+    return path
+
+
+def _probe(folder: Path, name: Path) -> None:
+    probe = folder / f".write-probe.partial-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise InputError(name, f"cannot write there ({exc.strerror or exc})") from exc
+
+
+def clear_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Remove the hidden temporaries that killed runs (SIGKILL, power loss) left in ``folder``;
+    files of a process that is still running are kept. Returns what was removed."""
+    removed = []
+    folder = Path(folder)
+    if not folder.is_dir():
+        return removed
+    for item in folder.iterdir():
+        match = TEMPORARY.match(item.name)
+        if match and not _alive(int(match.group(2))):
+            if item.is_dir():
+                shutil.rmtree(item, ignore_errors=True)
+            else:
+                item.unlink(missing_ok=True)
+            removed.append(item)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def staging_folder(out: Path, last: str = "summary.json"):
+    """A hidden folder in ``out`` that the run writes every output into; on success each file is
+    moved to its final name (``last`` last), on any exception or signal the folder is
+    removed: an interrupted run never leaves a file under a final name."""
+    stage = out / f".run.partial-{os.getpid()}"
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir()
+    try:
+        yield stage
+        names = sorted((p.name for p in stage.iterdir()), key=lambda name: name == last)
+        for name in names:
+            os.replace(stage / name, out / name)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

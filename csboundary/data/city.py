@@ -56,11 +56,14 @@ def begin_city(city_dir: str | Path) -> Path:
 def read_meta(city_dir: str | Path) -> dict[str, Any]:
     path = Path(city_dir) / META_FILE
     if not path.exists():
-        raise InputError(city_dir, f"not a city directory (no {META_FILE})")
+        raise InputError(city_dir, f"not a city directory (no {META_FILE}: an interrupted synth or import?)")
     try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
+        meta = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(path, f"invalid JSON ({exc})") from exc
+    if not isinstance(meta, dict):
+        raise InputError(path, "invalid city metadata (not a JSON object)")
+    return meta
 
 
 def is_city_dir(path: str | Path) -> bool:

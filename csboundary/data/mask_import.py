@@ -51,7 +51,7 @@ from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 SOURCE = "mask-import"
 PLACEHOLDER_CRS = "EPSG:32618"
 SET_FILE = "set.json"
-MODEL_GSD = SynthConfig().gsd
+from csboundary.data.units import MODEL_GSD  # noqa: E402  (re-exported)
 
 
 @dataclass(frozen=True)

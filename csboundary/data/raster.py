@@ -146,7 +146,10 @@ class Mosaic:
         if crs is None:
             if len(infos) > 1 and all(i[2] == Affine.identity() for i in infos):
                 raise InputError(paths[1], "no CRS and no georeference: tiles cannot be placed in one mosaic")
-            warnings.warn(f"{first[0]}: no CRS; working in pixel coordinates", InputWarning, stacklevel=2)
+            if first[2] == Affine.identity():
+                warnings.warn(f"{first[0]}: no CRS and no georeference; working in pixel coordinates", InputWarning, stacklevel=2)
+            else:
+                warnings.warn(f"{first[0]}: no CRS; coordinates follow the file's geotransform, in unknown units", InputWarning, stacklevel=2)
 
         res_x, res_y = first[2].a, first[2].e
         west = min(i[2].c for i in infos)
@@ -213,8 +216,10 @@ class Mosaic:
             valid[dst_rows, dst_cols] |= mask  # where tiles overlap, a later tile's nodata keeps earlier pixels
         return WindowRead(window, data, valid)
 
-    def _read_reduced(self, window: PixelWindow, scale: float, strip_rows: int = 1024) -> WindowRead:
+    def _read_reduced(self, window: PixelWindow, scale: float, strip_pixels: int = 2**26) -> WindowRead:
         # Not GDAL's decimated reads: GDAL weights its average by band 4 as if it were alpha.
+        # Strips of at most ``strip_pixels`` source pixels keep memory bounded for any width.
+        strip_rows = max(1, min(1024, strip_pixels // max(window.width, 1)))
         height, width = max(1, round(window.height * scale)), max(1, round(window.width * scale))
         data = np.zeros((BANDS, height, width), dtype=np.dtype(self.tiles[0].dtype))
         valid = np.zeros((height, width), dtype=bool)

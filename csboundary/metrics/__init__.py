@@ -81,10 +81,11 @@ def tlts(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricCo
 
 
 def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", grid=None, apls: str = "paper", seed: int = 0,
-             config: MetricConfig = MetricConfig()) -> dict:
-    """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``)."""
+             config: MetricConfig = MetricConfig(), extent: tuple[float, float, float, float] | None = None) -> dict:
+    """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``);
+    at city scale, ``extent`` (the imagery's pixel rectangle) clips both graphs first."""
     if scale == "city":
-        return evaluate_city(pred, gt, apls=apls, seed=seed, config=config)
+        return evaluate_city(pred, gt, apls=apls, seed=seed, config=config, extent=extent)
     if scale == "patch":
         if grid is None:
             raise ValueError("patch scale needs the city's PatchGrid")

@@ -71,9 +71,13 @@ def score_segments(pred: Segments, gt: Segments, pred_px: np.ndarray, gt_px: np.
     return metrics, counts
 
 
-def evaluate_city(pred: BoundaryGraph, gt: BoundaryGraph, *, apls: str = "paper", seed: int = 0, config: MetricConfig = MetricConfig()) -> dict:
-    """City scale: the whole prediction against the whole ground truth (same pixel frame)."""
+def evaluate_city(pred: BoundaryGraph, gt: BoundaryGraph, *, apls: str = "paper", seed: int = 0, config: MetricConfig = MetricConfig(),
+                  extent: tuple[float, float, float, float] | None = None) -> dict:
+    """City scale: the whole prediction against the whole ground truth (same pixel frame); with
+    ``extent`` (x0, y0, x1, y1: the imagery's pixels) both are first clipped to it."""
     pred_seg, gt_seg = flatten(pred), flatten(gt)
+    if extent is not None:
+        pred_seg, gt_seg = clip(pred_seg, *extent), clip(gt_seg, *extent)
     origin = common_origin(pred_seg, gt_seg)  # whole pixels: rasters and results are translation-invariant
     pred_seg, gt_seg = pred_seg.shifted(origin), gt_seg.shifted(origin)
     metrics, counts = score_segments(pred_seg, gt_seg, rasterize(pred_seg), rasterize(gt_seg), np.random.default_rng(seed), apls, config)
@@ -130,7 +134,7 @@ class _PatchBuckets:
         core = grid.config.core
         n_cols = grid.n_cols
         # raster once for the whole city, then hand each core its own pixels
-        px = rasterize(seg)
+        px = rasterize(seg, within=(0, 0, grid.width, grid.height))
         inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] < grid.width) & (px[:, 1] < grid.height)
         px = px[inside]
         cell = (px[:, 1] // core) * n_cols + px[:, 0] // core

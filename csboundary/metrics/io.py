@@ -27,6 +27,7 @@ from csboundary.data.windows import pixel_to_world, world_to_pixel
 from csboundary.errors import InputError
 from csboundary.graph.boundary_graph import FORMAT, BoundaryGraph
 
+MAX_FRAME_PIXELS = 10**12  # 1,000,000 patches of 1000 px: larger than any city (NYC is 250k x 205k px)
 GEOJSON_TYPES = ("FeatureCollection", "Feature", "LineString", "MultiLineString", "GeometryCollection")
 
 
@@ -155,8 +156,20 @@ def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels:
     pred_src, gt_src = read_source(pred_path), read_source(gt_path)
     frame = resolve_frame(pred_src, gt_src, raster, gsd, pixels)
     pred, gt = to_frame(pred_src, frame), to_frame(gt_src, frame)
+    for graph, path in ((pred, pred_src.path), (gt, gt_src.path)):
+        check_finite(graph, path, frame)
     check_overlap(pred, gt, frame, pred_src.path, gt_src.path)
     return pred, gt, frame
+
+
+def check_finite(graph: BoundaryGraph, path, frame: Frame) -> None:
+    """NaN or infinite coordinates (in the file, or from a projection that cannot place them)
+    would poison every metric silently."""
+    parts = [graph.vertices] + [np.asarray(p, dtype=float) for p in (graph.edge_polylines or []) if p is not None]
+    bad = sum(int((~np.isfinite(np.asarray(p, dtype=float).reshape(-1, 2))).any(axis=1).sum()) for p in parts)
+    if bad:
+        raise InputError(path, f"{bad} point(s) have no finite position in the evaluation frame ({frame.source}): "
+                               "NaN or infinite coordinates, or coordinates the frame's CRS cannot hold")
 
 
 def check_overlap(pred: BoundaryGraph, gt: BoundaryGraph, frame: Frame, pred_path, gt_path) -> None:
@@ -189,6 +202,8 @@ def grid_for(frame: Frame, pred: BoundaryGraph, gt: BoundaryGraph) -> PatchGrid:
     height = math.ceil(max([b[3] for b in boxes], default=0))
     if width <= 0 or height <= 0:
         raise InputError("<inputs>", "no boundary lies at positive pixel coordinates: nothing to cut into patches")
+    if width * height > MAX_FRAME_PIXELS:
+        raise InputError("<inputs>", f"the boundaries span {width}x{height} px: give --raster so the patches are the imagery's")
     return PatchGrid(width, height, frame.transform or Affine.identity())
 
 

@@ -12,20 +12,36 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from csboundary.metrics.sampling import Segments
+from csboundary.metrics.sampling import RasterTooLarge, Segments, clip
 
 DEFAULT_TAUS = (2.0, 5.0, 10.0)
 
 
-def rasterize(seg: Segments) -> np.ndarray:
-    """Distinct pixels (P, 2) int64 (col, row) covered by the graph's segments."""
+MAX_RASTER_PIXELS = 100_000_000  # ~3 GB of int64 work arrays; a 40 km city's boundaries need ~1e7
+
+
+def rasterize(seg: Segments, within: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """Distinct pixels (P, 2) int64 (col, row) covered by the graph's segments.
+
+    ``within`` (x0, y0, x1, y1) clips the segments to the raster first, so memory is bounded by
+    the raster, not by the coordinates; without it, a graph covering more than
+    :data:`MAX_RASTER_PIXELS` pixels raises :class:`RasterTooLarge` before anything is allocated.
+    """
+    if within is not None:
+        seg = clip(seg, *within)
     if seg.n_edges == 0:
         return np.zeros((0, 2), dtype=np.int64)
+    if not np.isfinite(seg.points).all():
+        raise ValueError("graph has a vertex with a non-finite coordinate")
     ends = np.floor(seg.points).astype(np.int64)
     a, b = ends[seg.edges[:, 0]], ends[seg.edges[:, 1]]
     delta = b - a
     steps = np.abs(delta).max(axis=1)
     counts = steps + 1
+    total = int(counts.sum())
+    if total > MAX_RASTER_PIXELS:
+        raise RasterTooLarge(f"the boundaries would cover {total:.3g} pixels (limit {MAX_RASTER_PIXELS:.0e}): "
+                             "a coordinate lies far outside the imagery")
     which = np.repeat(np.arange(len(steps)), counts)
     j = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
     t = j / np.maximum(steps, 1)[which]

@@ -27,7 +27,13 @@ from scipy.sparse.csgraph import connected_components
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import chains as find_chains
 
-_MIN_WEIGHT = 1e-9  # csgraph drops zero weights; a zero-length piece still connects its ends
+MAX_SAMPLES = 20_000_000  # sampled points for APLS/TLTS; a 40 km city at 10 px spacing needs ~1e6
+_MIN_WEIGHT = 1e-9
+
+
+class RasterTooLarge(ValueError):
+    """A graph would need more pixels or samples than the metrics' limits: a coordinate far
+    outside the imagery (e.g. a label point at 2e9), not a real road network."""  # csgraph drops zero weights; a zero-length piece still connects its ends
 
 
 @dataclass(frozen=True)
@@ -279,6 +285,9 @@ def resample(seg: Segments, spacing: float) -> SampledGraph:
         seg_arc = before - before[seg_first][seg_chain]
         chain_length = np.bincount(seg_chain, weights=seg_len, minlength=n_chains)
         pieces = np.maximum(1, np.ceil(chain_length / spacing - 1e-9)).astype(np.int64)
+        if pieces.sum() > MAX_SAMPLES:
+            raise RasterTooLarge(f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points): "
+                                 "a coordinate lies far outside the imagery")
         step = chain_length / pieces
         # interior samples j * step, j = 1 .. pieces - 1, located on their segment
         n_inner = pieces - 1

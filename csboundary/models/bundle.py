@@ -9,23 +9,28 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from csboundary.data.units import MODEL_GSD
 from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+from csboundary.models.train import training_pixel_size
 
 
 def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, edge_threshold: float = 0.5, max_degree: int = 2,
                 min_support: float = 0.0, max_length_px: float = 0.0, crossing_spacing_px: int = 0) -> Path:
     """One weights file: both models, their provenance and the inference settings (edge threshold,
     degree cap, edge-support check, grid-crossing vertices; see :mod:`csboundary.graph.edge_support`
-    and :mod:`csboundary.graph.crossings`)."""
+    and :mod:`csboundary.graph.crossings`), and the pixel size the FPN was trained at (imagery is
+    resampled to it)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet",))
     provenance = {
         name: {k: payload.get(k) for k in ("code_version", "code_version_at_start", "train_config", "step", "validation")}
         for name, payload in (("fpn", fpn), ("afanet", afanet))
     }
+    pixel_size = training_pixel_size(fpn.get("train_config") or {}) or MODEL_GSD
     return save_checkpoint(
         out,
         "bundle",
+        pixel_size_m=pixel_size,
         fpn=fpn["fpn"],
         fpn_config=fpn["fpn_config"],
         afanet=afanet["afanet"],

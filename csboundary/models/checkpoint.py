@@ -8,10 +8,12 @@ both models without optimizer state.
 
 from __future__ import annotations
 
+import pickle
 import subprocess
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from csboundary import __version__
@@ -39,24 +41,65 @@ def save_checkpoint(path: str | Path, kind: str, **content: Any) -> Path:
     return Path(path)
 
 
-def load_fpn(source: str | Path | dict, device: torch.device | str = "cpu"):
+def load_fpn(source: str | Path | dict, device: torch.device | str = "cpu", path: str | Path | None = None):
     """csBoundary's FPN, in eval mode on ``device``, from an ``fpn`` checkpoint or a bundle (a
-    path, or a payload already loaded)."""
+    path, or a payload already loaded from ``path``)."""
     from csboundary.models.fpn import fpn_for_weights
 
     payload = source if isinstance(source, dict) else load_checkpoint(source, ("fpn", "bundle"), map_location=device)
-    fpn = fpn_for_weights(payload["fpn_config"]).to(device).eval().to(memory_format=torch.channels_last)
-    fpn.load_state_dict(payload["fpn"])
-    return fpn
+    where = path if path is not None else ("<weights>" if isinstance(source, dict) else source)
+    fpn = restore_model(where, "fpn", payload, fpn_for_weights)
+    return fpn.to(device).eval().to(memory_format=torch.channels_last)
+
+
+def restore_model(path: str | Path, name: str, payload: dict, build):
+    """``build(payload[name + "_config"])`` with ``payload[name]`` loaded into it; a missing field, a
+    config the code cannot build or tensors that do not fit it is one InputError naming the file."""
+    for key in (name, f"{name}_config"):
+        if key not in payload:
+            raise InputError(path, f"damaged weights file: no {key!r} entry")
+    config, state = payload[f"{name}_config"], payload[name]
+    if not isinstance(config, dict) or not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise InputError(path, f"damaged weights file: {name!r} is not a model config and a dict of tensors")
+    try:
+        model = build(config)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise InputError(path, f"damaged weights file: the {name} config cannot be built ({exc})") from exc
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as exc:
+        problem = " ".join(str(exc).split())
+        raise InputError(path, f"damaged weights file: the {name} tensors do not fit its config ({problem[:160]})") from exc
+    return model
+
+
+# Plain data that older checkpoints pickled as numpy scalars (e.g. a validation metric): numpy's
+# scalar reconstructor and dtypes only build numbers, never run code.
+try:
+    from numpy._core.multiarray import scalar as _numpy_scalar  # numpy >= 2
+except ImportError:  # pragma: no cover - numpy 1.x
+    from numpy.core.multiarray import scalar as _numpy_scalar
+_SAFE_NUMPY = [_numpy_scalar, np.dtype, *{type(np.dtype(t)) for t in ("float64", "float32", "int64", "int32", "bool")}]
 
 
 def load_checkpoint(path: str | Path, kinds: tuple[str, ...], map_location="cpu") -> dict[str, Any]:
-    """Load a checkpoint and check that it holds one of ``kinds``; errors name the file."""
+    """Load a checkpoint and check that it holds one of ``kinds``; errors name the file.
+
+    Loading never runs code from the file: ``weights_only=True`` unpickles tensors and plain
+    data only (plus numpy scalars), so a weights file from a stranger cannot execute anything.
+    """
     path = Path(path)
     if not path.exists():
         raise InputError(path, "weights file not found")
+    if path.is_dir():
+        raise InputError(path, "is a folder, not a weights file")
     try:
-        payload = torch.load(path, map_location=map_location, weights_only=False)
+        with torch.serialization.safe_globals(_SAFE_NUMPY):
+            payload = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        if "GLOBAL" in str(exc) or "global" in str(exc):  # the safe unpickler met a class or function
+            raise InputError(path, "refused: the file holds Python objects, not only tensors and plain data (loading it could run code)") from exc
+        raise InputError(path, f"not a readable weights file ({type(exc).__name__})") from exc
     except Exception as exc:  # torch raises many types for foreign or damaged files
         raise InputError(path, f"not a readable weights file ({type(exc).__name__})") from exc
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:

@@ -109,6 +109,25 @@ def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
             {"params": [p for p in model.parameters() if id(p) not in inside], "lr_scale": 1.0}]
 
 
+def training_pixel_size(config: dict) -> float | None:
+    """The pixel size in metres of the cities a (recorded) training config trained on, read from
+    their ``city.json`` without building anything; None when none is on disk or they disagree."""
+    try:
+        cfg = TrainConfig.from_dict(config)
+    except (TypeError, ValueError):
+        return None
+    paths = [cfg.train_city.path(cfg.cache)] if cfg.train_city is not None else []
+    if cfg.worlds:
+        paths += [spec.path(cfg.cache) for spec in WorldsConfig.from_dict(cfg.worlds).specs()]
+    sizes = set()
+    for path in [*paths, *map(Path, cfg.extra_train_cities)]:
+        if layout.is_city_dir(path):
+            gsd = layout.read_meta(path).get("gsd")
+            if isinstance(gsd, (int, float)):
+                sizes.add(round(float(gsd), 6))
+    return sizes.pop() if len(sizes) == 1 else None
+
+
 def training_cities(config: TrainConfig) -> list[TrainingCity]:
     """The synthetic ``train_city`` and ``worlds`` cities (built on first use) and every
     ``extra_train_cities`` directory."""

@@ -19,6 +19,8 @@ from tqdm import tqdm
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.mask_import import SET_FILE
+from csboundary.data.model_view import model_view
+from csboundary.data.units import MODEL_GSD
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError, InputWarning
 from csboundary.pipeline.city import PatchModel, predict_city
@@ -53,7 +55,7 @@ def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[
     """City-scale scores of ``model`` on one city directory (RGB cities read without warnings)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", InputWarning)  # 3-band crops: NIR := green is the documented rule
-        mosaic = Mosaic.open(layout.tiles_dir(city_dir))
+        mosaic = model_view(Mosaic.open(layout.tiles_dir(city_dir)), model_gsd=getattr(model, "pixel_size_m", MODEL_GSD), assume_model_gsd=True).mosaic
     with mosaic:
         lines = list(read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs).geometry)
         result = predict_city(mosaic, model, progress=False)

@@ -10,6 +10,7 @@ the ``scale`` tag say so) to keep city-sized maps small.
 from __future__ import annotations
 
 import contextlib
+import os
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,7 @@ class StitchedMapWriter(contextlib.AbstractContextManager):
     def __init__(self, path: str | Path, mosaic: Mosaic):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._scratch = self.path.with_name(f".{self.path.stem}.scratch.tif")
+        self._scratch = self.path.with_name(f".{self.path.stem}.scratch-{os.getpid()}.tif")
         self._dst = rasterio.open(
             self._scratch, "w", driver="GTiff", width=mosaic.width, height=mosaic.height, count=len(BANDS), dtype="uint8",
             crs=mosaic.crs, transform=mosaic.transform, tiled=True, blockxsize=512, blockysize=512, compress="deflate", BIGTIFF="IF_SAFER",

@@ -7,8 +7,8 @@ as predicted, to trace a boundary back to its edges, scores and source patches).
 ``graph.json`` keeps the graph itself (pixel and world coordinates) for the metrics.
 
 Geometry is in the world coordinates of ``graph.crs`` (no reprojection, so the GeoJSON is in the
-same CRS as the GeoPackage, not RFC 7946's WGS 84); lengths are in its units (metres for the
-projected CRSs the pipeline works in). The boundaries layer is the ground-truth layer name, so
+same CRS as the GeoPackage, not RFC 7946's WGS 84); ``length_m`` is true metres in every CRS
+(:mod:`csboundary.data.units`: geodesic for degrees, the unit's size for feet). The boundaries layer is the ground-truth layer name, so
 :func:`csboundary.data.ground_truth.read_ground_truth` reads the output back directly.
 """
 
@@ -25,6 +25,7 @@ from shapely.geometry import LineString
 
 from csboundary.data.atomic import atomic_path
 from csboundary.data.ground_truth import LAYER as BOUNDARIES_LAYER
+from csboundary.data.units import GroundUnits, ground_units
 from csboundary.data.windows import pixel_to_world
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import edge_line, merge_chains
@@ -32,27 +33,28 @@ from csboundary.graph.chains import edge_line, merge_chains
 EDGES_LAYER = "edges"
 
 
-def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "boundaries") -> dict[str, Path]:
+def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "boundaries", units: GroundUnits | None = None) -> dict[str, Path]:
     """Write ``{stem}.gpkg``, ``{stem}.geojson`` and ``graph.json`` into ``out_dir``.
 
     All three are written to temporary names first and renamed only once all of them are
     complete, so an interrupted run leaves either the previous files or none, never a partial
     one. Returns the paths under the keys ``gpkg``, ``geojson`` and ``graph_json``.
     """
-    boundaries, edges = graph_frames(graph)
+    boundaries, edges = graph_frames(graph, units)
     out_dir = Path(out_dir)
     paths = {"gpkg": out_dir / f"{stem}.gpkg", "geojson": out_dir / f"{stem}.geojson", "graph_json": out_dir / "graph.json"}
     with ExitStack() as stack:
         tmp = {key: stack.enter_context(atomic_path(path)) for key, path in paths.items()}
         _write_layer(boundaries, tmp["gpkg"], BOUNDARIES_LAYER, "GPKG")
         _write_layer(edges, tmp["gpkg"], EDGES_LAYER, "GPKG")
-        _write_layer(boundaries, tmp["geojson"], None, "GeoJSON")
+        _write_layer(boundaries, tmp["geojson"], stem, "GeoJSON")  # the layer name is in the file: never the temporary's
         graph.write_json(tmp["graph_json"])
     return paths
 
 
-def graph_frames(graph: BoundaryGraph) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
-    """The ``road_boundaries`` and ``edges`` tables of ``graph`` in world coordinates.
+def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
+    """The ``road_boundaries`` and ``edges`` tables of ``graph`` in world coordinates; lengths in
+    metres through ``units`` (default: those of ``graph.crs``, or the CRS's units without one).
 
     Boundary confidence is the length-weighted mean of its edges' scores (a long confident edge
     should outweigh a short doubtful one), ignoring missing (NaN) scores; NaN if none is known.
@@ -63,9 +65,11 @@ def graph_frames(graph: BoundaryGraph) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFra
     def world(line: np.ndarray) -> np.ndarray:
         return np.stack(pixel_to_world(graph.transform, line[:, 0], line[:, 1]), axis=1)
 
+    if units is None:
+        units = ground_units(graph.crs, _centre(graph)) or GroundUnits((1.0, 1.0), "unknown")
     n = graph.n_edges
     edge_lines = [world(edge_line(graph, k)) for k in range(n)]
-    length = np.array([_length(line) for line in edge_lines], dtype=float)
+    length = np.array([units.line_length_m(line) for line in edge_lines], dtype=float)
     score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, dtype=float).reshape(n)
     corner = np.array([kind == "corner" for kind in graph.edge_kinds or [""] * n], dtype=bool)
     patch = np.full((n, 2), -1, dtype=np.int64) if graph.edge_patches is None else graph.edge_patches
@@ -81,7 +85,7 @@ def graph_frames(graph: BoundaryGraph) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFra
         known = np.isfinite(score[k])
         distinct = dict.fromkeys(map(tuple, patch[k][patch[k, 0] >= 0].tolist()))
         geometry.append(LineString(line))
-        rows["length_m"].append(_length(line))
+        rows["length_m"].append(units.line_length_m(line))
         rows["n_edges"].append(len(k))
         rows["confidence_mean"].append(_weighted_mean(score[k][known], length[k][known]))
         rows["confidence_min"].append(float(score[k][known].min()) if known.any() else np.nan)
@@ -127,8 +131,11 @@ def _write_layer(frame: gpd.GeoDataFrame, path: Path, layer: str | None, driver:
         pyogrio.write_dataframe(frame, path, layer=layer, driver=driver, geometry_type="LineString")
 
 
-def _length(line: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum()) if len(line) > 1 else 0.0
+def _centre(graph: BoundaryGraph) -> tuple[float, float] | None:
+    if graph.n_vertices == 0 or graph.transform is None:
+        return None
+    xs, ys = pixel_to_world(graph.transform, graph.vertices[:, 0], graph.vertices[:, 1])
+    return float(np.mean(xs)), float(np.mean(ys))
 
 
 def _weighted_mean(values: np.ndarray, weights: np.ndarray) -> float:

@@ -7,6 +7,7 @@ score = symmetric adjacency probability).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -20,7 +21,9 @@ from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint, load_fpn
+from csboundary.data.units import MODEL_GSD
+from csboundary.errors import InputError
+from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN
 from csboundary.pipeline.maps import image_tensor, predict_probabilities
 
@@ -50,6 +53,7 @@ class PatchPredictor:
     max_degree: int | None = 2
     support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
     crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
+    pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
 
     @classmethod
     def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
@@ -57,14 +61,22 @@ class PatchPredictor:
         ``fpn_weights``."""
         path = Path(weights) if weights else shipped_weights()
         payload = load_checkpoint(path, ("bundle", "afanet"), map_location=device)
-        fpn = load_fpn(payload if payload["kind"] == "bundle" else fpn_weights or payload["train_config"]["fpn_weights"], device)
-        afanet = AfANet(AfANetConfig.from_dict(payload["afanet_config"])).to(device).eval()
-        afanet.load_state_dict(payload["afanet"])
-        settings = payload.get("inference", {})
+        if payload["kind"] == "bundle":
+            fpn = load_fpn(payload, device, path)
+        else:
+            source = fpn_weights or (payload.get("train_config") or {}).get("fpn_weights")
+            if not source:
+                raise InputError(path, "is an AfANet checkpoint without the FPN it was trained with; give --fpn-weights")
+            fpn = load_fpn(source, device)
+        afanet = restore_model(path, "afanet", payload, lambda c: AfANet(AfANetConfig.from_dict(c))).to(device).eval()
+        settings = inference_settings(payload.get("inference", {}), path)
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
+        pixel_size = payload.get("pixel_size_m", MODEL_GSD)
+        if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
+            raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support, crossings=crossings)
+                   support=support, crossings=crossings, pixel_size_m=float(pixel_size))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
         return predict_probabilities(self.fpn, image, self.device)
@@ -102,6 +114,29 @@ class PatchPredictor:
         if maps is None:
             maps = self.maps(image)
         return self.connect(None, image, maps, self.extract(maps))
+
+
+# name -> (smallest, largest, integer) of each inference setting a bundle may carry
+INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
+                      "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True)}
+
+
+def inference_settings(settings, path: str | Path) -> dict:
+    """A bundle's inference settings, checked: an edge threshold of 7 or a degree cap of -1 would
+    silently drop every edge, so an out-of-range or unknown value is an InputError naming the file."""
+    if not isinstance(settings, dict):
+        raise InputError(path, "damaged weights file: 'inference' is not a table of settings")
+    for key, value in settings.items():
+        if key not in INFERENCE_SETTINGS:
+            raise InputError(path, f"unknown inference setting {key!r} (known: {', '.join(INFERENCE_SETTINGS)})")
+        low, high, integer = INFERENCE_SETTINGS[key]
+        if key == "max_degree" and value is None:
+            continue
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and low <= value <= high
+        if not ok or (integer and int(value) != value):
+            kind = "an integer" if integer else "a number"
+            raise InputError(path, f"inference setting {key} = {value!r} must be {kind} from {low:g} to {high:g}")
+    return settings
 
 
 def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: float, max_degree: int | None) -> BoundaryGraph:

@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 import rasterio
 
-from csboundary.data.atomic import atomic_path
+from csboundary.data.atomic import check_output_dir, clear_stale_temporaries, staging_folder
 from csboundary.data.grid import GridConfig
 from csboundary.data.raster import Mosaic
+from csboundary.data.units import GroundUnits, ground_units
 from csboundary.graph.stitching import StitchConfig
 from csboundary.pipeline.city import GDAL_CACHE_MB, STAGES, CityResult, PatchModel, predict_city
 from csboundary.pipeline.map_output import StitchedMapWriter
@@ -38,46 +39,57 @@ SUMMARY = "summary.json"
 
 def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, write_maps: bool = False, batch_size: int = 1,
                    grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(), progress: bool = True,
-                   settings: dict | None = None, ground_truth=()) -> tuple[CityResult, dict]:
+                   settings: dict | None = None, ground_truth=(), units: GroundUnits | None = None) -> tuple[CityResult, dict]:
     """Predict ``mosaic`` and write every output into ``out_dir``; returns the result and the summary.
 
     ``ground_truth`` (world LineStrings), when given, is drawn in cyan under the prediction.
+    ``units`` turns coordinates into metres (default: the mosaic CRS's; see
+    :func:`csboundary.data.model_view.model_view`, which also gives them for CRS-less imagery).
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    if units is None:
+        units = mosaic_units(mosaic)
+    out = check_output_dir(out_dir, create=True)
+    clear_stale_temporaries(out)  # what a run killed with SIGKILL left behind
     (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
     start = time.perf_counter()
-    with contextlib.ExitStack() as stack:
+    with staging_folder(out) as stage, contextlib.ExitStack() as stack:
         stack.enter_context(rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB))  # overviews read every tile too
-        writer = stack.enter_context(StitchedMapWriter(out / "maps.tif", mosaic)) if write_maps else None
+        writer = stack.enter_context(StitchedMapWriter(stage / "maps.tif", mosaic)) if write_maps else None
         result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress, on_window=writer)
         if writer is not None:
             writer.close()
         rss_after_prediction = peak_rss_mb()
         written_at = time.perf_counter()
-        files = write_graph_outputs(result.graph, out)
-        files.update(write_overlays(mosaic, result, out, ground_truth))
-    if write_maps:
-        files["maps"] = out / "maps.tif"
-    seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
-    seconds["total"] = time.perf_counter() - start
-    summary = summarize(mosaic, result, seconds, files, settings or {})
-    summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
-    with atomic_path(out / SUMMARY) as tmp:
-        tmp.write_text(json.dumps(summary, indent=1) + "\n")
+        files = write_graph_outputs(result.graph, stage, units=units)
+        files.update(write_overlays(mosaic, result, stage, ground_truth))
+        if write_maps:
+            files["maps"] = stage / "maps.tif"
+        seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
+        seconds["total"] = time.perf_counter() - start
+        summary = summarize(mosaic, result, seconds, files, settings or {}, units)
+        summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
+        (stage / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n")
     return result, summary
 
 
-def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict) -> dict:
-    """Counts, timings and throughput of one run (JSON-ready)."""
+def mosaic_units(mosaic: Mosaic) -> GroundUnits:
+    """The ground units of the mosaic's CRS at its centre (pixels as metres without a CRS)."""
+    centre = mosaic.pixel_to_world(mosaic.width / 2, mosaic.height / 2)
+    return ground_units(mosaic.crs, (float(centre[0]), float(centre[1]))) or GroundUnits((1.0, 1.0), "pixel")
+
+
+def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict, units: GroundUnits | None = None) -> dict:
+    """Counts, timings and throughput of one run (JSON-ready); areas and lengths in true metres."""
     graph = result.graph
-    gsd_x, gsd_y = abs(mosaic.transform.a), abs(mosaic.transform.e)
-    area_km2 = mosaic.width * mosaic.height * gsd_x * gsd_y / 1e6
+    units = units or mosaic_units(mosaic)
+    area_km2 = units.area_km2(mosaic.bounds)
+    boundary_m = sum(units.line_length_m(np.asarray(line.coords)) for line in graph.to_linestrings(world=True)) if graph.n_edges else 0.0
     n = result.n_patches
     kinds = graph.edge_kinds or []
     return {
         "inputs": [str(t.path) for t in mosaic.tiles],
         "crs": graph.crs,
+        "length_unit": f"metre (from {units.unit_name}{', geodesic' if units.geographic else ''})",
         "mosaic_px": [mosaic.width, mosaic.height],
         "area_km2": round(area_km2, 6),
         "patches": n,
@@ -86,7 +98,7 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
             "vertices": graph.n_vertices,
             "edges": graph.n_edges,
             "corner_edges": sum(k == "corner" for k in kinds),
-            "boundary_km": round(float(graph.edge_lengths().sum()) * gsd_x / 1000, 4),
+            "boundary_km": round(boundary_m / 1000, 4),
             "patch_graph_edges": int(sum(g.n_edges for g in result.patch_graphs.values())),
             "vertex_pairs_within_1px": count_close_pairs(graph.vertices, 1.0),
         },
@@ -144,5 +156,5 @@ def evaluate_run(result: CityResult, ground_truth, seed: int = 0) -> dict[str, d
     gt = BoundaryGraph.from_world_lines(list(ground_truth), result.grid.transform)
     return {
         "patch": evaluate(patch_scale_graph(result), gt, scale="patch", grid=result.grid, seed=seed),
-        "city": evaluate(result.graph, gt, scale="city", seed=seed),
+        "city": evaluate(result.graph, gt, scale="city", seed=seed, extent=(0, 0, result.grid.width, result.grid.height)),
     }

@@ -49,7 +49,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.labels.boundaries import Boundary
 from csboundary.labels.select import near_window
 from csboundary.models.afanet import crop_rois
-from csboundary.models.checkpoint import load_checkpoint, load_fpn
+from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN
 from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity
@@ -360,9 +360,8 @@ class Model:
         """The agent of an ``icurb`` checkpoint plus the FPN ``seg_weights`` (default: the one it
         was trained with, else the shipped bundle)."""
         payload = load_checkpoint(path, (KIND,), map_location=device)
+        agent = restore_model(path, KIND, payload, lambda c: Agent(ICurbConfig.from_dict(c))).to(device)
         config = ICurbConfig.from_dict(payload[f"{KIND}_config"])
-        agent = Agent(config).to(device)
-        agent.load_state_dict(payload[KIND])
         return cls(agent, config, _load_fpn(seg_weights or payload["train_config"].get("fpn_weights") or None, device), device)
 
     def patch_maps(self, patches: list, images: list[np.ndarray]) -> list[np.ndarray]:

@@ -28,7 +28,7 @@ import torch.nn.functional as F
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 from csboundary.labels.rasterize import orientation_label
-from csboundary.models.checkpoint import load_checkpoint
+from csboundary.models.checkpoint import load_checkpoint, restore_model
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity
@@ -233,8 +233,7 @@ class Model:
     @classmethod
     def load(cls, path: str | Path, device: torch.device) -> "Model":
         payload = load_checkpoint(path, (KIND,), map_location=device)
-        pair = _Pair.from_config(payload[f"{KIND}_config"]).to(device)
-        pair.load_state_dict(payload[KIND])
+        pair = restore_model(path, KIND, payload, _Pair.from_config).to(device)
         return cls(pair, device)
 
     @torch.no_grad()

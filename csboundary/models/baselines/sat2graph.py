@@ -41,7 +41,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint, load_fpn
+from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
 from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity, augment
@@ -315,8 +315,7 @@ class Model:
         """A ``sat2graph`` checkpoint plus the keypoint FPN of a csBoundary bundle or ``fpn``
         checkpoint (default: the shipped bundle)."""
         payload = load_checkpoint(path, (KIND,), map_location=device)
-        net = fpn_for_weights(payload[f"{KIND}_config"]).to(device).eval()
-        net.load_state_dict(payload[KIND])
+        net = restore_model(path, KIND, payload, fpn_for_weights).to(device).eval()
         keypoint_fpn = load_fpn(keypoint_weights or shipped_weights(), device)
         return cls(net, keypoint_fpn, device, Sat2GraphOptions.from_dict(payload["train_config"].get("options", {})))
 
