@@ -40,6 +40,7 @@ from affine import Affine
 from rasterio.crs import CRS
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from scipy.spatial import cKDTree
+import shapely
 from shapely.geometry import LineString
 from tqdm import tqdm
 
@@ -247,6 +248,26 @@ def read_dense_seq(path: str | Path) -> list[np.ndarray]:
             raise InputError(path, f"boundary {k} has no valid 'seq' list of [row, col] pairs")
         seqs.append(np.asarray(seq, dtype=float).reshape(-1, 2))
     return seqs
+
+
+LABEL_MARGIN = 2.0  # px a label point may lie outside its patch (annotation on the border) before it is clipped
+
+
+def _inside_patch(seq: np.ndarray, patch_size: int) -> np.ndarray:
+    return ((seq >= -LABEL_MARGIN) & (seq <= patch_size + LABEL_MARGIN)).all(axis=1)
+
+
+def clip_to_patch(seq: np.ndarray, patch_size: int) -> list[np.ndarray]:
+    """The parts of a ``[row, col]`` label inside its patch (plus :data:`LABEL_MARGIN`): a point
+    thousands of pixels away is an annotation error, and kept it would make every later raster
+    of the tile as large as its coordinates."""
+    if _inside_patch(seq, patch_size).all():
+        return [seq]
+    if len(seq) == 1:
+        return []
+    low, high = -LABEL_MARGIN, patch_size + LABEL_MARGIN
+    clipped = shapely.clip_by_rect(LineString(seq), low, low, high, high)
+    return [np.asarray(part.coords) for part in getattr(clipped, "geoms", [clipped]) if isinstance(part, LineString) and not part.is_empty]
 
 
 # -- georeference (pure) ----------------------------------------------------------------------------
@@ -472,7 +493,13 @@ def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATC
         if pid in index.labels:
             _, row, col = parse_patch_id(pid)
             offset = np.array([row * patch_size, col * patch_size], dtype=float)
-            pieces.extend(Piece(pid, seq + offset) for seq in read_dense_seq(index.labels[pid]) if len(seq))
+            seqs = read_dense_seq(index.labels[pid])
+            kept = [part for seq in seqs if len(seq) for part in clip_to_patch(seq, patch_size)]
+            outside = sum(int((~_inside_patch(seq, patch_size)).sum()) for seq in seqs)
+            if outside:
+                warnings.warn(f"{index.labels[pid]}: {outside} label point(s) lie more than {LABEL_MARGIN:g} px outside the "
+                              f"{patch_size} px patch; the boundaries are clipped to it", InputWarning, stacklevel=2)
+            pieces.extend(Piece(pid, part + offset) for part in kept)
     joined = join_pieces(pieces)
     lines = [pixels_to_line(transform, points) for points, _ in joined]
     return AssembledTile(

@@ -1,0 +1,315 @@
+"""Hostile input, one case per class: bad file, band count, data type, CRS, pixel size,
+geotransform, weights, output location, signals, huge coordinates. Each case runs the command
+line as a user does and asserts the exit code, the single ``error:`` line on stderr and what is
+left on disk (nothing under a final name unless the run completed)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from affine import Affine
+
+from csboundary.data.geotiff import write_geotiff
+from csboundary.models.afanet import AfANet, AfANetConfig
+from csboundary.models.checkpoint import FORMAT, save_checkpoint
+from csboundary.models.fpn import FPN, FPNConfig
+from helpers import run_cli
+
+UTM = "EPSG:32618"
+GSD = 0.3  # the tiny test bundle's pixel size, so 0.3 m test imagery is used as it is
+
+
+def tiny_bundle(path: Path, **changes) -> Path:
+    torch.manual_seed(0)
+    fpn_config = FPNConfig(widths=(8, 8, 8, 8), blocks=(1, 1, 1, 1), pyramid=8, stem=8)
+    afanet_config = AfANetConfig(global_size=64, roi=16, encoder_widths=(8, 8), dim=32, layers=1)
+    fpn = FPN(fpn_config)
+    with torch.no_grad():
+        fpn.head[-1].bias.fill_(-3.0)
+    content = {"fpn": fpn.state_dict(), "fpn_config": fpn_config.to_dict(), "afanet": AfANet(afanet_config).state_dict(),
+               "afanet_config": afanet_config.to_dict(), "inference": {"edge_threshold": 0.5, "max_degree": 2}, "pixel_size_m": GSD}
+    content.update(changes)
+    content = {k: v for k, v in content.items() if v is not None}
+    return save_checkpoint(path, "bundle", **content)
+
+
+def image(path: Path, size: int = 300, bands: int = 4, dtype=np.uint8, transform=None, crs=UTM, fill=None) -> Path:
+    rng = np.random.default_rng(0)
+    data = rng.integers(0, 200, (bands, size, size)).astype(dtype) if fill is None else np.full((bands, size, size), fill, dtype)
+    return write_geotiff(path, data, transform or Affine(GSD, 0, 500000, 0, -GSD, 4400000), crs)
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    root = tmp_path_factory.mktemp("hostile")
+    return {"root": root, "bundle": tiny_bundle(root / "bundle.pt"), "tif": image(root / "ok.tif")}
+
+
+def one_error(result: subprocess.CompletedProcess, *needles: str) -> str:
+    """The run failed with exit 2 and exactly one ``error:`` line holding every needle."""
+    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith("warning:")]
+    assert result.returncode == 2, result.stderr
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "Traceback" not in result.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+def predict(world, *inputs, out=None, extra=()):
+    out = out or world["root"] / "out"
+    return run_cli("predict", *map(str, inputs), "--out", str(out), "--weights", str(world["bundle"]), "--device", "cpu", "--quiet", *extra)
+
+
+def final_files(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+
+
+# -- files and pixels ---------------------------------------------------------------------------------
+def test_a_text_file_is_not_a_raster(world, tmp_path):
+    bad = tmp_path / "notes.tif"
+    bad.write_text("hello")
+    one_error(predict(world, bad, out=tmp_path / "out"), str(bad), "not a raster")
+    assert not (tmp_path / "out").exists()  # refused before any output folder was made
+
+
+def test_two_bands_are_refused_naming_the_file(world, tmp_path):
+    path = image(tmp_path / "two.tif", bands=2)
+    one_error(predict(world, path, out=tmp_path / "out"), str(path), "2 band(s)")
+    assert not (tmp_path / "out").exists()
+
+
+def test_float_imagery_with_nan_is_stretched_and_nan_is_nodata(world, tmp_path):
+    data = np.random.default_rng(1).random((4, 300, 300)).astype(np.float32) * 0.3
+    data[:, :50] = np.nan
+    path = write_geotiff(tmp_path / "float.tif", data, Affine(GSD, 0, 500000, 0, -GSD, 4400000), UTM)
+    result = predict(world, path, out=tmp_path / "out")
+    assert result.returncode == 0, result.stderr
+    assert f"{path}: float32 imagery stretched to 8 bits" in result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["settings"]["stretch"]["high"][0] <= 0.3
+
+
+def test_uint16_imagery_runs_with_a_stretch(world, tmp_path):
+    path = image(tmp_path / "u16.tif", dtype=np.uint16)
+    result = predict(world, path, out=tmp_path / "out")
+    assert result.returncode == 0 and "uint16 imagery stretched" in result.stderr
+
+
+# -- georeference ------------------------------------------------------------------------------------
+def test_no_crs_needs_the_pixel_size(world, tmp_path):
+    path = image(tmp_path / "plain.tif", transform=Affine.identity(), crs=None)
+    one_error(predict(world, path, out=tmp_path / "out"), str(path), "no CRS", "--gsd")
+    assert not (tmp_path / "out").exists()
+    result = predict(world, path, out=tmp_path / "out", extra=("--gsd", "0.3"))
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["area_km2"] == pytest.approx(300 * 300 * 0.09 / 1e6, rel=1e-6)  # pixels of 0.3 m, not of 1 m
+
+
+def test_pixel_size_far_from_the_models_is_refused(world, tmp_path):
+    path = image(tmp_path / "coarse.tif", transform=Affine(4.5, 0, 500000, 0, -4.5, 4400000))
+    one_error(predict(world, path, out=tmp_path / "out"), str(path), "pixel size 4.5 m is outside")
+
+
+def test_resampled_pixel_size_is_warned_and_lengths_stay_metres(world, tmp_path):
+    path = image(tmp_path / "fine.tif", size=400, transform=Affine(0.15, 0, 500000, 0, -0.15, 4400000))
+    result = predict(world, path, out=tmp_path / "out")
+    assert result.returncode == 0, result.stderr
+    assert "pixel size 0.15 m resampled to the model's 0.3 m" in result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["mosaic_px"] == [200, 200] and summary["area_km2"] == pytest.approx(0.0036, rel=1e-6)
+
+
+def test_rotated_georeference_is_refused(world, tmp_path):
+    path = image(tmp_path / "rot.tif", transform=Affine(0.2, 0.1, 500000, 0.1, -0.2, 4400000))
+    one_error(predict(world, path, out=tmp_path / "out"), str(path), "rotated")
+
+
+def test_us_feet_are_converted_to_metres(world, tmp_path):
+    feet = 0.3 / 0.3048006096  # one pixel is 0.3 m, expressed in US survey feet
+    path = image(tmp_path / "feet.tif", transform=Affine(feet, 0, 980000, 0, -feet, 200000), crs="EPSG:2263")
+    result = predict(world, path, out=tmp_path / "out")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["area_km2"] == pytest.approx(300 * 300 * 0.09 / 1e6, rel=1e-3)
+    assert "US survey foot" in summary["length_unit"]
+
+
+def test_geographic_crs_is_measured_on_the_ellipsoid(world, tmp_path):
+    from pyproj import Geod
+
+    lat = 40.7
+    dlon, dlat = 0.3 / 84305.0, 0.3 / 111040.0  # about 0.3 m at 40.7 N
+    path = image(tmp_path / "wgs84.tif", transform=Affine(dlon, 0, -74.0, 0, -dlat, lat), crs="EPSG:4326")
+    result = predict(world, path, out=tmp_path / "out")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    area, _ = Geod(ellps="WGS84").polygon_area_perimeter([-74, -74 + 300 * dlon, -74 + 300 * dlon, -74], [lat - 300 * dlat] * 2 + [lat] * 2)
+    assert summary["area_km2"] == pytest.approx(abs(area) / 1e6, rel=1e-3)
+    assert summary["area_km2"] > 0.005 and "geodesic" in summary["length_unit"]
+    assert summary["mosaic_px"][0] == pytest.approx(300, abs=3)  # square 0.3 m pixels on the ground
+
+
+# -- weights -----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("case, needle", [
+    ("junk", "not a readable weights file"),
+    ("no_fpn_config", "no 'fpn_config' entry"),
+    ("wrong_shapes", "tensors do not fit its config"),
+    ("edge_threshold_7", "edge_threshold = 7"),
+    ("max_degree_minus_1", "max_degree = -1"),
+    ("code", "refused"),
+    ("folder", "is a folder"),
+])
+def test_damaged_or_hostile_weights_are_one_line(world, tmp_path, case, needle):
+    path = tmp_path / "w.pt"
+    marker = tmp_path / "PWNED"
+    if case == "junk":
+        path.write_text("no weights here")
+    elif case == "no_fpn_config":
+        tiny_bundle(path, fpn_config=None)
+    elif case == "wrong_shapes":
+        other = FPN(FPNConfig(widths=(16, 16, 16, 16), blocks=(1, 1, 1, 1), pyramid=8, stem=8)).state_dict()
+        tiny_bundle(path, fpn=other)
+    elif case == "edge_threshold_7":
+        tiny_bundle(path, inference={"edge_threshold": 7})
+    elif case == "max_degree_minus_1":
+        tiny_bundle(path, inference={"max_degree": -1})
+    elif case == "code":
+        class Evil:
+            def __reduce__(self):
+                return (os.system, (f"touch {marker}",))
+        torch.save({"format": FORMAT, "kind": "bundle", "x": Evil()}, path)
+    elif case == "folder":
+        path.mkdir()
+    result = run_cli("predict", str(world["tif"]), "--out", str(tmp_path / "out"), "--weights", str(path), "--device", "cpu", "--quiet")
+    one_error(result, str(path), needle)
+    assert not marker.exists()  # nothing in a weights file ever runs
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("device, needle", [("tpu", "must be auto, cpu, cuda"), ("cuda:7", "CUDA")])
+def test_unknown_or_missing_device_is_one_line(world, tmp_path, device, needle):
+    if device.startswith("cuda") and torch.cuda.device_count() > 7:
+        pytest.skip("this machine has 8 GPUs")
+    one_error(predict(world, world["tif"], out=tmp_path / "out", extra=("--device", device)), "--device", needle)
+
+
+# -- output location ---------------------------------------------------------------------------------
+def test_out_naming_an_existing_file_is_refused_before_work(world, tmp_path):
+    taken = tmp_path / "taken"
+    taken.write_text("keep me")
+    one_error(predict(world, world["tif"], out=taken), str(taken), "not a folder")
+    assert taken.read_text() == "keep me"
+
+
+def test_out_below_a_file_is_refused(world, tmp_path):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("x")
+    one_error(predict(world, world["tif"], out=blocker / "out"), "is a file")
+
+
+def test_out_inside_the_input_folder_is_refused(world, tmp_path):
+    folder = tmp_path / "tiles"
+    image(folder / "a.tif")
+    one_error(predict(world, folder, out=folder / "pred"), "inside the input folder")
+    assert final_files(folder) == ["a.tif"]
+
+
+def test_json_and_picture_outputs_are_checked_first(world, tmp_path):
+    city = tmp_path / "city"
+    assert run_cli("synth", str(city), "--tile-size", "300", "--gsd", "0.3", "--quiet").returncode == 0
+    one_error(run_cli("show", str(city), "--out", str(tmp_path / "picture")), "needs one of the extensions .png")
+    one_error(run_cli("show", str(city), "--out", str(tmp_path)), "is a folder")
+    one_error(run_cli("evaluate-model", str(city), "--weights", str(world["bundle"]), "--json", str(tmp_path), "--quiet"), "is a folder")
+
+
+def test_a_city_folder_without_city_json_is_refused(world, tmp_path):
+    city = tmp_path / "city"
+    image(city / "tiles" / "t.tif")
+    one_error(predict(world, city, out=tmp_path / "out"), "no city.json")
+
+
+# -- signals and leftovers ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def slow_city(tmp_path_factory):
+    city = tmp_path_factory.mktemp("slow") / "city"
+    done = run_cli("synth", str(city), "--tiles", "2x2", "--tile-size", "1200", "--gsd", "0.3", "--quiet")
+    assert done.returncode == 0, done.stderr
+    return city
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_leaves_no_final_file_and_no_temporary(world, slow_city, tmp_path, signum, code):
+    out = tmp_path / "out"
+    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(slow_city), "--out", str(out), "--weights", str(world["bundle"]),
+                            "--device", "cpu", "--quiet", "--write-maps"], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not any(p.name.startswith(".run.partial-") for p in (out.iterdir() if out.exists() else [])):
+        assert job.poll() is None and time.time() < deadline, "the run ended before it could be interrupted"
+        time.sleep(0.05)
+    time.sleep(0.5)
+    job.send_signal(signum)
+    _, err = job.communicate(timeout=60)
+    assert job.returncode == code, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("interrupted")
+    assert final_files(out) == []  # no final file, no temporary, no scratch
+
+
+def test_leftovers_of_a_killed_run_are_cleared_by_the_next(world, tmp_path):
+    out = tmp_path / "out"
+    dead = 2**22 + 12345  # above Linux's default pid_max of 4194304: no such process
+    (out / f".run.partial-{dead}").mkdir(parents=True)
+    (out / f".run.partial-{dead}" / "maps.tif").write_bytes(b"x" * 1000)
+    (out / f".maps.scratch-{dead}.tif").write_bytes(b"x" * 1000)
+    (out / f".maps.partial-{dead}.tif.ovr.tmp").write_bytes(b"x")
+    result = predict(world, world["tif"], out=out)
+    assert result.returncode == 0, result.stderr
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    assert "summary.json" in final_files(out)
+
+
+def test_geojson_layer_is_named_boundaries_not_the_temporary(world, tmp_path):
+    assert predict(world, world["tif"], out=tmp_path / "out").returncode == 0
+    assert json.loads((tmp_path / "out" / "boundaries.geojson").read_text())["name"] == "boundaries"
+
+
+# -- huge coordinates --------------------------------------------------------------------------------
+def test_a_far_away_label_point_is_refused_in_one_line_without_memory(tmp_path):
+    gt = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {
+        "type": "LineString", "coordinates": [[10, 10], [-500, 2e9]]}}]}
+    pred = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {
+        "type": "LineString", "coordinates": [[10, 10], [50, 50]]}}]}
+    (tmp_path / "gt.geojson").write_text(json.dumps(gt))
+    (tmp_path / "pred.geojson").write_text(json.dumps(pred))
+    result = run_cli("evaluate", str(tmp_path / "pred.geojson"), str(tmp_path / "gt.geojson"), "--pixels", timeout=120)
+    one_error(result, "far outside the imagery")
+
+
+def test_an_infinite_vertex_is_refused(tmp_path):
+    from csboundary.graph.boundary_graph import FORMAT as GRAPH, VERSION
+
+    graph = {"format": GRAPH, "version": VERSION, "vertices": [{"px": [0, 0]}, {"px": [float("inf"), 5]}], "edges": [{"u": 0, "v": 1}]}
+    (tmp_path / "g.json").write_text(json.dumps(graph))
+    one_error(run_cli("evaluate", str(tmp_path / "g.json"), str(tmp_path / "g.json"), "--pixels"), "g.json", "finite")
+
+
+def test_show_clips_a_huge_window_to_the_imagery(world, tmp_path):
+    result = run_cli("show", str(world["tif"]), "--out", str(tmp_path / "a.png"), "--window", "0,0,10000000,10000000", timeout=120)
+    assert result.returncode == 0, result.stderr
+    one_error(run_cli("show", str(world["tif"]), "--out", str(tmp_path / "b.png"), "--window", "5000,5000,10,10"), "outside the imagery")
+    assert not (tmp_path / "b.png").exists()
+
+
+def test_nan_and_inf_options_are_usage_errors(world, tmp_path):
+    one_error(run_cli("synth", str(tmp_path / "c"), "--gsd", "nan"), "--gsd")
+    one_error(predict(world, world["tif"], out=tmp_path / "o", extra=("--gsd", "inf")), "--gsd")
