@@ -564,3 +564,23 @@ def test_a_reduced_read_is_the_block_mean_across_tiles(shared_tiles):
     assert np.abs(corner.data.astype(float) - mean[:, 15:25, 25:35]).max() <= 0.5
     with Mosaic.open(t.directory) as mosaic:  # strips of 10 rows stitch into the same picture
         assert np.array_equal(mosaic._read_reduced(mosaic.window, 0.5, strip_pixels=10 * mosaic.width).data, small.data)
+
+
+def test_band_four_holding_only_0_and_255_is_alpha_not_nir(tmp_path):
+    import rasterio
+    from rasterio.enums import ColorInterp
+
+    rgb = np.random.default_rng(0).integers(0, 256, (3, 40, 40), dtype=np.uint8)
+    alpha = np.full((1, 40, 40), 255, np.uint8)
+    alpha[0, :, :10] = 0  # a transparent strip
+    path = tmp_path / "rgba.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=40, height=40, count=4, dtype="uint8", crs="EPSG:32618",
+                       transform=Affine(0.15, 0, 500000, 0, -0.15, 4400000)) as ds:
+        ds.write(np.concatenate([rgb, alpha]))
+        ds.colorinterp = [ColorInterp.red, ColorInterp.green, ColorInterp.blue, ColorInterp.alpha]
+    with pytest.warns(InputWarning, match="RGB \\+ alpha"):
+        mosaic = Mosaic.open(path)
+    with mosaic:
+        read = mosaic.read(mosaic.window)
+    assert not read.valid[:, :10].any() and read.valid[:, 10:].all()  # alpha is the validity
+    assert np.array_equal(read.data[3, :, 10:], rgb[1, :, 10:])  # NIR := green, never the alpha band

@@ -42,6 +42,7 @@ class Tile:
     window: PixelWindow  # where the file lies, in mosaic pixels
     band_count: int
     dtype: str
+    alpha: bool = False  # band 4 is a true alpha mask (0/255 only), not NIR: RGB + validity
 
 
 @dataclass
@@ -74,18 +75,29 @@ def find_rasters(source: str | Path | Sequence[str | Path]) -> list[Path]:
     return paths
 
 
-def _inspect(path: Path) -> tuple[object, Affine, int, str, int, int]:
+def _inspect(path: Path) -> tuple[object, Affine, int, str, int, int, bool]:
     """Open ``path`` just long enough to read its georeference, or raise a one-line InputError."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
             with rasterio.open(path) as ds:
-                return ds.crs, ds.transform, ds.count, ds.dtypes[0], ds.width, ds.height
+                return ds.crs, ds.transform, ds.count, ds.dtypes[0], ds.width, ds.height, _true_alpha(ds)
     except RasterioIOError as exc:
         text = str(exc)
         if "not recognized" in text or "not a supported" in text.lower():
             raise InputError(path, "not a raster (GDAL does not recognise the format)") from exc
         raise InputError(path, f"unreadable raster ({text.splitlines()[0]})") from exc
+
+
+def _true_alpha(ds) -> bool:
+    """Is band 4 a real alpha mask? GDAL labels band 4 of most 4-band files alpha (see
+    :func:`_valid_mask`), so the label alone proves nothing; a band 4 holding only 0 and 255 in an
+    overview of the file (an NIR band never does) is taken to be transparency."""
+    if ds.count != BANDS or ds.colorinterp[BANDS - 1] != ColorInterp.alpha or ds.width == 0 or ds.height == 0:
+        return False
+    side = (min(256, ds.height), min(256, ds.width))
+    values = np.unique(ds.read(BANDS, out_shape=side, resampling=rasterio.enums.Resampling.nearest))
+    return bool(set(values.tolist()) <= {0, 255} and 255 in values)
 
 
 def _valid_mask(ds, window: Window) -> np.ndarray:
@@ -124,13 +136,14 @@ class Mosaic:
         paths = find_rasters(source)
         infos = [(p, *_inspect(p)) for p in paths]
         first = infos[0]
-        for path, crs, transform, count, dtype, width, height in infos:
+        for path, crs, transform, count, dtype, width, height, alpha in infos:
             if width == 0 or height == 0:
                 raise InputError(path, "empty image (0 pixels)")
             if count < 3:
                 raise InputError(path, f"has {count} band(s); need 4 (R, G, B, NIR) or at least 3 (R, G, B)")
-            if count == 3:
-                warnings.warn(f"{path}: 3-band RGB input; NIR is filled with the green band", InputWarning, stacklevel=2)
+            if count == 3 or alpha:
+                what = "RGB + alpha input (band 4 holds only 0/255)" if alpha else "3-band RGB input"
+                warnings.warn(f"{path}: {what}; NIR is filled with the green band", InputWarning, stacklevel=2)
             elif count > BANDS:
                 warnings.warn(f"{path}: {count} bands; using bands 1-4 as R, G, B, NIR", InputWarning, stacklevel=2)
             if transform.b != 0 or transform.d != 0 or transform.a <= 0 or transform.e >= 0:
@@ -155,7 +168,7 @@ class Mosaic:
         west = min(i[2].c for i in infos)
         north = max(i[2].f for i in infos) if res_y < 0 else min(i[2].f for i in infos)
         tiles = []
-        for path, _crs, transform, count, dtype, width, height in infos:
+        for path, _crs, transform, count, dtype, width, height, alpha in infos:
             # Judge alignment against the first tile, not the westmost/northmost origin: otherwise a
             # misaligned tile lying west or north of the others gets the *aligned* tiles blamed.
             dcol = (transform.c - first[2].c) / res_x
@@ -164,7 +177,7 @@ class Mosaic:
                 raise InputError(path, f"not aligned to the pixel grid of {first[0]} (offset {dcol:.3f}, {drow:.3f} px)")
             col = (transform.c - west) / res_x
             row = (transform.f - north) / res_y
-            tiles.append(Tile(path, PixelWindow(int(round(col)), int(round(row)), width, height), count, dtype))
+            tiles.append(Tile(path, PixelWindow(int(round(col)), int(round(row)), width, height), count, dtype, alpha))
         width = max(t.window.col_end for t in tiles)
         height = max(t.window.row_end for t in tiles)
         transform = Affine(res_x, 0.0, west, 0.0, res_y, north)
@@ -243,10 +256,10 @@ class Mosaic:
     def _read_tile(self, tile: Tile, src: PixelWindow) -> tuple[np.ndarray, np.ndarray]:
         ds = self._handle(tile.path)
         rio_window = Window(src.col_off, src.row_off, src.width, src.height)
-        indexes = list(range(1, min(tile.band_count, BANDS) + 1))
+        indexes = list(range(1, (3 if tile.alpha else min(tile.band_count, BANDS)) + 1))
         try:
             pixels = ds.read(indexes, window=rio_window)
-            mask = _valid_mask(ds, rio_window)
+            mask = ds.read(BANDS, window=rio_window) > 0 if tile.alpha else _valid_mask(ds, rio_window)
         except RasterioIOError as exc:
             raise InputError(tile.path, f"unreadable pixels ({str(exc).splitlines()[0]})") from exc
         if pixels.shape[0] == 3:
