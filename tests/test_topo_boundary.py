@@ -322,3 +322,52 @@ def test_pil_written_patches_keep_nir_zero_pixels_valid(tmp_path):
         got = mosaic.read(mosaic.window)
     assert got.valid.all()
     np.testing.assert_array_equal(got.data, pixels)
+
+
+# -- placement of tiles from their ids -------------------------------------------------------------
+def test_tile_ids_decode_to_the_2500_ft_grid_by_hand():
+    from csboundary.data.topo_boundary import placed_transform, tile_origin_ft
+
+    assert tile_origin_ft("987217") == (987_500.0, 217_500.0)  # the one grid line within each 1000 ft
+    assert tile_origin_ft("990215") == (990_000.0, 215_000.0)
+    assert tile_origin_ft("002210") == (1_002_500.0, 210_000.0)  # eastings past 1,000,000 ft wrap
+    assert tile_origin_ft("986217") is None  # no grid line in 986,000-987,000: not the pattern
+    assert tile_origin_ft("12345") is None
+    t = placed_transform("987217")
+    assert (t.a, t.e, t.c, t.f) == (0.5, -0.5, 987_500.0, 217_500.0 + 2500.0)  # north-up, top-left corner
+
+
+def _placed_tile(tile_id: str, transform: Affine, chains: list[np.ndarray], size: int = 40):
+    from csboundary.data.topo_boundary import AssembledTile
+
+    return AssembledTile(tile_id, np.zeros((4, 1, 1), np.uint8), np.zeros((1, 1), bool), transform, "EPSG:2263", False, size // 2, 2,
+                         {}, [], [], chains=chains, placed=True)
+
+
+def test_boundaries_continue_across_correctly_placed_tiles_and_not_across_misplaced_ones():
+    from csboundary.data.topo_boundary import border_continuity, join_tiles
+
+    west = _placed_tile("a", Affine(0.5, 0, 1000.0, 0, -0.5, 2000.0), [np.array([[10.0, 5.0], [10.0, 39.0]])])
+    east = _placed_tile("b", Affine(0.5, 0, 1020.0, 0, -0.5, 2000.0), [np.array([[10.0, 0.0], [10.0, 30.0]])])  # 40 px = 20 ft east
+    report = border_continuity([west, east])
+    assert report == {"border_ends": 2, "matched": 2, "share": 1.0}
+    frame, lines, sources = join_tiles([west, east])
+    assert len(lines) == 1 and sorted(sources[0]) == ["a", "b"]
+    assert lines[0].length == pytest.approx((70 - 5) * 0.5, abs=0.6)  # one boundary from col 5 to col 70, in feet
+    shifted = _placed_tile("b", Affine(0.5, 0, 1020.0, 0, -0.5, 1990.0), east.chains)  # 20 px too far south
+    assert border_continuity([west, shifted])["share"] == 0.0
+
+
+def test_import_places_tiles_from_ids_and_writes_a_city_per_split(tmp_path):
+    root = make_dataset(tmp_path / "src", tile="987217", labels={(0, 0): [[[5, 0], [5, 19]]], (0, 1): [[[5, 0], [5, 10]]]})
+    report = import_topo_boundary(root, tmp_path / "out", patch_size=PS, splits=2, progress=False)
+    assert report["tiles"]["987217"]["placed_from_id"]
+    (split, city), = report["split_cities"].items()
+    meta = read_meta(city["city_dir"])
+    assert meta["tile_ids"] == ["987217"] and meta["crs"] == "EPSG:2263"
+    with Mosaic.open(tiles_dir(city["city_dir"])) as mosaic:  # the linked tile, on the map
+        assert (mosaic.transform.c, mosaic.transform.f) == (987_500.0, 217_500.0 + 2 * PS * 0.5)
+    gt = read_ground_truth(ground_truth_path(city["city_dir"]))
+    assert len(gt) == 1 and gt.total_bounds[0] >= 987_500.0  # the patch-split boundary, re-joined, in feet
+    plain = import_topo_boundary(root, tmp_path / "plain", patch_size=PS, splits=2, progress=False, placement=False)
+    assert plain["split_cities"] == {} and not plain["tiles"]["987217"]["placed_from_id"]

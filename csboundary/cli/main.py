@@ -69,13 +69,19 @@ def import_topo_boundary_cmd(
     out: Path = typer.Option(..., "--out", help="Output folder: one city directory per 6-digit tile id."),
     patch_size: int = typer.Option(1000, min=1, help="Patch side in pixels (the benchmark's is 1000)."),
     splits: int = typer.Option(5, min=1, help="Patches per tile side (the benchmark's is 5)."),
+    placement: bool = typer.Option(True, "--placement/--no-placement", help="Place tiles without georeference on the map from their 6-digit ids (an inference, docs/city-inference.md) and write one city per split."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
-    """Reassemble Topo-boundary patches into 5000x5000 tiles with vector ground truth."""
+    """Reassemble Topo-boundary patches into 5000x5000 tiles with vector ground truth, and the
+    tiles of each split into one georeferenced city (city-<split>/) for city-scale evaluation."""
     from csboundary.data.topo_boundary import import_topo_boundary
 
     _out_dir(out)
-    report = import_topo_boundary(root, out, patch_size=patch_size, splits=splits, progress=not quiet)
+    report = import_topo_boundary(root, out, patch_size=patch_size, splits=splits, progress=not quiet, placement=placement)
+    for split, city in report["split_cities"].items():
+        share = city["border_continuity"]["share"]
+        typer.echo(f"{city['city_dir']}: {city['tiles']} tile(s) of split {split}, {city['boundaries']} boundaries"
+                   + (f"; {share:.0%} of boundary ends at shared tile edges continue" if share is not None else ""))
     missing = report["missing_patches"]
     typer.echo(f"{out}: {len(report['tiles_written'])} tile(s) written; {len(missing)} missing patch(es)"
                + (f": {', '.join(missing[:10])}{' ...' if len(missing) > 10 else ''}" if missing else ""))

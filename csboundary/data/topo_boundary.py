@@ -25,6 +25,7 @@ Choices, because the format leaves them open:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -307,6 +308,95 @@ def tile_georeference(patches: list[Patch], patch_size: int = PATCH_SIZE) -> tup
     return ref, first.crs.to_string(), True
 
 
+GRID_FT = 2500.0  # NYC orthophoto tiles: 5000 px at 0.5 ft
+
+
+def tile_origin_ft(tile_id: str, grid_ft: float = GRID_FT) -> tuple[float, float] | None:
+    """South-west corner (easting, northing) in EPSG:2263 feet that a 6-digit tile id encodes.
+
+    An inference from the benchmark's ids, not a documented fact: the first three digits read
+    as easting / 1000 ft modulo 1000 (NYC spans 913,000-1,067,000 ft, so 000-499 means
+    1,000,000 more), the last three as northing / 1000 ft, and tiles lie on a 2,500 ft grid, so
+    the corner is the one grid line within the id's 1,000 ft. None when no grid line is (the id
+    does not follow the pattern). ``import-topo-boundary --no-placement`` turns it off.
+    """
+    if not re.fullmatch(r"\d{6}", tile_id):
+        return None
+    east3, north3 = int(tile_id[:3]), int(tile_id[3:])
+    out = []
+    for low in (east3 * 1000.0 + (1_000_000.0 if east3 < 500 else 0.0), north3 * 1000.0):
+        corner = math.ceil(low / grid_ft) * grid_ft
+        if corner >= low + 1000.0:
+            return None
+        out.append(corner)
+    return out[0], out[1]
+
+
+def placed_transform(tile_id: str, gsd_ft: float = FALLBACK_GSD, size_px: int = PATCH_SIZE * SPLITS) -> Affine | None:
+    """The tile's north-up transform in EPSG:2263 from :func:`tile_origin_ft` (None if it has none)."""
+    corner = tile_origin_ft(tile_id)
+    if corner is None:
+        return None
+    return Affine(gsd_ft, 0.0, corner[0], 0.0, -gsd_ft, corner[1] + size_px * gsd_ft)
+
+
+def border_continuity(tiles: list["AssembledTile"], tolerance: float = 3.0, band: float = 2.0) -> dict[str, Any]:
+    """How well the placement lets boundaries continue across shared tile edges.
+
+    For each boundary end within ``band`` px of a tile edge that a neighbouring tile shares, is
+    there an end of a boundary of the neighbour within ``tolerance`` px of it? A wrong placement
+    leaves almost every border end alone; the right one matches most (a few end at a missing
+    patch). Returns ``{"border_ends": n, "matched": m, "share": m / n}`` (share None without ends).
+    """
+    if not tiles:
+        return {"border_ends": 0, "matched": 0, "share": None}
+    gsd = tiles[0].transform.a
+    west = min(t.transform.c for t in tiles)
+    north = max(t.transform.f for t in tiles)
+    ends, owner, near_edge = [], [], []
+    boxes = {}
+    for k, tile in enumerate(tiles):
+        size = tile.patch_size * tile.splits
+        off = np.array([(north - tile.transform.f) / gsd, (tile.transform.c - west) / gsd])
+        boxes[k] = (off[0], off[1], off[0] + size, off[1] + size)
+        for chain in tile.chains:
+            for point in (chain[0], chain[-1]):
+                local = point
+                edge = min(local[0], local[1], size - 1 - local[0], size - 1 - local[1]) <= band
+                ends.append(point + off)
+                owner.append(k)
+                near_edge.append(edge)
+    ends, owner, near_edge = np.array(ends).reshape(-1, 2), np.array(owner), np.array(near_edge, dtype=bool)
+    shared = np.zeros(len(ends), dtype=bool)
+    for i in np.flatnonzero(near_edge):  # only ends on an edge some other tile lies beyond
+        r, c = ends[i]
+        shared[i] = any(k != owner[i] and b[0] - band - 1 <= r <= b[2] + band and b[1] - band - 1 <= c <= b[3] + band for k, b in boxes.items())
+    if not shared.any():
+        return {"border_ends": 0, "matched": 0, "share": None}
+    tree = cKDTree(ends)
+    matched = 0
+    for i in np.flatnonzero(shared):
+        partners = tree.query_ball_point(ends[i], tolerance)
+        matched += any(owner[j] != owner[i] for j in partners)
+    n = int(shared.sum())
+    return {"border_ends": n, "matched": int(matched), "share": matched / n}
+
+
+def join_tiles(tiles: list["AssembledTile"]) -> tuple[Affine, list[LineString], list[list[str]]]:
+    """The tiles' boundaries in one frame, re-joined across shared tile edges: (transform of the
+    frame's top-left, LineStrings in world coordinates, source tile ids per line)."""
+    gsd = tiles[0].transform.a
+    west = min(t.transform.c for t in tiles)
+    north = max(t.transform.f for t in tiles)
+    pieces = []
+    for tile in tiles:
+        off = np.array([round((north - tile.transform.f) / gsd), round((tile.transform.c - west) / gsd)], dtype=float)
+        pieces.extend(Piece(tile.tile_id, chain + off) for chain in tile.chains)
+    frame = Affine(gsd, 0.0, west, 0.0, -gsd, north)
+    joined = join_pieces(pieces)
+    return frame, [pixels_to_line(frame, points) for points, _ in joined], [sources for _, sources in joined]
+
+
 def _tile_transform(patch: Patch, patch_size: int) -> Affine:
     return patch.transform @ Affine.translation(-patch.col * patch_size, -patch.row * patch_size)
 
@@ -439,6 +529,8 @@ class AssembledTile:
     unlabelled: list[str]  # present patch ids without a label file
     lines: list[LineString] = field(default_factory=list)
     line_sources: list[list[str]] = field(default_factory=list)  # patch ids each line came from
+    chains: list[np.ndarray] = field(default_factory=list)  # the lines as joined [row, col] tile pixels
+    placed: bool = False  # put on the map from its tile id (:func:`placed_transform`)
 
     @property
     def gsd(self) -> float:
@@ -456,8 +548,10 @@ class AssembledTile:
         )
 
 
-def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATCH_SIZE, splits: int = SPLITS) -> AssembledTile:
-    """Reassemble tile ``tile_id``: patch (R, C) goes to rows R*ps.., cols C*ps..; boundaries re-joined."""
+def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATCH_SIZE, splits: int = SPLITS,
+                  placement: bool = True) -> AssembledTile:
+    """Reassemble tile ``tile_id``: patch (R, C) goes to rows R*ps.., cols C*ps..; boundaries re-joined.
+    Without a georeference in the files, ``placement`` puts it on the map from its id."""
     _check_grid(patch_size, splits)
     found = index.patches.get(tile_id, {})
     for (row, col), path in found.items():
@@ -475,7 +569,10 @@ def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATC
         valid[rows, cols] = True
         read.append(patch)
     transform, crs, georeferenced = tile_georeference(read, patch_size)
-    if not georeferenced:
+    placed = False
+    if not georeferenced and placement and placed_transform(tile_id, FALLBACK_GSD, patch_size * splits) is not None:
+        transform, placed = placed_transform(tile_id, FALLBACK_GSD, patch_size * splits), True
+    elif not georeferenced:
         where = read[0].path if read else tile_id
         warnings.warn(
             f"{where}: tile {tile_id} is not georeferenced; placed at {FALLBACK_GSD} ft/px in {FALLBACK_CRS} "
@@ -504,7 +601,7 @@ def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATC
     lines = [pixels_to_line(transform, points) for points, _ in joined]
     return AssembledTile(
         tile_id, image, valid, transform, crs, georeferenced, patch_size, splits, present, missing, unlabelled,
-        lines, [sources for _, sources in joined],
+        lines, [sources for _, sources in joined], [points for points, _ in joined], placed,
     )
 
 
@@ -580,8 +677,13 @@ def import_topo_boundary(
     progress: bool = True,
     *,
     tile_ids: Iterable[str] | None = None,
+    placement: bool = True,
 ) -> dict[str, Any]:
-    """Import every tile under ``root`` (or only ``tile_ids``) as ``out_dir/TTTTTT/`` cities.
+    """Import every tile under ``root`` (or only ``tile_ids``) as ``out_dir/TTTTTT/`` cities and,
+    when the tiles can be placed from their ids (``placement``), every split's tiles as one
+    georeferenced city ``out_dir/city-<split>/`` with boundaries re-joined across tile edges:
+    the paper's city-scale evaluation. The placement is checked on the labels (how many
+    boundary ends at shared tile edges find a partner, :func:`border_continuity`) and reported.
 
     Missing patches and missing label files are reported, not fatal; a broken file raises an
     InputError naming it. Returns a JSON-serialisable report.
@@ -608,10 +710,13 @@ def import_topo_boundary(
         "label_tiles_without_images": index.label_tiles_without_images(),
         "tiles": {},
     }
+    placed: list[AssembledTile] = []
     for tile_id in tqdm(wanted, desc="topo-boundary tiles", unit="tile", disable=not progress):
-        tile = assemble_tile(index, tile_id, patch_size, splits)
+        tile = assemble_tile(index, tile_id, patch_size, splits, placement)
         city_dir = out_dir / tile_id
         write_tile_city(tile, city_dir, index)
+        if tile.placed:  # keep the geometry only: a tile's pixels are 100 MB
+            placed.append(dataclasses.replace(tile, image=tile.image[:, :1, :1], valid=tile.valid[:1, :1]))
         report["tiles_written"].append(tile_id)
         report["missing_patches"].extend(tile.missing)
         report["unlabelled_patches"].extend(tile.unlabelled)
@@ -624,6 +729,51 @@ def import_topo_boundary(
             "unlabelled_patches": tile.unlabelled,
             "boundaries": len(tile.lines),
             "georeferenced": tile.georeferenced,
+            "placed_from_id": tile.placed,
             "crs": tile.crs,
         }
+    report["split_cities"] = write_split_cities(placed, out_dir, index) if placement else {}
+    return report
+
+
+def tile_split(tile: AssembledTile, index: TopoBoundaryIndex) -> str:
+    """The benchmark split most of the tile's patches belong to ("unlisted" when none is listed)."""
+    splits = [index.split.get(pid) for pid in tile.patches]
+    listed = [s for s in splits if s]
+    return max(sorted(set(listed)), key=listed.count) if listed else "unlisted"
+
+
+def write_split_cities(tiles: list[AssembledTile], out_dir: Path, index: TopoBoundaryIndex) -> dict[str, Any]:
+    """One city per split of the placed tiles: their GeoTIFFs linked, boundaries re-joined across
+    tile edges, the placement's border continuity in ``city.json`` (and warned about when most
+    border ends stay alone, i.e. the tiles are probably misplaced)."""
+    groups: dict[str, list[AssembledTile]] = {}
+    for tile in tiles:
+        groups.setdefault(tile_split(tile, index), []).append(tile)
+    report = {}
+    for split, members in sorted(groups.items()):
+        city_dir = begin_city(out_dir / f"city-{split}")
+        tiles_dir(city_dir).mkdir(parents=True, exist_ok=True)
+        names = []
+        for tile in members:
+            name = tile_file_name(tile.tile_id)
+            link = tiles_dir(city_dir) / name
+            link.unlink(missing_ok=True)
+            link.symlink_to(Path("..", "..", tile.tile_id, "tiles", name))
+            names.append(name)
+        frame, lines, sources = join_tiles(members)
+        gt = gpd.GeoDataFrame({"source_tiles": np.array([",".join(s) for s in sources], dtype=object)},
+                              geometry=gpd.GeoSeries(lines, crs=FALLBACK_CRS), crs=FALLBACK_CRS)
+        write_ground_truth(ground_truth_path(city_dir), gt)
+        continuity = border_continuity(members)
+        if continuity["share"] is not None and continuity["share"] < 0.5:
+            warnings.warn(f"{city_dir}: only {continuity['matched']} of {continuity['border_ends']} boundary ends at shared tile edges "
+                          "continue in the neighbour: the placement from tile ids is probably wrong (--no-placement)", InputWarning, stacklevel=2)
+        write_meta(city_dir, {
+            "source": SOURCE, "split": split, "crs": FALLBACK_CRS, "gsd": FALLBACK_GSD, "units": "US survey foot",
+            "tiles": names, "tile_ids": [t.tile_id for t in members], "boundaries": len(lines),
+            "placement": "from tile ids (an inference: csboundary.data.topo_boundary.tile_origin_ft)",
+            "border_continuity": continuity, "transform": list(frame)[:6],
+        })
+        report[split] = {"city_dir": str(city_dir), "tiles": len(members), "boundaries": len(lines), "border_continuity": continuity}
     return report
