@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point
 
-from csboundary.data.synth.city import draw_look, plan_city, synthesize_city
+from csboundary.data.synth.city import draw_look, plan_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.data.synth.render import CameraLook, HAZE_VEIL, apply_look, resample
 from csboundary.data.synth.scene import CONCRETE, GRAVEL, SOIL

@@ -6,6 +6,7 @@ documented fallbacks (no CRS, 3-band RGB) as ``warning: ...`` lines.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import warnings
@@ -656,6 +657,13 @@ def main() -> None:
     except (OSError, MemoryError) as exc:  # a full disk, a vanished file, no memory: the system's problem, said in one line
         name = getattr(exc, "filename", None)
         typer.echo(f"error: {name + ': ' if name else ''}{exc.strerror or exc if isinstance(exc, OSError) else 'out of memory'}", err=True)
+        sys.exit(1)
+    except Exception as exc:  # a bug, not the user's input: one line, the traceback on request
+        if os.environ.get("CSBOUNDARY_DEBUG"):
+            raise
+        message = " ".join(str(exc).split())[:300]
+        typer.echo(f"error: internal error ({type(exc).__name__}: {message}); please report it, with the traceback "
+                   "that CSBOUNDARY_DEBUG=1 prints", err=True)
         sys.exit(1)
     except (Interrupted, KeyboardInterrupt) as exc:
         signum = getattr(exc, "signum", signal.SIGINT)

@@ -43,7 +43,6 @@ from csboundary.data.atomic import atomic_path
 from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, tile_name, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
-from csboundary.data.synth.config import SynthConfig
 from csboundary.data.windows import pixel_to_world
 from csboundary.errors import InputError
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
