@@ -79,10 +79,10 @@ def test_edges_respect_threshold_degree_and_fixed_edges():
 def test_device_choice():
     assert resolve_device("cpu").type == "cpu"
     assert resolve_device("auto").type in ("cpu", "cuda")
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError, match="--device: must be auto"):
         resolve_device("tpu")
     if not torch.cuda.is_available():
-        with pytest.raises(ValueError, match="no CUDA"):
+        with pytest.raises(InputError, match="no CUDA"):
             resolve_device("cuda")
 
 
