@@ -143,6 +143,11 @@ def test_us_feet_are_converted_to_metres(world, tmp_path):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["area_km2"] == pytest.approx(300 * 300 * 0.09 / 1e6, rel=1e-3)
     assert "US survey foot" in summary["length_unit"]
+    import geopandas as gpd
+
+    edges = gpd.read_file(tmp_path / "out" / "boundaries.gpkg", layer="edges")
+    if len(edges):  # lengths in the GeoPackage are metres, not feet
+        assert edges["length_m"].sum() == pytest.approx(edges.length.sum() * 1200 / 3937, rel=1e-3)
 
 
 def test_geographic_crs_is_measured_on_the_ellipsoid(world, tmp_path):

@@ -458,6 +458,11 @@ def predict(
     predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
     view = model_view(mosaic, gsd, predictor.pixel_size_m)
     _out_dir(out, inputs)
+    from csboundary.data.grid import PatchGrid
+
+    plan = PatchGrid.for_mosaic(view.mosaic)
+    typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
+               f"at {predictor.pixel_size_m:g} m", err=True)
     settings = {"weights": str(weights or "shipped"), "edge_threshold": predictor.edge_threshold, "batch_size": batch_size,
                 "device": str(predictor.device), "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
                 "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
