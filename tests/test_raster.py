@@ -584,3 +584,44 @@ def test_band_four_holding_only_0_and_255_is_alpha_not_nir(tmp_path):
         read = mosaic.read(mosaic.window)
     assert not read.valid[:, :10].any() and read.valid[:, 10:].all()  # alpha is the validity
     assert np.array_equal(read.data[3, :, 10:], rgb[1, :, 10:])  # NIR := green, never the alpha band
+
+
+def test_open_files_stay_under_the_cap_and_reads_do_not_change(shared_tiles):
+    with Mosaic.open(shared_tiles.directory) as reference:
+        expected = reference.read(reference.window).data
+    with Mosaic.open(shared_tiles.directory) as mosaic:
+        mosaic.max_open = 2  # four tiles, two handles at most
+        for _ in range(2):
+            for window in (PixelWindow(0, 0, 30, 20), PixelWindow(70, 50, 30, 20), PixelWindow(0, 50, 30, 20), PixelWindow(70, 0, 30, 20)):
+                mosaic.read(window)
+                assert len(mosaic._handles) <= 2
+        assert np.array_equal(mosaic.read(mosaic.window).data, expected)
+
+
+def test_patches_without_imagery_skip_the_model(tmp_path):
+    from csboundary.data.grid import GridConfig
+    from csboundary.graph import BoundaryGraph
+    from csboundary.pipeline.city import predict_city
+
+    data = np.full((4, 100, 100), 90, np.uint8)
+    for name, x0 in (("west.tif", 500000.0), ("east.tif", 500000.0 + 400 * 0.5)):  # 300 px of nothing between
+        write_geotiff(tmp_path / name, data, Affine(0.5, 0, x0, 0, -0.5, 4400000), "EPSG:32618")
+
+    class Counting:
+        seen = 0
+
+        def patch_maps(self, patches, images):
+            self.seen += len(images)
+            return [np.zeros((2, *i.shape[1:]), np.float32) for i in images]
+
+        def extract(self, maps):
+            return BoundaryGraph(np.zeros((0, 2)), np.zeros((0, 2), np.int64))
+
+        def connect(self, patch, image, maps, found):
+            return found
+
+    model = Counting()
+    with Mosaic.open(tmp_path) as mosaic:
+        result = predict_city(mosaic, model, grid_config=GridConfig(core=100, margin=10), progress=False)
+    # windows of 120 px (cores 100 + 10 px margins): only the middle one (cols 190-310) sees no tile
+    assert result.n_patches == 5 and result.patches_without_imagery == 1 and model.seen == 4

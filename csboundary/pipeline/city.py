@@ -73,6 +73,7 @@ class CityResult:
     grid: PatchGrid
     seconds: dict[str, float] = field(default_factory=dict)
     map_bytes_peak: int = 0
+    patches_without_imagery: int = 0  # windows with no valid pixel: the FPN was not run on them
 
     @property
     def n_patches(self) -> int:
@@ -91,6 +92,7 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
     seconds: dict[str, float] = defaultdict(float)
     patch_graphs: dict[tuple[int, int], BoundaryGraph] = {}
     patches = list(grid)
+    skipped, channels = 0, None
     bar = tqdm(total=len(patches), desc="predict patches", unit="patch", disable=not progress)
 
     def timed(stage: str, fn, *args):
@@ -113,7 +115,17 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
         for start in range(0, len(patches), batch_size):
             batch = patches[start : start + batch_size]
             reads = timed("read", lambda: [mosaic.read(p.expanded) for p in batch])
-            maps = timed("fpn", model.patch_maps, batch, [r.data for r in reads])
+            # A window without imagery skips the model (its maps are zero anyway), once the model's
+            # channel count is known from a window it did see.
+            has_pixels = [bool(r.valid.any()) or channels is None for r in reads]
+            work = [k for k, ok in enumerate(has_pixels) if ok]
+            predicted = timed("fpn", model.patch_maps, [batch[k] for k in work], [reads[k].data for k in work]) if work else []
+            if predicted:
+                channels = predicted[0].shape[0]
+            maps = [np.zeros((channels, *r.valid.shape), np.float32) if not ok else None for r, ok in zip(reads, has_pixels)]
+            skipped += has_pixels.count(False)
+            for k, m in zip(work, predicted):
+                maps[k] = m
             for patch, read, patch_maps in zip(batch, reads, maps):
                 patch_maps = patch_maps * read.valid[None]  # no keypoints where there is no image
                 for ready, stitched in timed("map_stitching", averager.add, patch, patch_maps):
@@ -123,7 +135,7 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
     with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
         graph = timed("graph_stitching", stitch_patch_graphs, patch_graphs, grid, stitch, crs)
         stitch_bar.update(1)
-    return CityResult(graph, patch_graphs, grid, {s: seconds[s] for s in STAGES}, averager.peak_bytes)
+    return CityResult(graph, patch_graphs, grid, {s: seconds[s] for s in STAGES}, averager.peak_bytes, skipped)
 
 
 def patch_scale_graph(result: CityResult) -> BoundaryGraph:

@@ -93,6 +93,7 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
         "mosaic_px": [mosaic.width, mosaic.height],
         "area_km2": round(area_km2, 6),
         "patches": n,
+        "patches_without_imagery": result.patches_without_imagery,
         "grid": list(result.grid.shape),
         "counts": {
             "vertices": graph.n_vertices,
