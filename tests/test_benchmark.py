@@ -36,6 +36,8 @@ def test_training_time_per_epoch_from_a_log(tmp_path):
     assert t["seconds_per_epoch"] == pytest.approx(0.6 * 400)
     assert steps_per_epoch({**config, "model": "afanet"}) == pytest.approx(1e8 / 1100**2)
     assert training_time(tmp_path / "missing.log") is None
+    worlds = {**config, "train_city": None, "worlds": {"cities": 16, "tiles": [1, 1], "tile_size": 2500}}
+    assert steps_per_epoch(worlds) == 16 * 2500**2 / 250000  # 16 cities of 2500^2 px
 
 
 @pytest.fixture(scope="module")

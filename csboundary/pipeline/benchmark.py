@@ -107,10 +107,23 @@ def training_time(log: Path) -> dict | None:
     return {"seconds": seconds, "steps": steps, "seconds_per_epoch": seconds / max(steps, 1) * steps_per_epoch(config)}
 
 
+def training_area_px(config: dict) -> float:
+    """Pixels of training imagery a run's config names: its train city and its ``worlds``."""
+    area = 0.0
+    city = config.get("train_city")
+    if city:
+        area += (city["tiles"][0] * city["tile_size"]) * (city["tiles"][1] * city["tile_size"])
+    if config.get("worlds"):
+        from csboundary.models.training_data import WorldsConfig
+
+        worlds = WorldsConfig.from_dict(config["worlds"])
+        area += worlds.cities * worlds.tiles[0] * worlds.tiles[1] * worlds.tile_size**2
+    return area
+
+
 def steps_per_epoch(config: dict) -> float:
-    """Training steps that see the train city's area once (see the module docstring)."""
-    city = config["train_city"]
-    area = (city["tiles"][0] * city["tile_size"]) * (city["tiles"][1] * city["tile_size"])
+    """Training steps that see the training imagery's area once (see the module docstring)."""
+    area = training_area_px(config)
     if config["model"] == "afanet":
         return area / config["window"] ** 2
     options = config.get("options", {})
