@@ -33,12 +33,28 @@ def cli(*args: str) -> None:
     subprocess.run([sys.executable, "-m", "csboundary", *args], check=True)
 
 
+def loso_table(results: dict, held_out: list[str], reference: str = "shipped") -> str:
+    """APLS on each held-out style: by the model trained without it, by the other leave-one-out
+    models (same budget, the style seen: their mean), and by ``reference`` (the shipped model)."""
+    rows = ["| style left out | APLS without it (F1@5) | APLS of the same-budget models that saw it (mean of 3) | APLS, shipped model (longer, saw it) |",
+            "|---|---|---|---|"]
+    for style in held_out:
+        own = results[f"without-{style}"].get(style)
+        seen = [results[f"without-{o}"][style]["apls"] for o in held_out if o != style and style in results[f"without-{o}"]]
+        ref = results.get(reference, {}).get(style)
+        rows.append(f"| {style} | {own['apls']:.3f} ({own['f1@5']:.3f}) | "
+                    + (f"{sum(seen) / len(seen):.3f} ({', '.join(f'{v:.3f}' for v in seen)})" if seen else "") + " | "
+                    + (f"{ref['apls']:.3f}" if ref else "") + " |")
+    return "\n".join(rows)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bundle", action="append", required=True, help="NAME=PATH of a weights bundle (repeatable)")
     parser.add_argument("--styles", default=",".join(STYLES), help="comma-separated styles to score")
     parser.add_argument("--cache", type=Path, default=Path("data/cities"))
     parser.add_argument("--out", type=Path, required=True, help="JSON of results (read first: finished cells are kept)")
+    parser.add_argument("--loso-table", action="store_true", help="also print the leave-one-style-out table from the 'without-STYLE' rows")
     args = parser.parse_args()
     results = json.loads(args.out.read_text()) if args.out.exists() else {}
     styles = args.styles.split(",")
@@ -54,6 +70,8 @@ def main() -> None:
             results.setdefault(name, {})[style] = {k: round(metrics[k], 4) for k in ("f1@5", "apls", "tlts")}
             args.out.parent.mkdir(parents=True, exist_ok=True)
             args.out.write_text(json.dumps(results, indent=2) + "\n")
+    if args.loso_table:
+        print(loso_table(results, [s for s in styles if f"without-{s}" in results]))
     print("| model | " + " | ".join(styles) + " |")
     print("|---|" + "---|" * len(styles))
     for name, row in results.items():
