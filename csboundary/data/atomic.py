@@ -50,12 +50,7 @@ def check_output_dir(path: str | Path, create: bool = False) -> Path:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise InputError(path, f"cannot create the output folder ({exc.strerror or exc})") from exc
-    existing = path
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        raise InputError(path, f"cannot be created: {existing} is a file")
-    _probe(existing, path)
+    _probe(_writable_ancestor(path, path), path)
     return path
 
 
@@ -67,13 +62,18 @@ def check_output_file(path: str | Path, suffixes: tuple[str, ...] = ()) -> Path:
         raise InputError(path, "is a folder; give a file name")
     if suffixes and path.suffix.lower() not in suffixes:
         raise InputError(path, f"needs one of the extensions {', '.join(suffixes)}")
-    existing = path.parent
+    _probe(_writable_ancestor(path.parent, path), path)
+    return path
+
+
+def _writable_ancestor(folder: Path, name: Path) -> Path:
+    """The nearest existing folder at or above ``folder`` (where writing will be tried)."""
+    existing = folder
     while not existing.exists():
         existing = existing.parent
     if not existing.is_dir():
-        raise InputError(path, f"cannot be written: {existing} is a file")
-    _probe(existing, path)
-    return path
+        raise InputError(name, f"cannot be written: {existing} is a file")
+    return existing
 
 
 def _probe(folder: Path, name: Path) -> None:
