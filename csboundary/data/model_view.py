@@ -139,6 +139,15 @@ class ModelInput:
     stretch: BandStretch | None
 
 
+def mosaic_units(mosaic: Mosaic, gsd: float | None = None) -> GroundUnits | None:
+    """The ground units of the mosaic's CRS at its centre; without a CRS, those of pixels of
+    ``gsd`` metres (None when that is not given either)."""
+    if mosaic.crs is None:
+        return ground_units(None, pixel_metres=gsd / abs(mosaic.transform.a)) if gsd else None
+    centre = mosaic.pixel_to_world(mosaic.width / 2, mosaic.height / 2)
+    return ground_units(mosaic.crs, (float(centre[0]), float(centre[1])))
+
+
 def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODEL_GSD, assume_model_gsd: bool = False) -> ModelInput:
     """``mosaic`` as the model sees it (module doc). ``gsd`` gives the pixel size in metres of
     imagery without a CRS (and overrides nothing else); ``assume_model_gsd`` takes such imagery
@@ -146,18 +155,17 @@ def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODE
     a usable scale or with a pixel size outside :data:`PIXEL_SIZE_RANGE_M`; warns when resampling
     by more than :data:`WARN_FACTOR`."""
     first = mosaic.tiles[0].path
-    centre = mosaic.pixel_to_world(mosaic.width / 2, mosaic.height / 2)
     if mosaic.crs is None:
         if gsd is None and assume_model_gsd:
             warnings.warn(f"{first}: no CRS: its pixels are taken to be the model's {model_gsd:g} m (give --gsd otherwise)", InputWarning, stacklevel=2)
             gsd = model_gsd * abs(mosaic.transform.a)
         if gsd is None:
             raise InputError(first, "has no CRS, so its pixel size is unknown: give --gsd (metres per pixel) to predict it")
-        units = ground_units(None, pixel_metres=gsd / abs(mosaic.transform.a))
+        units = mosaic_units(mosaic, gsd)
     else:
         if gsd is not None:
             warnings.warn(f"{first}: --gsd ignored: the CRS {mosaic.crs.to_string()} gives the pixel size", InputWarning, stacklevel=2)
-        units = ground_units(mosaic.crs, (float(centre[0]), float(centre[1])))
+        units = mosaic_units(mosaic)
     pixel = pixel_size_m(units, mosaic.transform)
     size = geometric_mean(pixel)
     low, high = PIXEL_SIZE_RANGE_M

@@ -27,7 +27,8 @@ import rasterio
 from csboundary.data.atomic import check_output_dir, clear_stale_temporaries, staging_folder
 from csboundary.data.grid import GridConfig
 from csboundary.data.raster import Mosaic
-from csboundary.data.units import GroundUnits, ground_units
+from csboundary.data.model_view import mosaic_units
+from csboundary.data.units import GroundUnits
 from csboundary.graph.stitching import StitchConfig
 from csboundary.pipeline.city import GDAL_CACHE_MB, STAGES, CityResult, PatchModel, predict_city
 from csboundary.pipeline.map_output import StitchedMapWriter
@@ -35,6 +36,7 @@ from csboundary.pipeline.outputs import write_graph_outputs
 
 ORANGE = (255, 140, 0)
 SUMMARY = "summary.json"
+PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
 
 
 def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, write_maps: bool = False, batch_size: int = 1,
@@ -47,7 +49,7 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     :func:`csboundary.data.model_view.model_view`, which also gives them for CRS-less imagery).
     """
     if units is None:
-        units = mosaic_units(mosaic)
+        units = mosaic_units(mosaic) or PIXEL_UNITS
     out = check_output_dir(out_dir, create=True)
     clear_stale_temporaries(out)  # what a run killed with SIGKILL left behind
     (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
@@ -72,16 +74,10 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     return result, summary
 
 
-def mosaic_units(mosaic: Mosaic) -> GroundUnits:
-    """The ground units of the mosaic's CRS at its centre (pixels as metres without a CRS)."""
-    centre = mosaic.pixel_to_world(mosaic.width / 2, mosaic.height / 2)
-    return ground_units(mosaic.crs, (float(centre[0]), float(centre[1]))) or GroundUnits((1.0, 1.0), "pixel")
-
-
 def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict, units: GroundUnits | None = None) -> dict:
     """Counts, timings and throughput of one run (JSON-ready); areas and lengths in true metres."""
     graph = result.graph
-    units = units or mosaic_units(mosaic)
+    units = units or mosaic_units(mosaic) or PIXEL_UNITS
     area_km2 = units.area_km2(mosaic.bounds)
     boundary_m = sum(units.line_length_m(np.asarray(line.coords)) for line in graph.to_linestrings(world=True)) if graph.n_edges else 0.0
     n = result.n_patches
