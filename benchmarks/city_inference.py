@@ -45,7 +45,7 @@ def main() -> None:
     write_scores(f"{args.out}/scores.json", scores)
     print(format_rows(scores))
     print(stage_table(summary))
-    print(json.dumps({"counts": summary["counts"], "map_memory_peak_mb": summary["map_memory_peak_mb"]}))
+    print(json.dumps({"counts": summary["counts"], "map_store_peak_mb": summary["map_store_peak_mb"]}))
 
 
 if __name__ == "__main__":

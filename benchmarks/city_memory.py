@@ -28,7 +28,7 @@ with Mosaic.open(sys.argv[1]) as mosaic:
     _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2], progress=False)
 print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "peak_rss_prediction_mb": summary["peak_rss_mb"]["prediction"],
-                  "map_memory_peak_mb": summary["map_memory_peak_mb"], "patches": summary["patches"],
+                  "map_store_peak_mb": summary["map_store_peak_mb"], "patches": summary["patches"],
                   "seconds": time.perf_counter() - start, "edges": summary["counts"]["edges"]}))
 """
 
@@ -55,7 +55,7 @@ def main() -> None:
         row = {"tiles": f"{n}x{n}", **json.loads(done.stdout.strip().splitlines()[-1])}
         rows.append(row)
         print(f"{row['tiles']:>4s} tiles of {args.tile_size} px: {row['patches']:4d} patches, peak RSS {row['peak_rss_mb']:7.1f} MB "
-              f"(after the city pipeline {row['peak_rss_prediction_mb']:7.1f} MB; maps held {row['map_memory_peak_mb']:5.1f} MB), "
+              f"(after the city pipeline {row['peak_rss_prediction_mb']:7.1f} MB; maps stored {row['map_store_peak_mb']:5.1f} MB), "
               f"{row['seconds']:6.1f} s", flush=True)
     if len(rows) > 1:
         growth = rows[-1]["peak_rss_mb"] / rows[0]["peak_rss_mb"] - 1

@@ -267,7 +267,9 @@ def test_a_signal_leaves_no_final_file_and_no_temporary(world, slow_city, tmp_pa
     _, err = job.communicate(timeout=60)
     assert job.returncode == code, err
     assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("interrupted")
-    assert final_files(out) == []  # no final file, no temporary, no scratch
+    assert final_files(out) == [".csboundary-run"]  # no final file, no temporary, no scratch; the finished work, kept
+    store = out / ".csboundary-run"
+    assert not [p for p in store.rglob(".*") if "partial" in p.name]  # every stored file is complete
 
 
 def test_leftovers_of_a_killed_run_are_cleared_by_the_next(world, tmp_path):

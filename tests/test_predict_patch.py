@@ -140,19 +140,19 @@ def test_an_interrupted_predict_leaves_no_final_file(bundle, four_patch_city, tm
     out.mkdir()
     (out / "summary.json").write_text("{}")  # from an earlier run: must not vouch for this one
     calls = []
-    original = map_stitching.StreamingMapAverager.add
+    original = map_stitching.WindowSchedule.add_maps
 
-    def add_then_interrupt(self, patch, maps):
-        calls.append(patch.index)
+    def add_then_interrupt(self, index):
+        calls.append(index)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return original(self, patch, maps)
+        return original(self, index)
 
-    monkeypatch.setattr(map_stitching.StreamingMapAverager, "add", add_then_interrupt)
+    monkeypatch.setattr(map_stitching.WindowSchedule, "add_maps", add_then_interrupt)
     predictor = PatchPredictor.load(bundle, torch.device("cpu"))
     with Mosaic.open(four_patch_city / "tiles") as mosaic, pytest.raises(KeyboardInterrupt):
         job.run_prediction(mosaic, predictor, out, write_maps=True, progress=False)
-    assert list(out.iterdir()) == []  # no outputs, no scratch maps, no stale summary
+    assert [p.name for p in out.iterdir()] == [".csboundary-run"]  # no outputs, no scratch maps, no stale summary; the work kept
 
 
 def test_predict_on_a_non_raster_is_one_line_error(tmp_path):

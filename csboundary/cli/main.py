@@ -444,14 +444,23 @@ def predict(
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of imagery without a CRS (needed then)."),
+    restart: bool = typer.Option(False, "--restart", help="Discard the unfinished run in --out instead of resuming it."),
+    scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
+    workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
+    threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
     """City-scale prediction: patch grid -> FPN -> averaged maps -> vertices -> AfANet -> stitched
     city graph, written in the input's CRS. Any pixel size from 0.03 to 1 m, any CRS (metres,
     feet, degrees) and 8/16-bit or float imagery are resampled and stretched on the fly
-    (docs/city-inference.md)."""
+    (docs/city-inference.md). Work is kept as it is done: the same command after an interruption
+    continues where it stopped (docs/scaling.md)."""
+    import contextlib
+
     from csboundary.data.model_view import model_view
+    from csboundary.models.checkpoint import file_sha256
+    from csboundary.pipeline.patch import shipped_weights
     from csboundary.pipeline.run import run_prediction, stage_table
 
     mosaic, _ = _open_inputs(inputs, None)
@@ -463,12 +472,26 @@ def predict(
     plan = PatchGrid.for_mosaic(view.mosaic)
     typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
                f"at {predictor.pixel_size_m:g} m", err=True)
-    settings = {"weights": str(weights or "shipped"), "edge_threshold": predictor.edge_threshold, "batch_size": batch_size,
-                "device": str(predictor.device), "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
-                "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
-    with view.mosaic:
+    if scheduler and workers:
+        raise typer.BadParameter("give --scheduler or --workers, not both")
+    if threads and not (scheduler or workers):
+        import torch
+
+        torch.set_num_threads(threads)
+    settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
+                "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
+                "batch_size": batch_size, "device": str(predictor.device), "input_pixel_m": [round(v, 5) for v in view.source_pixel_m],
+                "resampled": view.resampled, "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
+    with view.mosaic, contextlib.ExitStack() as stack:
+        options = {}
+        if scheduler or workers:
+            from csboundary.pipeline.distributed import dask_client, dask_executor
+
+            client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
+            options = {"executor": dask_executor(client), "threads": threads or worker_threads}
+            settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
         _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=not quiet,
-                                    settings=settings, units=view.units)
+                                    settings=settings, units=view.units, restart=restart, **options)
     c = summary["counts"]
     typer.echo(f"{out}: {c['edges']} edges, {c['vertices']} vertices, {c['boundary_km']} km of boundary\n{stage_table(summary)}")
 
@@ -672,7 +695,8 @@ def main() -> None:
         sys.exit(1)
     except (Interrupted, KeyboardInterrupt) as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
-        typer.echo(f"interrupted ({signal.Signals(signum).name}): temporaries removed; no partial file was left under a final name", err=True)
+        typer.echo(f"interrupted ({signal.Signals(signum).name}): temporaries removed; no partial file was left under a final name "
+                   "(a predict run keeps its finished patches: the same command continues it)", err=True)
         sys.exit(128 + signum)
     sys.exit(code if isinstance(code, int) else 0)
 

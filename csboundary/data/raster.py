@@ -299,6 +299,12 @@ class Mosaic:
             ds.close()
         self._handles.clear()
 
+    def __getstate__(self) -> dict:
+        """Pickled without its open files (a Dask worker opens the tiles it reads itself)."""
+        state = dict(self.__dict__)
+        state["_handles"] = OrderedDict()
+        return state
+
     def __enter__(self) -> "Mosaic":
         return self
 

@@ -34,6 +34,17 @@ def code_version() -> str:
         return __version__
 
 
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file (identifies weights in a run's manifest)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 def save_checkpoint(path: str | Path, kind: str, **content: Any) -> Path:
     payload = {"format": FORMAT, "kind": kind, "code_version": code_version(), **content}
     with atomic_path(path) as tmp:

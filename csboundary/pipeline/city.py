@@ -1,13 +1,18 @@
-"""City-scale inference, streaming (paper Algorithm 1 and Section IV-E).
+"""City-scale inference, patch by patch (paper Algorithm 1 and Section IV-E).
 
-Patches are visited in the grid's row-major order in batches: read -> model maps (FPN) ->
-:class:`StreamingMapAverager`, which hands back each patch's stitched window as soon as all of
-its neighbours have been predicted -> vertex extraction on that window -> edges (AfANet) -> the
-patch graph, kept in mosaic pixels. Once every patch is done the patch graphs are stitched into
-the city graph (:func:`stitch_patch_graphs`). Raster memory is bounded by about one row of
-patches (the averager's band), not by the city; only the vector graphs grow with the city. The
-image of a patch is read again for AfANet a row later: holding a row of images instead would
-double the band's memory to save ~0.06 s of reading per patch.
+The run is two kinds of per-patch work, both in :class:`CityJob`: the FPN's maps of a batch of
+patches (read -> model -> stored), and a window's graph (its stitched maps, averaged over the
+patches covering it -> vertex extraction -> AfANet -> the patch graph in mosaic pixels, stored).
+:class:`~csboundary.pipeline.map_stitching.WindowSchedule` says when a window can be stitched
+and when a patch's maps can be dropped; the :class:`~csboundary.pipeline.run_store.RunStore`
+holds what is done, in memory or on disk (then a killed run resumes where it stopped). Once every
+window has its graph, the patch graphs are stitched into the city graph
+(:func:`stitch_patch_graphs`).
+
+Here the work runs in this process in the grid's row-major order, so map memory is bounded by
+about two rows of patches; :mod:`csboundary.pipeline.distributed` hands the same ``CityJob``
+steps to Dask workers. Every window's graph depends only on the stored maps of its patches, so
+the city graph is the same whichever process computed which patch (given the same FPN batches).
 
 The model is anything with the three steps of :class:`PatchModel`: the trained networks
 (:class:`~csboundary.pipeline.patch.PatchPredictor`) or the ground truth
@@ -33,10 +38,12 @@ from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig, stitch_patch_graphs, to_mosaic
-from csboundary.pipeline.map_stitching import StreamingMapAverager
+from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
+from csboundary.pipeline.run_store import RunStore
 
 GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow with the city
 STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching")
+DEFAULT_CHANNELS = 2  # keypoint + segmentation: the maps of a window no covering patch has imagery for
 
 
 def _heap_trimmer():
@@ -55,7 +62,7 @@ _trim_heap = _heap_trimmer()
 
 class PatchModel(Protocol):
     def patch_maps(self, patches: list[Patch], images: list[np.ndarray]) -> list[np.ndarray]:
-        """(2, S, S) keypoint and segmentation probabilities per patch."""
+        """(C, S, S) probabilities per patch (C = 2: keypoint and segmentation)."""
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         """Vertices and corner edges of a stitched window (window pixels)."""
@@ -72,70 +79,179 @@ class CityResult:
     patch_graphs: dict[tuple[int, int], BoundaryGraph]
     grid: PatchGrid
     seconds: dict[str, float] = field(default_factory=dict)
-    map_bytes_peak: int = 0
+    map_bytes_peak: int = 0  # stored patch maps at most (memory or disk)
     patches_without_imagery: int = 0  # windows with no valid pixel: the FPN was not run on them
+    work: dict[str, int] = field(default_factory=dict)  # patches predicted / windows connected by this run, and reused
 
     @property
     def n_patches(self) -> int:
         return len(self.grid)
 
 
+class _Timer:
+    def __init__(self):
+        self.seconds: dict[str, float] = defaultdict(float)
+
+    def __call__(self, stage: str, fn, *args):
+        start = time.perf_counter()
+        out = fn(*args)
+        self.seconds[stage] += time.perf_counter() - start
+        return out
+
+
+@dataclass
+class CityJob:
+    """The two steps of a city run, on a mosaic, a model and a store: what a worker is given."""
+
+    mosaic: Mosaic
+    model: PatchModel
+    grid: PatchGrid
+    store: RunStore
+    write_cores: bool = False  # keep each core's stitched maps (uint8) for maps.tif
+    threads: int | None = None  # torch threads in a worker process (None: leave as is)
+
+    def predict_maps(self, indices: list[Index]) -> tuple[list[bool], dict[str, float]]:
+        """Read and predict one FPN batch and store its maps; returns whether each window had
+        imagery (the FPN skips those without) and the seconds per stage."""
+        timed = _Timer()
+        patches = [self.grid.patch(*i) for i in indices]
+        with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
+            reads = timed("read", lambda: [self.mosaic.read(p.expanded) for p in patches])
+        has_pixels = [bool(r.valid.any()) for r in reads]
+        work = [k for k, ok in enumerate(has_pixels) if ok]
+        predicted = timed("fpn", self.model.patch_maps, [patches[k] for k in work], [reads[k].data for k in work]) if work else []
+        maps: list[np.ndarray | None] = [None] * len(patches)
+        for k, m in zip(work, predicted):
+            maps[k] = m * reads[k].valid[None]  # no keypoints where there is no image
+        for index, m in zip(indices, maps):
+            timed("map_stitching", self.store.save_maps, index, m)
+        return has_pixels, dict(timed.seconds)
+
+    def stitched_maps(self, index: Index) -> np.ndarray:
+        """The window's maps averaged over every patch covering it (float32)."""
+        channels = self.store.channels or DEFAULT_CHANNELS
+        return stitch_window(self.grid, self.grid.patch(*index), self.store.load_maps, channels)
+
+    def connect_window(self, index: Index, maps: np.ndarray | None = None) -> tuple[BoundaryGraph, dict[str, float]]:
+        """Stitch the window, find its vertices and edges, store its graph (mosaic pixels)."""
+        timed = _Timer()
+        patch = self.grid.patch(*index)
+        if maps is None:
+            maps = timed("map_stitching", self.stitched_maps, index)
+        with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
+            image = timed("read", lambda: self.mosaic.read(patch.expanded).data)
+        found = timed("vertex_extraction", self.model.extract, maps)
+        graph = to_mosaic(timed("afanet", self.model.connect, patch, image, maps, found), patch)
+        if self.write_cores:
+            rows, cols = patch.core_local.slices()
+            self.store.save_core(index, np.clip(np.rint(maps[:, rows, cols] * 255), 0, 255).astype(np.uint8))
+        self.store.save_graph(index, graph)
+        _trim_heap()
+        return graph, dict(timed.seconds)
+
+
+def fpn_batches(grid: PatchGrid, batch_size: int) -> list[list[Index]]:
+    """The FPN batches of a run: consecutive patches in row-major order. Fixed by the grid and
+    the batch size alone, so a resumed or distributed run feeds the FPN the same batches."""
+    indices = [p.index for p in grid]
+    return [indices[k : k + batch_size] for k in range(0, len(indices), batch_size)]
+
+
+class CityRun:
+    """The bookkeeping of one run, whoever does the work: which windows are ready, which maps to
+    drop, the patch graphs, the seconds per stage, the progress bar."""
+
+    def __init__(self, job: CityJob, batch_size: int, progress: bool, on_window: Callable[[Patch, np.ndarray], None] | None = None):
+        self.job, self.on_window = job, on_window
+        grid, store = job.grid, job.store
+        graphs = store.graphs_done()
+        self.schedule = WindowSchedule(grid, graphs_done=graphs)
+        # maps a finished window no longer needs were dropped; they count as done
+        self.schedule.maps_done = store.maps_done() | {p.index for p in grid if self.schedule.releasable(p.index)}
+        self.patch_graphs = {i: store.load_graph(i) for i in sorted(graphs)}
+        self.batches = [b for b in fpn_batches(grid, batch_size) if not set(b) <= self.schedule.maps_done]
+        self.seconds: dict[str, float] = defaultdict(float)
+        self.work = {"patches_predicted": 0, "windows_connected": 0, "patches_reused": len(self.schedule.maps_done),
+                     "windows_reused": len(graphs)}
+        self.map_bytes_peak = store.held_map_bytes()
+        self.bar = tqdm(total=len(grid), initial=len(graphs), desc="predict patches", unit="patch", disable=not progress)
+
+    def add_seconds(self, seconds: dict[str, float]) -> None:
+        for k, v in seconds.items():
+            self.seconds[k] += v
+
+    def maps_finished(self, batch: list[Index], seconds: dict[str, float]) -> list[Index]:
+        """A batch's maps are stored; returns the windows now ready."""
+        self.add_seconds(seconds)
+        self.work["patches_predicted"] += len(batch)
+        ready = []
+        for index in batch:
+            if index not in self.schedule.maps_done:
+                ready += self.schedule.add_maps(index)
+        self.map_bytes_peak = max(self.map_bytes_peak, self.job.store.held_map_bytes())
+        return sorted(set(ready))
+
+    def graph_finished(self, index: Index, graph: BoundaryGraph, seconds: dict[str, float]) -> None:
+        self.add_seconds(seconds)
+        self.work["windows_connected"] += 1
+        self.patch_graphs[index] = graph
+        for q in self.schedule.add_graph(index):
+            self.job.store.drop_maps(q)
+        self.bar.update(1)
+
+    def connect_here(self, index: Index) -> None:
+        """Connect one window in this process (calls ``on_window`` with its stitched maps)."""
+        maps = None
+        if self.on_window is not None:
+            timed = _Timer()
+            maps = timed("map_stitching", self.job.stitched_maps, index)
+            self.add_seconds(timed.seconds)
+            self.on_window(self.job.grid.patch(*index), maps)
+        graph, seconds = self.job.connect_window(index, maps)
+        self.graph_finished(index, graph, seconds)
+
+    def finish(self, stitch: StitchConfig, progress: bool) -> CityResult:
+        self.bar.close()
+        if not self.schedule.done:
+            missing = len(self.job.grid) - len(self.schedule.graphs_done)
+            raise RuntimeError(f"{missing} window(s) have no graph: the run did not finish")
+        grid, mosaic = self.job.grid, self.job.mosaic
+        crs = mosaic.crs.to_string() if mosaic.crs is not None else None
+        timed = _Timer()
+        with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
+            graph = timed("graph_stitching", stitch_patch_graphs, self.patch_graphs, grid, stitch, crs)
+            stitch_bar.update(1)
+        self.add_seconds(timed.seconds)
+        return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,
+                          len(self.job.store.empty_patches()), dict(self.work))
+
+
+def run_here(run: CityRun) -> None:
+    """Do a run's remaining work in this process, in row-major order: a window is connected as
+    soon as its last covering patch is predicted."""
+    for index in run.schedule.ready():  # windows an interrupted run left ready
+        run.connect_here(index)
+    for batch in run.batches:
+        has_pixels, seconds = run.job.predict_maps(batch)
+        for index in run.maps_finished(batch, seconds):
+            run.connect_here(index)
+
+
 def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(),
-                 batch_size: int = 1, progress: bool = True,
-                 on_window: Callable[[Patch, np.ndarray], None] | None = None) -> CityResult:
-    """Predict the whole mosaic; ``on_window(patch, stitched_maps)`` sees every final window
-    (e.g. to write the stitched maps)."""
+                 batch_size: int = 1, progress: bool = True, on_window: Callable[[Patch, np.ndarray], None] | None = None,
+                 store: RunStore | None = None, write_cores: bool = False, executor: Callable[[CityRun], None] = run_here,
+                 threads: int | None = None) -> CityResult:
+    """Predict the whole mosaic. ``on_window(patch, stitched_maps)`` sees every final window
+    (in-process runs only); ``store`` (default: in memory) holds the work done, and a store left
+    by an interrupted run is resumed; ``executor`` does the work (default: this process; see
+    :func:`csboundary.pipeline.distributed.dask_executor`)."""
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     grid = PatchGrid.for_mosaic(mosaic, grid_config)
-    averager = StreamingMapAverager(grid)
-    seconds: dict[str, float] = defaultdict(float)
-    patch_graphs: dict[tuple[int, int], BoundaryGraph] = {}
-    patches = list(grid)
-    skipped, channels = 0, None
-    bar = tqdm(total=len(patches), desc="predict patches", unit="patch", disable=not progress)
-
-    def timed(stage: str, fn, *args):
-        start = time.perf_counter()
-        out = fn(*args)
-        seconds[stage] += time.perf_counter() - start
-        return out
-
-    def graph_of(patch: Patch, maps: np.ndarray) -> None:
-        if on_window is not None:
-            on_window(patch, maps)
-        image = timed("read", lambda: mosaic.read(patch.expanded).data)
-        found = timed("vertex_extraction", model.extract, maps)
-        graph = timed("afanet", model.connect, patch, image, maps, found)
-        patch_graphs[patch.index] = to_mosaic(graph, patch)
-        _trim_heap()
-        bar.update(1)
-
-    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
-        for start in range(0, len(patches), batch_size):
-            batch = patches[start : start + batch_size]
-            reads = timed("read", lambda: [mosaic.read(p.expanded) for p in batch])
-            # A window without imagery skips the model (its maps are zero anyway), once the model's
-            # channel count is known from a window it did see.
-            has_pixels = [bool(r.valid.any()) or channels is None for r in reads]
-            work = [k for k, ok in enumerate(has_pixels) if ok]
-            predicted = timed("fpn", model.patch_maps, [batch[k] for k in work], [reads[k].data for k in work]) if work else []
-            if predicted:
-                channels = predicted[0].shape[0]
-            maps = [np.zeros((channels, *r.valid.shape), np.float32) if not ok else None for r, ok in zip(reads, has_pixels)]
-            skipped += has_pixels.count(False)
-            for k, m in zip(work, predicted):
-                maps[k] = m
-            for patch, read, patch_maps in zip(batch, reads, maps):
-                patch_maps = patch_maps * read.valid[None]  # no keypoints where there is no image
-                for ready, stitched in timed("map_stitching", averager.add, patch, patch_maps):
-                    graph_of(ready, stitched)
-    bar.close()
-    crs = mosaic.crs.to_string() if mosaic.crs is not None else None
-    with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
-        graph = timed("graph_stitching", stitch_patch_graphs, patch_graphs, grid, stitch, crs)
-        stitch_bar.update(1)
-    return CityResult(graph, patch_graphs, grid, {s: seconds[s] for s in STAGES}, averager.peak_bytes, skipped)
+    job = CityJob(mosaic, model, grid, store if store is not None else RunStore(), write_cores, threads)
+    run = CityRun(job, batch_size, progress, on_window)
+    executor(run)
+    return run.finish(stitch, progress)
 
 
 def patch_scale_graph(result: CityResult) -> BoundaryGraph:

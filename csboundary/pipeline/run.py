@@ -11,7 +11,10 @@
 * ``summary.json``, written last: time per stage, seconds per patch, km2/h, counts, settings.
 
 Every file is written under a temporary name and renamed when complete; ``summary.json`` existing
-means the run finished.
+means the run finished. The work itself is kept in ``OUT/.csboundary-run/`` as it is done
+(:mod:`csboundary.pipeline.run_store`): the same command run again after a crash, Ctrl-C or
+SIGKILL continues where it stopped, and refuses a store left by other inputs, weights or
+settings (``restart`` discards it). The store is removed once the outputs are in place.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import contextlib
 import json
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import rasterio
@@ -30,48 +34,68 @@ from csboundary.data.raster import Mosaic
 from csboundary.data.model_view import mosaic_units
 from csboundary.data.units import GroundUnits
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.city import GDAL_CACHE_MB, STAGES, CityResult, PatchModel, predict_city
-from csboundary.pipeline.map_output import StitchedMapWriter
+from csboundary.pipeline.city import GDAL_CACHE_MB, STAGES, CityResult, CityRun, PatchModel, predict_city, run_here
+from csboundary.pipeline.map_output import write_maps_cog
+from csboundary.pipeline.run_store import STORE_DIR, RunStore
 from csboundary.pipeline.outputs import write_graph_outputs
 
 ORANGE = (255, 140, 0)
 SUMMARY = "summary.json"
+RUN_ONLY_SETTINGS = {"cluster"}  # how the work is spread, not what it computes: a run may resume on another cluster
 PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
 
 
 def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, write_maps: bool = False, batch_size: int = 1,
                    grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(), progress: bool = True,
-                   settings: dict | None = None, ground_truth=(), units: GroundUnits | None = None) -> tuple[CityResult, dict]:
+                   settings: dict | None = None, ground_truth=(), units: GroundUnits | None = None, restart: bool = False,
+                   executor: Callable[[CityRun], None] = run_here, threads: int | None = None) -> tuple[CityResult, dict]:
     """Predict ``mosaic`` and write every output into ``out_dir``; returns the result and the summary.
 
     ``ground_truth`` (world LineStrings), when given, is drawn in cyan under the prediction.
     ``units`` turns coordinates into metres (default: the mosaic CRS's; see
     :func:`csboundary.data.model_view.model_view`, which also gives them for CRS-less imagery).
+    ``settings`` (JSON-ready) describe the model and how it is run: with the inputs, the grid and
+    the code version they decide whether an unfinished run in ``out_dir`` is resumed or refused.
     """
     if units is None:
         units = mosaic_units(mosaic) or PIXEL_UNITS
     out = check_output_dir(out_dir, create=True)
     clear_stale_temporaries(out)  # what a run killed with SIGKILL left behind
+    store = RunStore.open(out / STORE_DIR, run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps), restart=restart)
     (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
     start = time.perf_counter()
     with staging_folder(out) as stage, contextlib.ExitStack() as stack:
         stack.enter_context(rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB))  # overviews read every tile too
-        writer = stack.enter_context(StitchedMapWriter(stage / "maps.tif", mosaic)) if write_maps else None
-        result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress, on_window=writer)
-        if writer is not None:
-            writer.close()
+        result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
+                              store=store, write_cores=write_maps, executor=executor, threads=threads)
         rss_after_prediction = peak_rss_mb()
         written_at = time.perf_counter()
         files = write_graph_outputs(result.graph, stage, units=units)
         files.update(write_overlays(mosaic, result, stage, ground_truth))
         if write_maps:
-            files["maps"] = stage / "maps.tif"
+            files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
         seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
         seconds["total"] = time.perf_counter() - start
         summary = summarize(mosaic, result, seconds, files, settings or {}, units)
         summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
         (stage / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n")
+    store.remove()
     return result, summary
+
+
+def run_manifest(mosaic: Mosaic, settings: dict, grid_config: GridConfig, batch_size: int, write_maps: bool) -> dict:
+    """What a run's stored work depends on: a resumed run must match it exactly. Input files are
+    identified by path, size and modification time (hashing a city's imagery would take longer
+    than a patch's work)."""
+    from csboundary.models.checkpoint import code_version
+
+    inputs = []
+    for tile in mosaic.tiles:
+        stat = Path(tile.path).stat()
+        inputs.append([str(Path(tile.path).resolve()), stat.st_size, stat.st_mtime_ns])
+    settings = {k: v for k, v in settings.items() if k not in RUN_ONLY_SETTINGS}
+    return {"inputs": inputs, "settings": settings, "grid": [grid_config.core, grid_config.margin], "batch_size": batch_size,
+            "write_maps": write_maps, "code_version": code_version()}
 
 
 def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict, units: GroundUnits | None = None) -> dict:
@@ -102,7 +126,8 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
         "seconds": {k: round(v, 3) for k, v in seconds.items()},
         "seconds_per_patch": {k: round(seconds[k] / n, 4) for k in (*STAGES, "total")},
         "km2_per_hour": round(area_km2 / (seconds["total"] / 3600), 3) if seconds["total"] > 0 else None,
-        "map_memory_peak_mb": round(result.map_bytes_peak / 2**20, 1),
+        "map_store_peak_mb": round(result.map_bytes_peak / 2**20, 1),
+        "work": result.work,
         "settings": settings,
         "files": {k: Path(v).name for k, v in files.items()},
     }

@@ -1,0 +1,249 @@
+"""The persisted state of a city run: what makes ``predict`` resumable and shareable by workers.
+
+A run has two kinds of per-patch work (paper Algorithm 1): the FPN's maps of each patch, and the
+graph of each window, which needs the maps of the window's patch and of all its neighbours (to
+average the overlaps). The store keeps both as one file per patch, each written under a
+temporary name and renamed into place, so a file that exists is complete whatever killed the
+process (SIGKILL included) and the files themselves are the progress record:
+
+* ``maps/R_C.npy``: the patch's FPN maps (float16, as the averaging has always stored them), or
+  ``maps/R_C.empty`` when the window has no valid pixel (the FPN was not run);
+* ``graphs/R_C.npz``: the window's graph in mosaic pixels (arrays only, read without pickle);
+* ``cores/R_C.npy``: the stitched maps of the patch core as uint8 (only with ``--write-maps``).
+
+A patch's maps are deleted as soon as every window that reads them has its graph, so the disk
+holds about two rows of patches, not the city. ``manifest.json`` records what the work depends
+on (inputs, weights, settings, code version); a later run with a different manifest is refused
+instead of mixing the two. The same store lives in memory (``root=None``) for runs that need not
+survive their process (evaluation, tests).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+from rasterio.transform import Affine
+
+from csboundary.errors import InputError
+from csboundary.graph import BoundaryGraph
+
+MANIFEST = "manifest.json"
+STORE_DIR = ".csboundary-run"  # inside the output folder
+FORMAT = "csboundary-run-store"
+VERSION = 1
+
+Index = tuple[int, int]
+
+
+class RunMismatch(InputError):
+    """The output folder holds an unfinished run of other inputs, weights or settings."""
+
+
+def _stem(index: Index) -> str:
+    return f"{index[0]}_{index[1]}"
+
+
+def _index(stem: str) -> Index:
+    row, col = stem.split("_")
+    return int(row), int(col)
+
+
+def _atomic_save(path: Path, write) -> None:
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+class RunStore:
+    """Per-patch maps, graphs and stitched cores of one run, on disk under ``root`` or in memory."""
+
+    def __init__(self, root: str | Path | None = None):
+        self.root = Path(root) if root is not None else None
+        self._maps: dict[Index, np.ndarray | None] = {}
+        self._graphs: dict[Index, BoundaryGraph] = {}
+        self._cores: dict[Index, np.ndarray] = {}
+        self._channels: int | None = None
+        if self.root is not None:
+            for sub in ("maps", "graphs", "cores"):
+                (self.root / sub).mkdir(parents=True, exist_ok=True)
+
+    # -- opening a persistent store ------------------------------------------------------------
+    @classmethod
+    def open(cls, root: str | Path, manifest: dict, restart: bool = False) -> "RunStore":
+        """The store at ``root`` for a run described by ``manifest`` (JSON-ready): a new one, or
+        the unfinished one left by the same run. A store of a different run is a
+        :class:`RunMismatch` naming what differs, unless ``restart`` discards it."""
+        root = Path(root)
+        manifest = {"format": FORMAT, "version": VERSION, **json.loads(json.dumps(manifest))}
+        path = root / MANIFEST
+        if root.exists() and restart:
+            shutil.rmtree(root)
+        if path.exists():
+            try:
+                old = json.loads(path.read_text())
+            except (OSError, ValueError):
+                old = {}
+            differs = [k for k in [*manifest, *(k for k in old if k not in manifest)] if old.get(k) != manifest.get(k)]
+            if differs:
+                raise RunMismatch(root.parent, f"holds an unfinished run with other {', '.join(differs)}; "
+                                               "rerun with --restart to discard it, or choose another --out")
+        elif root.exists():
+            shutil.rmtree(root)  # no manifest: a store whose creation was interrupted
+        store = cls(root)
+        if not path.exists():
+            _atomic_save(path, lambda f: f.write((json.dumps(manifest, indent=1) + "\n").encode()))
+        return store
+
+    @property
+    def channels(self) -> int | None:
+        """Channels of the stored maps (None until a patch's maps are stored, by any process)."""
+        if self._channels is None and self.root is not None and (self.root / "channels").exists():
+            self._channels = int((self.root / "channels").read_text())
+        return self._channels
+
+    def remove(self) -> None:
+        """Delete the store (the run's outputs are complete)."""
+        if self.root is not None:
+            shutil.rmtree(self.root, ignore_errors=True)
+
+    # -- what is done --------------------------------------------------------------------------
+    def maps_done(self) -> set[Index]:
+        """Patches whose FPN maps are stored (or known empty)."""
+        if self.root is None:
+            return set(self._maps)
+        return {_index(n.rsplit(".", 1)[0]) for n in os.listdir(self.root / "maps") if not n.startswith(".")}
+
+    def empty_patches(self) -> set[Index]:
+        """Patches without imagery (the FPN was not run on them)."""
+        if self.root is None:
+            return {i for i, m in self._maps.items() if m is None}
+        return {_index(n[: -len(".empty")]) for n in os.listdir(self.root / "maps") if n.endswith(".empty") and not n.startswith(".")}
+
+    def graphs_done(self) -> set[Index]:
+        if self.root is None:
+            return set(self._graphs)
+        return {_index(n[: -len(".npz")]) for n in os.listdir(self.root / "graphs") if n.endswith(".npz") and not n.startswith(".")}
+
+    # -- maps ----------------------------------------------------------------------------------
+    def save_maps(self, index: Index, maps: np.ndarray | None) -> None:
+        """Store a patch's (C, S, S) maps as float16, or ``None`` for a window without imagery."""
+        if maps is not None:
+            maps = maps.astype(np.float16)
+            if self.channels is None:
+                self._channels = maps.shape[0]
+                if self.root is not None:
+                    _atomic_save(self.root / "channels", lambda f: f.write(str(self._channels).encode()))
+        if self.root is None:
+            self._maps[index] = maps
+        elif maps is None:
+            _atomic_save(self.root / "maps" / f"{_stem(index)}.empty", lambda f: None)
+        else:
+            _atomic_save(self.root / "maps" / f"{_stem(index)}.npy", lambda f: np.save(f, maps, allow_pickle=False))
+
+    def load_maps(self, index: Index) -> np.ndarray | None:
+        """A patch's stored maps (memory-mapped on disk), ``None`` for a window without imagery."""
+        if self.root is None:
+            return self._maps[index]
+        path = self.root / "maps" / f"{_stem(index)}.npy"
+        if path.exists():
+            return np.load(path, mmap_mode="r", allow_pickle=False)
+        if (self.root / "maps" / f"{_stem(index)}.empty").exists():
+            return None
+        raise KeyError(f"maps of patch {index} are not in the run store")
+
+    def drop_maps(self, index: Index) -> None:
+        """Forget a patch's maps once no pending window needs them (its empty marker stays)."""
+        if self.root is None:
+            if self._maps.get(index) is not None:
+                self._maps[index] = np.zeros((0,), np.float16)  # done, no longer held
+            return
+        (self.root / "maps" / f"{_stem(index)}.npy").unlink(missing_ok=True)
+
+    def held_map_bytes(self) -> int:
+        if self.root is None:
+            return sum(m.nbytes for m in self._maps.values() if m is not None)
+        return sum(e.stat().st_size for e in os.scandir(self.root / "maps") if e.name.endswith(".npy"))
+
+    # -- graphs and cores ----------------------------------------------------------------------
+    def save_graph(self, index: Index, graph: BoundaryGraph) -> None:
+        if self.root is None:
+            self._graphs[index] = graph
+        else:
+            _atomic_save(self.root / "graphs" / f"{_stem(index)}.npz", lambda f: np.savez(f, **graph_arrays(graph)))
+
+    def load_graph(self, index: Index) -> BoundaryGraph:
+        if self.root is None:
+            return self._graphs[index]
+        with np.load(self.root / "graphs" / f"{_stem(index)}.npz", allow_pickle=False) as arrays:
+            return graph_from_arrays(arrays)
+
+    def save_core(self, index: Index, values: np.ndarray) -> None:
+        """The stitched maps of a patch core, uint8 (for ``maps.tif``)."""
+        if self.root is None:
+            self._cores[index] = values
+        else:
+            _atomic_save(self.root / "cores" / f"{_stem(index)}.npy", lambda f: np.save(f, values, allow_pickle=False))
+
+    def load_core(self, index: Index) -> np.ndarray:
+        if self.root is None:
+            return self._cores[index]
+        return np.load(self.root / "cores" / f"{_stem(index)}.npy", allow_pickle=False)
+
+
+def graph_arrays(graph: BoundaryGraph) -> dict[str, np.ndarray]:
+    """A graph as plain arrays (exact: float64 coordinates and scores; kinds as strings);
+    polylines concatenated with per-edge offsets, -1 for an edge without one."""
+    arrays = {"vertices": np.asarray(graph.vertices, np.float64), "edges": np.asarray(graph.edges, np.int64)}
+    if graph.vertex_kinds is not None:
+        arrays["vertex_kinds"] = np.array(graph.vertex_kinds, dtype=str).reshape(-1)
+    if graph.edge_kinds is not None:
+        arrays["edge_kinds"] = np.array(graph.edge_kinds, dtype=str).reshape(-1)
+    if graph.edge_scores is not None:
+        arrays["edge_scores"] = np.asarray(graph.edge_scores, np.float64)
+    if graph.edge_patches is not None:
+        arrays["edge_patches"] = np.asarray(graph.edge_patches, np.int64)
+    if graph.edge_polylines is not None:
+        starts, points = [], []
+        total = 0
+        for line in graph.edge_polylines:
+            if line is None:
+                starts.append((-1, 0))
+                continue
+            line = np.asarray(line, np.float64).reshape(-1, 2)
+            starts.append((total, len(line)))
+            points.append(line)
+            total += len(line)
+        arrays["polyline_spans"] = np.array(starts, np.int64).reshape(-1, 2)
+        arrays["polyline_points"] = np.concatenate(points) if points else np.zeros((0, 2))
+    if graph.crs is not None:
+        arrays["crs"] = np.array(graph.crs)
+    if graph.transform is not None:
+        arrays["transform"] = np.array(list(graph.transform)[:6], np.float64)
+    return arrays
+
+
+def graph_from_arrays(arrays) -> BoundaryGraph:
+    """Inverse of :func:`graph_arrays`."""
+    names = set(arrays.keys()) if hasattr(arrays, "keys") else set(arrays.files)
+    polylines = None
+    if "polyline_spans" in names:
+        points = arrays["polyline_points"]
+        polylines = [None if start < 0 else points[start : start + n] for start, n in arrays["polyline_spans"]]
+    return BoundaryGraph(
+        arrays["vertices"], arrays["edges"],
+        vertex_kinds=arrays["vertex_kinds"].tolist() if "vertex_kinds" in names else None,
+        edge_kinds=arrays["edge_kinds"].tolist() if "edge_kinds" in names else None,
+        edge_polylines=polylines,
+        edge_scores=arrays["edge_scores"] if "edge_scores" in names else None,
+        edge_patches=arrays["edge_patches"] if "edge_patches" in names else None,
+        transform=Affine(*arrays["transform"]) if "transform" in names else None,
+        crs=str(arrays["crs"]) if "crs" in names else None,
+    )
