@@ -128,3 +128,18 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
         assert len(client.nthreads()) == 2
     assert summary["work"]["windows_connected"] == 9
     assert (out / "graph.json").read_bytes() == (reference / "graph.json").read_bytes()
+
+
+def test_maps_written_behind_are_readable_at_once_and_dropped_for_good(tmp_path):
+    store = RunStore(tmp_path / "s", write_behind=True)
+    maps = {(0, k): np.full((2, 8, 8), k / 10, np.float32) for k in range(12)}  # more than the writer may queue
+    for index, m in maps.items():
+        store.save_maps(index, m)
+        assert np.array_equal(store.load_maps(index), m.astype(np.float16))  # served before its file is in place
+    store.drop_maps((0, 3))
+    store.flush()
+    assert store.maps_done() == set(maps) - {(0, 3)}
+    assert not (tmp_path / "s" / "maps" / "0_3.npy").exists()
+    fresh = RunStore(tmp_path / "s")  # what the next process finds
+    assert np.array_equal(fresh.load_maps((0, 11)), maps[(0, 11)].astype(np.float16))
+    assert fresh.held_map_bytes() == 11 * (2 * 8 * 8 * 2 + 128)  # float16 arrays with their .npy headers

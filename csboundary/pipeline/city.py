@@ -168,7 +168,9 @@ class CityRun:
         self.schedule = WindowSchedule(grid, graphs_done=graphs)
         # maps a finished window no longer needs were dropped; they count as done
         self.schedule.maps_done = store.maps_done() | {p.index for p in grid if self.schedule.releasable(p.index)}
-        self.patch_graphs = {i: store.load_graph(i) for i in sorted(graphs)}
+        # with a store on disk the patch graphs are read back for the final stitching only, so
+        # memory during the run does not grow with the number of patches
+        self.patch_graphs = {} if store.root is not None else {i: store.load_graph(i) for i in sorted(graphs)}
         self.batches = [b for b in fpn_batches(grid, batch_size) if not set(b) <= self.schedule.maps_done]
         self.seconds: dict[str, float] = defaultdict(float)
         self.work = {"patches_predicted": 0, "windows_connected": 0, "patches_reused": len(self.schedule.maps_done),
@@ -194,7 +196,8 @@ class CityRun:
     def graph_finished(self, index: Index, graph: BoundaryGraph, seconds: dict[str, float]) -> None:
         self.add_seconds(seconds)
         self.work["windows_connected"] += 1
-        self.patch_graphs[index] = graph
+        if self.job.store.root is None:
+            self.patch_graphs[index] = graph
         for q in self.schedule.add_graph(index):
             self.job.store.drop_maps(q)
         self.bar.update(1)
@@ -215,7 +218,9 @@ class CityRun:
         if not self.schedule.done:
             missing = len(self.job.grid) - len(self.schedule.graphs_done)
             raise RuntimeError(f"{missing} window(s) have no graph: the run did not finish")
-        grid, mosaic = self.job.grid, self.job.mosaic
+        grid, mosaic, store = self.job.grid, self.job.mosaic, self.job.store
+        if store.root is not None:
+            self.patch_graphs = {p.index: store.load_graph(p.index) for p in grid}
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         timed = _Timer()
         with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:

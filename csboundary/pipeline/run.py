@@ -61,7 +61,8 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         units = mosaic_units(mosaic) or PIXEL_UNITS
     out = check_output_dir(out_dir, create=True)
     clear_stale_temporaries(out)  # what a run killed with SIGKILL left behind
-    store = RunStore.open(out / STORE_DIR, run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps), restart=restart)
+    store = RunStore.open(out / STORE_DIR, run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps), restart=restart,
+                           write_behind=True)
     (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
     start = time.perf_counter()
     with staging_folder(out) as stage, contextlib.ExitStack() as stack:

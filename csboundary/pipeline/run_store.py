@@ -11,7 +11,10 @@ process (SIGKILL included) and the files themselves are the progress record:
 * ``graphs/R_C.npz``: the window's graph in mosaic pixels (arrays only, read without pickle);
 * ``cores/R_C.npy``: the stitched maps of the patch core as uint8 (only with ``--write-maps``).
 
-A patch's maps are deleted as soon as every window that reads them has its graph, so the disk
+Writing a patch's maps (4.8 MB) costs about as much as stitching a window, so a store made with
+``write_behind`` writes them in a background thread while the next patch is predicted; until a
+file is in place its maps are served from memory (a killed run loses those few patches' maps,
+which the next run predicts again). A patch's maps are deleted as soon as every window that reads them has its graph, so the disk
 holds about two rows of patches, not the city. ``manifest.json`` records what the work depends
 on (inputs, weights, settings, code version); a later run with a different manifest is refused
 instead of mixing the two. The same store lives in memory (``root=None``) for runs that need not
@@ -23,6 +26,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +39,7 @@ MANIFEST = "manifest.json"
 STORE_DIR = ".csboundary-run"  # inside the output folder
 FORMAT = "csboundary-run-store"
 VERSION = 1
+MAX_PENDING_WRITES = 8  # maps waiting for the background writer at most (then saving waits)
 
 Index = tuple[int, int]
 
@@ -65,8 +70,11 @@ def _atomic_save(path: Path, write) -> None:
 class RunStore:
     """Per-patch maps, graphs and stitched cores of one run, on disk under ``root`` or in memory."""
 
-    def __init__(self, root: str | Path | None = None):
+    def __init__(self, root: str | Path | None = None, write_behind: bool = False):
         self.root = Path(root) if root is not None else None
+        self.write_behind = write_behind and self.root is not None
+        self._writer: ThreadPoolExecutor | None = None
+        self._pending: dict[Index, tuple[np.ndarray, Future]] = {}
         self._maps: dict[Index, np.ndarray | None] = {}
         self._graphs: dict[Index, BoundaryGraph] = {}
         self._cores: dict[Index, np.ndarray] = {}
@@ -76,8 +84,16 @@ class RunStore:
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
 
     # -- opening a persistent store ------------------------------------------------------------
+    def __getstate__(self) -> dict:
+        """A copy for another process (a Dask worker) writes synchronously: the client must find
+        a task's files in place when it learns the task is done."""
+        self.flush()
+        state = dict(self.__dict__)
+        state.update(write_behind=False, _writer=None, _pending={})
+        return state
+
     @classmethod
-    def open(cls, root: str | Path, manifest: dict, restart: bool = False) -> "RunStore":
+    def open(cls, root: str | Path, manifest: dict, restart: bool = False, write_behind: bool = False) -> "RunStore":
         """The store at ``root`` for a run described by ``manifest`` (JSON-ready): a new one, or
         the unfinished one left by the same run. A store of a different run is a
         :class:`RunMismatch` naming what differs, unless ``restart`` discards it."""
@@ -97,7 +113,7 @@ class RunStore:
                                                "rerun with --restart to discard it, or choose another --out")
         elif root.exists():
             shutil.rmtree(root)  # no manifest: a store whose creation was interrupted
-        store = cls(root)
+        store = cls(root, write_behind)
         if not path.exists():
             _atomic_save(path, lambda f: f.write((json.dumps(manifest, indent=1) + "\n").encode()))
         return store
@@ -111,6 +127,7 @@ class RunStore:
 
     def remove(self) -> None:
         """Delete the store (the run's outputs are complete)."""
+        self.flush()
         if self.root is not None:
             shutil.rmtree(self.root, ignore_errors=True)
 
@@ -119,7 +136,7 @@ class RunStore:
         """Patches whose FPN maps are stored (or known empty)."""
         if self.root is None:
             return set(self._maps)
-        return {_index(n.rsplit(".", 1)[0]) for n in os.listdir(self.root / "maps") if not n.startswith(".")}
+        return set(self._pending) | {_index(n.rsplit(".", 1)[0]) for n in os.listdir(self.root / "maps") if not n.startswith(".")}
 
     def empty_patches(self) -> set[Index]:
         """Patches without imagery (the FPN was not run on them)."""
@@ -145,13 +162,34 @@ class RunStore:
             self._maps[index] = maps
         elif maps is None:
             _atomic_save(self.root / "maps" / f"{_stem(index)}.empty", lambda f: None)
+        elif self.write_behind:
+            self._settle(MAX_PENDING_WRITES - 1)
+            if self._writer is None:
+                self._writer = ThreadPoolExecutor(1, thread_name_prefix="csboundary-maps-writer")
+            future = self._writer.submit(_atomic_save, self.root / "maps" / f"{_stem(index)}.npy", lambda f: np.save(f, maps, allow_pickle=False))
+            self._pending[index] = (maps, future)
         else:
             _atomic_save(self.root / "maps" / f"{_stem(index)}.npy", lambda f: np.save(f, maps, allow_pickle=False))
+
+    def _settle(self, keep: int = 0) -> None:
+        """Forget finished background writes, waiting until at most ``keep`` are pending; a
+        failed write (a full disk) raises here."""
+        for index in list(self._pending):
+            maps, future = self._pending[index]
+            if future.done() or len(self._pending) > keep:
+                future.result()
+                del self._pending[index]
+
+    def flush(self) -> None:
+        """Wait for every background write."""
+        self._settle(0)
 
     def load_maps(self, index: Index) -> np.ndarray | None:
         """A patch's stored maps (memory-mapped on disk), ``None`` for a window without imagery."""
         if self.root is None:
             return self._maps[index]
+        if index in self._pending:
+            return self._pending[index][0]
         path = self.root / "maps" / f"{_stem(index)}.npy"
         if path.exists():
             return np.load(path, mmap_mode="r", allow_pickle=False)
@@ -165,12 +203,16 @@ class RunStore:
             if self._maps.get(index) is not None:
                 self._maps[index] = np.zeros((0,), np.float16)  # done, no longer held
             return
+        if index in self._pending:
+            self._pending.pop(index)[1].result()  # the write must not recreate the file after it is removed
         (self.root / "maps" / f"{_stem(index)}.npy").unlink(missing_ok=True)
 
     def held_map_bytes(self) -> int:
         if self.root is None:
             return sum(m.nbytes for m in self._maps.values() if m is not None)
-        return sum(e.stat().st_size for e in os.scandir(self.root / "maps") if e.name.endswith(".npy"))
+        self._settle(len(self._pending))  # forget the writes that are done
+        pending = sum(m.nbytes for m, _ in self._pending.values())
+        return pending + sum(e.stat().st_size for e in os.scandir(self.root / "maps") if e.name.endswith(".npy"))
 
     # -- graphs and cores ----------------------------------------------------------------------
     def save_graph(self, index: Index, graph: BoundaryGraph) -> None:
