@@ -280,3 +280,26 @@ def test_merged_chains_cover_every_edge_once_and_keep_the_total_length(g):
     assert boundaries["length_m"].sum() == pytest.approx(0.3 * total, rel=1e-9, abs=1e-9)
     assert edges["length_m"].sum() == pytest.approx(0.3 * total, rel=1e-9, abs=1e-9)
     assert boundaries["confidence_mean"].isna().all()  # no scores: NaN, not an error
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5, 0.37])
+def test_the_overview_from_core_thumbnails_is_the_reduced_mosaic(shared_tiles, scale):
+    """overview.png is assembled from each core's thumbnail taken when the FPN read the patch;
+    it must be the picture a second, reduced pass over the imagery would give."""
+    from csboundary.data.grid import GridConfig, PatchGrid
+    from csboundary.data.raster import Mosaic
+    from csboundary.viz.overlay import core_thumbnail, overview_from_thumbs
+
+    with Mosaic.open(shared_tiles.directory) as mosaic:  # 120 x 80 px
+        grid = PatchGrid.for_mosaic(mosaic, GridConfig(core=32, margin=6))
+        thumbs = {p.index: core_thumbnail(mosaic.read(p.expanded), p, scale) for p in grid}
+        whole = mosaic.read(mosaic.window, scale=scale) if scale != 1.0 else mosaic.read(mosaic.window)
+        assert overview_from_thumbs(grid, scale, lambda i: None if i == (1, 1) else thumbs[i]) is None  # one missing: read instead
+        built = overview_from_thumbs(grid, scale, thumbs.get)
+    assert built.data.shape == whole.data.shape and built.valid.all() == whole.valid.all()
+    difference = np.abs(built.data.astype(int) - whole.data.astype(int))
+    if scale == 1.0:
+        assert difference.max() == 0
+    else:  # area averages of uniform noise over blocks cut at the cores' rounded edges instead of strips'
+        assert np.median(difference) < 20
+        assert np.allclose(built.data.mean(axis=(1, 2)), whole.data.mean(axis=(1, 2)), atol=2)

@@ -138,7 +138,8 @@ class Mosaic:
     def open(cls, source: str | Path | Sequence[str | Path]) -> "Mosaic":
         """Open and validate every raster in ``source`` (file, list of files, or directory)."""
         paths = find_rasters(source)
-        infos = [(p, *_inspect(p)) for p in paths]
+        with rasterio.Env(GDAL_DISABLE_READDIR_ON_OPEN="TRUE"):  # no folder listing per tile: side-cars are probed one by one
+            infos = [(p, *_inspect(p)) for p in paths]
         first = infos[0]
         for path, crs, transform, count, dtype, width, height, alpha in infos:
             if width == 0 or height == 0:

@@ -40,8 +40,12 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig, stitch_patch_graphs, to_mosaic
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
 from csboundary.pipeline.run_store import RunStore
+from csboundary.viz.overlay import core_thumbnail
 
 GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow with the city
+# GDAL lists a tile's folder on every open to find side-car files; with thousands of tiles in one
+# folder that listing dominates the open (side-cars are still probed one by one)
+GDAL_ENV = {"GDAL_CACHEMAX": GDAL_CACHE_MB, "GDAL_DISABLE_READDIR_ON_OPEN": "TRUE"}
 STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching")
 DEFAULT_CHANNELS = 2  # keypoint + segmentation: the maps of a window no covering patch has imagery for
 
@@ -109,13 +113,14 @@ class CityJob:
     store: RunStore
     write_cores: bool = False  # keep each core's stitched maps (uint8) for maps.tif
     threads: int | None = None  # torch threads in a worker process (None: leave as is)
+    overview_scale: float | None = None  # keep each core reduced by this for overview.png (None: do not)
 
     def predict_maps(self, indices: list[Index]) -> tuple[list[bool], dict[str, float]]:
         """Read and predict one FPN batch and store its maps; returns whether each window had
         imagery (the FPN skips those without) and the seconds per stage."""
         timed = _Timer()
         patches = [self.grid.patch(*i) for i in indices]
-        with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
+        with rasterio.Env(**GDAL_ENV):
             reads = timed("read", lambda: [self.mosaic.read(p.expanded) for p in patches])
         has_pixels = [bool(r.valid.any()) for r in reads]
         work = [k for k, ok in enumerate(has_pixels) if ok]
@@ -123,8 +128,13 @@ class CityJob:
         maps: list[np.ndarray | None] = [None] * len(patches)
         for k, m in zip(work, predicted):
             maps[k] = m * reads[k].valid[None]  # no keypoints where there is no image
-        for index, m in zip(indices, maps):
+        for index, m, read in zip(indices, maps, reads):
             timed("map_stitching", self.store.save_maps, index, m)
+            if m is not None:
+                timed("read", self.store.save_image, index, read.data)
+        if self.overview_scale:
+            for index, patch, read in zip(indices, patches, reads):
+                timed("read", self.store.save_thumb, index, core_thumbnail(read, patch, self.overview_scale))
         return has_pixels, dict(timed.seconds)
 
     def stitched_maps(self, index: Index) -> np.ndarray:
@@ -138,14 +148,17 @@ class CityJob:
         patch = self.grid.patch(*index)
         if maps is None:
             maps = timed("map_stitching", self.stitched_maps, index)
-        with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB):
-            image = timed("read", lambda: self.mosaic.read(patch.expanded).data)
+        image = timed("read", self.store.load_image, index)
+        if image is None:  # not kept (a store in memory, or an interrupted run)
+            with rasterio.Env(**GDAL_ENV):
+                image = timed("read", lambda: self.mosaic.read(patch.expanded).data)
         found = timed("vertex_extraction", self.model.extract, maps)
         graph = to_mosaic(timed("afanet", self.model.connect, patch, image, maps, found), patch)
         if self.write_cores:
             rows, cols = patch.core_local.slices()
             self.store.save_core(index, np.clip(np.rint(maps[:, rows, cols] * 255), 0, 255).astype(np.uint8))
         self.store.save_graph(index, graph)
+        self.store.drop_image(index)
         _trim_heap()
         return graph, dict(timed.seconds)
 
@@ -245,7 +258,7 @@ def run_here(run: CityRun) -> None:
 def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(),
                  batch_size: int = 1, progress: bool = True, on_window: Callable[[Patch, np.ndarray], None] | None = None,
                  store: RunStore | None = None, write_cores: bool = False, executor: Callable[[CityRun], None] = run_here,
-                 threads: int | None = None) -> CityResult:
+                 threads: int | None = None, overview_scale: float | None = None) -> CityResult:
     """Predict the whole mosaic. ``on_window(patch, stitched_maps)`` sees every final window
     (in-process runs only); ``store`` (default: in memory) holds the work done, and a store left
     by an interrupted run is resumed; ``executor`` does the work (default: this process; see
@@ -253,7 +266,7 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     grid = PatchGrid.for_mosaic(mosaic, grid_config)
-    job = CityJob(mosaic, model, grid, store if store is not None else RunStore(), write_cores, threads)
+    job = CityJob(mosaic, model, grid, store if store is not None else RunStore(), write_cores, threads, overview_scale)
     run = CityRun(job, batch_size, progress, on_window)
     executor(run)
     return run.finish(stitch, progress)

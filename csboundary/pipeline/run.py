@@ -34,12 +34,14 @@ from csboundary.data.raster import Mosaic
 from csboundary.data.model_view import mosaic_units
 from csboundary.data.units import GroundUnits
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.city import GDAL_CACHE_MB, STAGES, CityResult, CityRun, PatchModel, predict_city, run_here
+from csboundary.pipeline.city import GDAL_ENV, STAGES, CityResult, CityRun, PatchModel, predict_city, run_here
 from csboundary.pipeline.map_output import write_maps_cog
 from csboundary.pipeline.run_store import STORE_DIR, RunStore
+from csboundary.viz.overlay import overview_scale
 from csboundary.pipeline.outputs import write_graph_outputs
 
 ORANGE = (255, 140, 0)
+OVERVIEW_PX = 2000  # longest side of overview.png
 SUMMARY = "summary.json"
 RUN_ONLY_SETTINGS = {"cluster"}  # how the work is spread, not what it computes: a run may resume on another cluster
 PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
@@ -66,13 +68,14 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
     start = time.perf_counter()
     with staging_folder(out) as stage, contextlib.ExitStack() as stack:
-        stack.enter_context(rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB))  # overviews read every tile too
+        stack.enter_context(rasterio.Env(**GDAL_ENV))  # overviews read every tile too
         result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
-                              store=store, write_cores=write_maps, executor=executor, threads=threads)
+                              store=store, write_cores=write_maps, executor=executor, threads=threads,
+                              overview_scale=overview_scale(mosaic.window, OVERVIEW_PX))
         rss_after_prediction = peak_rss_mb()
         written_at = time.perf_counter()
         files = write_graph_outputs(result.graph, stage, units=units)
-        files.update(write_overlays(mosaic, result, stage, ground_truth))
+        files.update(write_overlays(mosaic, result, stage, ground_truth, store))
         if write_maps:
             files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
         seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
@@ -134,13 +137,16 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
     }
 
 
-def write_overlays(mosaic: Mosaic, result: CityResult, out: Path, ground_truth=()) -> dict[str, Path]:
-    """overview.png (whole mosaic) and detail.png (the patch core holding the most prediction)."""
-    from csboundary.viz.overlay import render_window, write_png
+def write_overlays(mosaic: Mosaic, result: CityResult, out: Path, ground_truth=(), store: RunStore | None = None) -> dict[str, Path]:
+    """overview.png (whole mosaic; from the run's core thumbnails when ``store`` has them all)
+    and detail.png (the patch core holding the most prediction)."""
+    from csboundary.viz.overlay import overview_from_thumbs, render_window, write_png
 
     predicted = result.graph.to_linestrings(world=True)
     layers = [(predicted, ORANGE)]
-    overview = write_png(out / "overview.png", render_window(mosaic, mosaic.window, ground_truth, max_size=2000, grid=result.grid, layers=layers))
+    base = None if store is None else overview_from_thumbs(result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb)
+    overview = write_png(out / "overview.png", render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid,
+                                                             layers=layers, base=base))
     busiest = max(result.patch_graphs, key=lambda i: result.patch_graphs[i].edge_lengths().sum(), default=(0, 0))
     detail = write_png(out / "detail.png", render_window(mosaic, result.grid.patch(*busiest).core, ground_truth, layers=layers))
     return {"overview": overview, "detail": detail}

@@ -9,6 +9,10 @@ process (SIGKILL included) and the files themselves are the progress record:
 * ``maps/R_C.npy``: the patch's FPN maps (float16, as the averaging has always stored them), or
   ``maps/R_C.empty`` when the window has no valid pixel (the FPN was not run);
 * ``graphs/R_C.npz``: the window's graph in mosaic pixels (arrays only, read without pickle);
+* ``images/R_C.npy``: the patch's image as the FPN read it, until its window is connected (AfANet
+  needs it a patch row later; reading it again from a city of small tiles costs ~4x more);
+* ``thumbs/R_C.npy``: the patch core's pixels reduced for ``overview.png`` (bands + validity), so
+  the overview needs no second pass over the imagery;
 * ``cores/R_C.npy``: the stitched maps of the patch core as uint8 (only with ``--write-maps``).
 
 Writing a patch's maps (4.8 MB) costs about as much as stitching a window, so a store made with
@@ -74,13 +78,14 @@ class RunStore:
         self.root = Path(root) if root is not None else None
         self.write_behind = write_behind and self.root is not None
         self._writer: ThreadPoolExecutor | None = None
-        self._pending: dict[Index, tuple[np.ndarray, Future]] = {}
+        self._pending: dict[tuple[str, Index], tuple[np.ndarray, Future]] = {}
         self._maps: dict[Index, np.ndarray | None] = {}
         self._graphs: dict[Index, BoundaryGraph] = {}
         self._cores: dict[Index, np.ndarray] = {}
+        self._thumbs: dict[Index, np.ndarray] = {}
         self._channels: int | None = None
         if self.root is not None:
-            for sub in ("maps", "graphs", "cores"):
+            for sub in ("maps", "images", "thumbs", "graphs", "cores"):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
 
     # -- opening a persistent store ------------------------------------------------------------
@@ -136,7 +141,8 @@ class RunStore:
         """Patches whose FPN maps are stored (or known empty)."""
         if self.root is None:
             return set(self._maps)
-        return set(self._pending) | {_index(n.rsplit(".", 1)[0]) for n in os.listdir(self.root / "maps") if not n.startswith(".")}
+        pending = {index for folder, index in self._pending if folder == "maps"}
+        return pending | {_index(n.rsplit(".", 1)[0]) for n in os.listdir(self.root / "maps") if not n.startswith(".")}
 
     def empty_patches(self) -> set[Index]:
         """Patches without imagery (the FPN was not run on them)."""
@@ -162,23 +168,42 @@ class RunStore:
             self._maps[index] = maps
         elif maps is None:
             _atomic_save(self.root / "maps" / f"{_stem(index)}.empty", lambda f: None)
-        elif self.write_behind:
-            self._settle(MAX_PENDING_WRITES - 1)
-            if self._writer is None:
-                self._writer = ThreadPoolExecutor(1, thread_name_prefix="csboundary-maps-writer")
-            future = self._writer.submit(_atomic_save, self.root / "maps" / f"{_stem(index)}.npy", lambda f: np.save(f, maps, allow_pickle=False))
-            self._pending[index] = (maps, future)
         else:
-            _atomic_save(self.root / "maps" / f"{_stem(index)}.npy", lambda f: np.save(f, maps, allow_pickle=False))
+            self._put("maps", index, maps)
+
+    def _put(self, folder: str, index: Index, array: np.ndarray) -> None:
+        path = self.root / folder / f"{_stem(index)}.npy"
+        if not self.write_behind:
+            _atomic_save(path, lambda f: np.save(f, array, allow_pickle=False))
+            return
+        self._settle(MAX_PENDING_WRITES - 1)
+        if self._writer is None:
+            self._writer = ThreadPoolExecutor(1, thread_name_prefix="csboundary-store-writer")
+        self._pending[folder, index] = (array, self._writer.submit(_atomic_save, path, lambda f: np.save(f, array, allow_pickle=False)))
+
+    def _get(self, folder: str, index: Index) -> np.ndarray | None:
+        """A stored array (pending or memory-mapped), None if there is none."""
+        if (folder, index) in self._pending:
+            return self._pending[folder, index][0]
+        path = self.root / folder / f"{_stem(index)}.npy"
+        try:
+            return np.load(path, mmap_mode="r", allow_pickle=False)
+        except FileNotFoundError:
+            return None
+
+    def _drop(self, folder: str, index: Index) -> None:
+        if (folder, index) in self._pending:
+            self._pending.pop((folder, index))[1].result()  # the write must not recreate the file after it is removed
+        (self.root / folder / f"{_stem(index)}.npy").unlink(missing_ok=True)
 
     def _settle(self, keep: int = 0) -> None:
         """Forget finished background writes, waiting until at most ``keep`` are pending; a
         failed write (a full disk) raises here."""
-        for index in list(self._pending):
-            maps, future = self._pending[index]
+        for key in list(self._pending):
+            _, future = self._pending[key]
             if future.done() or len(self._pending) > keep:
                 future.result()
-                del self._pending[index]
+                del self._pending[key]
 
     def flush(self) -> None:
         """Wait for every background write."""
@@ -188,11 +213,9 @@ class RunStore:
         """A patch's stored maps (memory-mapped on disk), ``None`` for a window without imagery."""
         if self.root is None:
             return self._maps[index]
-        if index in self._pending:
-            return self._pending[index][0]
-        path = self.root / "maps" / f"{_stem(index)}.npy"
-        if path.exists():
-            return np.load(path, mmap_mode="r", allow_pickle=False)
+        maps = self._get("maps", index)
+        if maps is not None:
+            return maps
         if (self.root / "maps" / f"{_stem(index)}.empty").exists():
             return None
         raise KeyError(f"maps of patch {index} are not in the run store")
@@ -203,16 +226,42 @@ class RunStore:
             if self._maps.get(index) is not None:
                 self._maps[index] = np.zeros((0,), np.float16)  # done, no longer held
             return
-        if index in self._pending:
-            self._pending.pop(index)[1].result()  # the write must not recreate the file after it is removed
-        (self.root / "maps" / f"{_stem(index)}.npy").unlink(missing_ok=True)
+        self._drop("maps", index)
+
+    # -- images --------------------------------------------------------------------------------
+    def save_image(self, index: Index, image: np.ndarray) -> None:
+        """Keep a patch's image for its window's AfANet step (on disk only: in memory it would
+        grow with the city's width)."""
+        if self.root is not None:
+            self._put("images", index, image)
+
+    def load_image(self, index: Index) -> np.ndarray | None:
+        """The kept image, or None (not kept: read it from the imagery)."""
+        return None if self.root is None else self._get("images", index)
+
+    def drop_image(self, index: Index) -> None:
+        if self.root is not None:
+            self._drop("images", index)
 
     def held_map_bytes(self) -> int:
         if self.root is None:
             return sum(m.nbytes for m in self._maps.values() if m is not None)
         self._settle(len(self._pending))  # forget the writes that are done
-        pending = sum(m.nbytes for m, _ in self._pending.values())
+        pending = sum(m.nbytes for (folder, _), (m, _) in self._pending.items() if folder == "maps")
         return pending + sum(e.stat().st_size for e in os.scandir(self.root / "maps") if e.name.endswith(".npy"))
+
+    # -- overview thumbnails -------------------------------------------------------------------
+    def save_thumb(self, index: Index, thumb: np.ndarray) -> None:
+        if self.root is None:
+            self._thumbs[index] = thumb
+        else:
+            self._put("thumbs", index, thumb)
+
+    def load_thumb(self, index: Index) -> np.ndarray | None:
+        if self.root is None:
+            return self._thumbs.get(index)
+        thumb = self._get("thumbs", index)
+        return None if thumb is None else np.asarray(thumb)
 
     # -- graphs and cores ----------------------------------------------------------------------
     def save_graph(self, index: Index, graph: BoundaryGraph) -> None:

@@ -15,8 +15,8 @@ import numpy as np
 from shapely.geometry import LineString, box
 
 from csboundary.data.atomic import atomic_path
-from csboundary.data.grid import PatchGrid
-from csboundary.data.raster import Mosaic
+from csboundary.data.grid import Patch, PatchGrid
+from csboundary.data.raster import Mosaic, WindowRead
 from csboundary.data.windows import PixelWindow, world_to_pixel
 
 CYAN = (0, 255, 255)
@@ -53,17 +53,18 @@ def render_window(
     grid: PatchGrid | None = None,
     colour=CYAN,
     layers: Sequence[tuple[Iterable[LineString], tuple]] = (),
+    base: WindowRead | None = None,
 ) -> np.ndarray:
     """RGB picture of ``window`` with ``boundaries`` (world coordinates) drawn over it.
 
     ``max_size`` downsamples large windows (longest side) before the lines are drawn, so lines
     stay visible; ``grid`` adds the patch grid (cores red, expanded windows yellow); ``layers``
-    are more (lines, colour) pairs drawn on top (e.g. a prediction over the ground truth).
+    are more (lines, colour) pairs drawn on top (e.g. a prediction over the ground truth);
+    ``base`` is the window's pixels already reduced (:func:`overview_from_thumbs`), not read again.
     """
-    scale = 1.0
-    if max_size and max(window.width, window.height) > max_size:
-        scale = max_size / max(window.width, window.height)
-    read = mosaic.read(window, scale=scale)  # read reduced in strips: a city overview never holds the full image
+    scale = overview_scale(window, max_size)
+    # read reduced in strips: a city overview never holds the full image
+    read = base if base is not None else mosaic.read(window, scale=scale)
     rgb = to_display(read.data, read.valid)
     thickness = 2 if scale > 0.5 else 1
     world_box = box(*_world_bounds(mosaic, window))
@@ -87,6 +88,52 @@ def render_window(
     for lines_world, layer_colour in layers:
         draw_lines(rgb, to_pixels(lines_world), layer_colour, thickness)
     return rgb
+
+
+def overview_scale(window: PixelWindow, max_size: int | None) -> float:
+    """The reduction that brings the longest side of ``window`` to ``max_size`` (1 if it fits)."""
+    if max_size and max(window.width, window.height) > max_size:
+        return max_size / max(window.width, window.height)
+    return 1.0
+
+
+def _reduced_span(start: int, end: int, scale: float) -> tuple[int, int]:
+    return round(start * scale), round(end * scale)
+
+
+def core_thumbnail(read: WindowRead, patch: Patch, scale: float) -> np.ndarray:
+    """A patch core's pixels reduced by ``scale`` (area average), validity as the last band
+    (0/1): its piece of the overview, cut on the same rounded rows and columns as
+    :func:`overview_from_thumbs` places it."""
+    core = patch.core
+    rows, cols = patch.core_local.slices()
+    x0, x1 = _reduced_span(core.col_off, core.col_end, scale)
+    y0, y1 = _reduced_span(core.row_off, core.row_end, scale)
+    if x1 <= x0 or y1 <= y0:
+        return np.zeros((read.data.shape[0] + 1, y1 - y0, x1 - x0), read.data.dtype)
+    pixels = cv2.resize(np.moveaxis(read.data[:, rows, cols], 0, -1), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+    valid = cv2.resize(read.valid[rows, cols].astype(np.float32), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA) >= 0.5
+    pixels = pixels.reshape(y1 - y0, x1 - x0, -1)
+    return np.concatenate([np.moveaxis(pixels, -1, 0), valid[None].astype(pixels.dtype)])
+
+
+def overview_from_thumbs(grid: PatchGrid, scale: float, load) -> WindowRead | None:
+    """The whole mosaic reduced by ``scale`` from every core's :func:`core_thumbnail`
+    (``load(index)``); None if one is missing."""
+    height, width = max(1, round(grid.height * scale)), max(1, round(grid.width * scale))
+    data = valid = None
+    for patch in grid:
+        thumb = load(patch.index)
+        if thumb is None:
+            return None
+        if data is None:
+            data = np.zeros((thumb.shape[0] - 1, height, width), thumb.dtype)
+            valid = np.zeros((height, width), bool)
+        x0, x1 = _reduced_span(patch.core.col_off, patch.core.col_end, scale)
+        y0, y1 = _reduced_span(patch.core.row_off, patch.core.row_end, scale)
+        data[:, y0:y1, x0:x1] = thumb[:-1]
+        valid[y0:y1, x0:x1] = thumb[-1] > 0
+    return WindowRead(PixelWindow(0, 0, grid.width, grid.height), data, valid)
 
 
 def _world_bounds(mosaic: Mosaic, window: PixelWindow) -> tuple[float, float, float, float]:
