@@ -148,6 +148,7 @@ def evaluate_set_cmd(
     edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help="Adjacency probability for an edge (default: the weights')."),
     min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
     max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
+    engine: str = typer.Option("auto", help="auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
@@ -158,7 +159,7 @@ def evaluate_set_cmd(
 
     if json_out is not None:
         _out_file(json_out, (".json",))
-    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, engine=engine)
     result = evaluate_set(set_dir, predictor, seed=seed, progress=not quiet)
     result["weights"] = str(weights or "shipped")
     typer.echo(format_set(result))
@@ -386,6 +387,7 @@ def evaluate_model(
     min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
     max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
+    engine: str = typer.Option("auto", help="auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
@@ -402,7 +404,7 @@ def evaluate_model(
 
     layout.read_meta(city)
     mosaic, lines = _open_inputs([city], None)
-    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, engine=engine)
     view = model_view(mosaic, model_gsd=predictor.pixel_size_m)
     with view.mosaic:
         result = predict_city(view.mosaic, predictor, batch_size=batch_size, progress=not quiet)
@@ -415,8 +417,10 @@ def evaluate_model(
 
 
 def _load_predictor(weights: Optional[Path], device: str, edge_threshold: Optional[float] = None,
-                    min_edge_support: Optional[float] = None, max_edge_length: Optional[float] = None, fpn_weights: Optional[Path] = None):
-    """The predictor of a weights bundle, with the command line's overrides of its inference settings."""
+                    min_edge_support: Optional[float] = None, max_edge_length: Optional[float] = None, fpn_weights: Optional[Path] = None,
+                    engine: str = "auto"):
+    """The predictor of a weights bundle, with the command line's overrides of its inference
+    settings, on the chosen engine (``auto``: ONNX Runtime on a CPU when installed)."""
     import dataclasses
 
     from csboundary.models.device import resolve_device
@@ -429,6 +433,7 @@ def _load_predictor(weights: Optional[Path], device: str, edge_threshold: Option
         predictor.support = dataclasses.replace(predictor.support, min_support=min_edge_support)
     if max_edge_length is not None:
         predictor.support = dataclasses.replace(predictor.support, max_length_px=max_edge_length)
+    predictor.use_engine(engine, weights, fpn_weights)
     return predictor
 
 
@@ -448,6 +453,7 @@ def predict(
     scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
     workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
     threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
+    engine: str = typer.Option("auto", help="auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
@@ -464,7 +470,7 @@ def predict(
     from csboundary.pipeline.run import run_prediction, stage_table
 
     mosaic, _ = _open_inputs(inputs, None)
-    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, engine=engine)
     view = model_view(mosaic, gsd, predictor.pixel_size_m)
     _out_dir(out, inputs)
     from csboundary.data.grid import PatchGrid
@@ -480,7 +486,7 @@ def predict(
         torch.set_num_threads(threads)
     settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
                 "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
-                "batch_size": batch_size, "device": str(predictor.device), "input_pixel_m": [round(v, 5) for v in view.source_pixel_m],
+                "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine, "input_pixel_m": [round(v, 5) for v in view.source_pixel_m],
                 "resampled": view.resampled, "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
     with view.mosaic, contextlib.ExitStack() as stack:
         options = {}
@@ -507,6 +513,7 @@ def predict_patch(
     max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
+    engine: str = typer.Option("auto", help="auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
 ) -> None:
     """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
@@ -518,7 +525,7 @@ def predict_patch(
     from csboundary.viz.overlay import to_display, write_png
 
     _out_dir(out, [image] if image.is_dir() else [])
-    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, fpn_weights)
+    predictor = _load_predictor(weights, device, edge_threshold, min_edge_support, max_edge_length, fpn_weights, engine=engine)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
     from csboundary.data.model_view import model_view
@@ -584,6 +591,7 @@ def benchmark(
 def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),
     seed: int = typer.Option(0, min=0, help="City seed (test split)."),
+    engine: str = typer.Option("auto", help="auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."),
     device: str = typer.Option("auto", help="auto | cpu | cuda."),
 ) -> None:
     """The main job on an embedded default: a small test-split city, predicted and scored.
@@ -598,11 +606,11 @@ def demo(
     from csboundary.pipeline.run import evaluate_run, run_prediction, stage_table
 
     _out_dir(out)
-    predictor = _load_predictor(None, device)
+    predictor = _load_predictor(None, device, engine=engine)
     city_dir = out / "city"
     meta = synthesize_city(city_dir, seed, "test", (2, 2), SynthConfig(tile_size=1500))
     mosaic, lines = _open_inputs([city_dir], None)
-    settings = {"weights": "shipped", "edge_threshold": predictor.edge_threshold, "device": str(predictor.device)}
+    settings = {"weights": "shipped", "edge_threshold": predictor.edge_threshold, "device": str(predictor.device), "engine": predictor.engine}
     with mosaic:
         result, summary = run_prediction(mosaic, predictor, out / "prediction", settings=settings, ground_truth=lines)
     scores = evaluate_run(result, lines, seed=0)

@@ -175,9 +175,14 @@ class AfANet(nn.Module):
     @torch.no_grad()
     def adjacency(self, tensor: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
         """Symmetrised adjacency probabilities (M, M) with a zero diagonal."""
-        p = torch.sigmoid(self.forward(tensor, vertices))
-        p = (p + p.T) / 2
-        return p * (1 - torch.eye(p.shape[0], device=p.device, dtype=p.dtype))
+        return adjacency_from_logits(self.forward(tensor, vertices))
+
+
+def adjacency_from_logits(logits: torch.Tensor) -> torch.Tensor:
+    """(M, M) logits -> symmetrised probabilities with a zero diagonal (whichever engine ran)."""
+    p = torch.sigmoid(logits)
+    p = (p + p.T) / 2
+    return p * (1 - torch.eye(p.shape[0], device=p.device, dtype=p.dtype))
 
 
 def crop_rois(tensor: torch.Tensor, vertices: torch.Tensor, size: int) -> torch.Tensor:

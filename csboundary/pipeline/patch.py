@@ -20,12 +20,13 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
-from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
+from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits, edges_from_adjacency
 from csboundary.data.units import MODEL_GSD
 from csboundary.errors import InputError
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN
-from csboundary.pipeline.maps import image_tensor, predict_probabilities
+from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
+from csboundary.pipeline.maps import image_tensor, predict_probabilities, unit_bands
 
 SHIPPED_WEIGHTS = "csboundary-synthetic.pt"
 CORNER_SIMPLIFY_PX = 0.75  # skeleton staircases -> smooth polylines (they are ~5 % too long otherwise)
@@ -36,6 +37,12 @@ def _smooth(polyline: np.ndarray | None) -> np.ndarray | None:
     if polyline is None or len(polyline) < 3:
         return polyline
     return np.asarray(LineString(polyline).simplify(CORNER_SIMPLIFY_PX).coords)
+
+
+def _sha(text: str) -> str:
+    import hashlib
+
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def shipped_weights() -> Path:
@@ -54,6 +61,33 @@ class PatchPredictor:
     support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
     crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
+    onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
+
+    @property
+    def engine(self) -> str:
+        return "onnx" if self.onnx is not None else "torch"
+
+    def use_engine(self, engine: str, weights: str | Path | None = None, fpn_weights: str | Path | None = None) -> str:
+        """``torch``, ``onnx`` (ONNX Runtime, CPU only) or ``auto`` (onnx on a CPU when
+        onnxruntime is installed); returns the engine chosen. ``weights`` (and ``fpn_weights``)
+        are the files the networks came from (default: the shipped bundle): the export is cached
+        under their hash."""
+        if engine not in ("auto", "torch", "onnx"):
+            raise InputError("--engine", f"unknown engine {engine!r} (auto, torch or onnx)")
+        on_cpu = self.device.type == "cpu"
+        if engine == "onnx" and not on_cpu:
+            raise InputError("--engine", f"the onnx engine runs on the CPU, not {self.device}; use --device cpu or --engine torch")
+        if engine == "onnx" and not onnxruntime_available():
+            raise InputError("--engine", "onnxruntime is not installed (pip install 'csboundary[onnx]')")
+        if engine == "torch" or (engine == "auto" and not (on_cpu and onnxruntime_available())):
+            self.onnx = None
+            return "torch"
+        from csboundary.models.checkpoint import file_sha256
+
+        path = Path(weights) if weights else shipped_weights()
+        digest = file_sha256(path) + (file_sha256(fpn_weights) if fpn_weights else "")
+        self.onnx = OnnxNetworks.for_weights(path, digest if not fpn_weights else _sha(digest), self.fpn, self.afanet)
+        return "onnx"
 
     @classmethod
     def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
@@ -79,11 +113,15 @@ class PatchPredictor:
                    support=support, crossings=crossings, pixel_size_m=float(pixel_size))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
-        return predict_probabilities(self.fpn, image, self.device)
+        return self.patch_maps([None], [image])[0]
 
     def patch_maps(self, patches: list, images: list[np.ndarray]) -> list[np.ndarray]:
         """FPN maps of several patches in one batch (the city pipeline's ``PatchModel`` step)."""
-        return list(predict_probabilities(self.fpn, np.stack(images), self.device))
+        batch = np.stack(images)
+        if self.onnx is not None and batch.shape[-2:] == (WINDOW, WINDOW):
+            logits = torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch)))
+            return list(torch.sigmoid(logits).numpy())
+        return list(predict_probabilities(self.fpn, batch, self.device))
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         """Vertices (and corner edges) of a patch's keypoint map, plus, when ``crossings`` is on,
@@ -102,9 +140,12 @@ class PatchPredictor:
         m = found.n_vertices
         if m < 2:
             return graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree)
-        tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(np.ascontiguousarray(maps)).to(self.device)], dim=0)
+        tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(np.ascontiguousarray(maps, np.float32)).to(self.device)], dim=0)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
-        probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
+        if self.onnx is not None and tensor.shape[-2:] == (WINDOW, WINDOW):
+            probs = adjacency_from_logits(torch.from_numpy(self.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()
+        else:
+            probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
         for i, j in unsupported_pairs(found.vertices, probs, maps[1], self.edge_threshold, self.support):
             probs[i, j] = probs[j, i] = 0.0
         return graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree)

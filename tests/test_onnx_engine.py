@@ -1,0 +1,91 @@
+"""The ONNX Runtime engine: the same probabilities as PyTorch on a real patch, cached exports,
+and a clear refusal where it cannot run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+pytest.importorskip("onnxruntime")
+
+from csboundary.errors import InputError  # noqa: E402
+from csboundary.models.afanet import adjacency_from_logits  # noqa: E402
+from csboundary.pipeline.patch import PatchPredictor  # noqa: E402
+from helpers import run_cli  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def patch_image(tmp_path_factory):
+    """A real 1100 x 1100 window: the centre patch of a synthetic test city, shipped model's pixel size."""
+    from csboundary.data.grid import PatchGrid
+    from csboundary.data.raster import Mosaic
+
+    city = tmp_path_factory.mktemp("onnx") / "city"
+    done = run_cli("synth", str(city), "--tiles", "1x1", "--tile-size", "2400", "--seed", "5", "--split", "test", "--quiet")
+    assert done.returncode == 0, done.stderr
+    with Mosaic.open(city / "tiles") as mosaic:
+        return mosaic.read(PatchGrid.for_mosaic(mosaic).patch(1, 1).expanded).data
+
+
+@pytest.fixture(scope="module")
+def predictors(tmp_path_factory):
+    import shutil
+
+    from csboundary.pipeline.patch import shipped_weights
+
+    weights = tmp_path_factory.mktemp("w") / "bundle.pt"
+    shutil.copy(shipped_weights(), weights)  # the export is cached beside it, not in the package
+    torch_engine = PatchPredictor.load(weights, torch.device("cpu"))
+    onnx_engine = PatchPredictor.load(weights, torch.device("cpu"))
+    assert onnx_engine.use_engine("onnx", weights) == "onnx" and torch_engine.use_engine("torch", weights) == "torch"
+    assert len(list((weights.parent / ".onnx-cache").glob("*.onnx"))) == 2
+    return torch_engine, onnx_engine, weights
+
+
+def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictors):
+    torch_engine, onnx_engine, _ = predictors
+    maps_torch = torch_engine.patch_maps([None], [patch_image])[0]
+    maps_onnx = onnx_engine.patch_maps([None], [patch_image])[0]
+    assert maps_torch.shape == (2, 1100, 1100)
+    assert np.abs(maps_onnx - maps_torch).max() < 1e-5
+
+    found = torch_engine.extract(maps_torch)
+    assert found.n_vertices >= 20  # a patch with boundaries, so AfANet has work
+    tensor = torch.cat([torch.from_numpy(patch_image / 255.0).float(), torch.from_numpy(maps_torch)], 0)
+    vertices = torch.from_numpy(found.vertices.astype(np.float32))
+    p_torch = torch_engine.afanet.adjacency(tensor, vertices).numpy()
+    p_onnx = adjacency_from_logits(torch.from_numpy(onnx_engine.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()
+    assert np.abs(p_onnx - p_torch).max() < 1e-5
+    assert torch_engine.afanet.training is False  # exporting left the PyTorch networks as they were
+
+
+def test_the_export_is_reused_and_a_changed_weights_file_gets_its_own(predictors, tmp_path):
+    import shutil
+
+    _, _, weights = predictors
+    cache = weights.parent / ".onnx-cache"
+    stamps = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.onnx")}
+    again = PatchPredictor.load(weights, torch.device("cpu"))
+    again.use_engine("onnx", weights)
+    assert {p.name: p.stat().st_mtime_ns for p in cache.glob("*.onnx")} == stamps  # not exported again
+    other = tmp_path / "other.pt"
+    shutil.copy(weights, other)
+    with open(other, "ab") as f:
+        f.write(b"\0")  # another file (torch ignores trailing bytes): another hash
+    moved = PatchPredictor.load(other, torch.device("cpu"))
+    moved.use_engine("auto", other)
+    assert moved.engine == "onnx" and len(list((tmp_path / ".onnx-cache").glob("*.onnx"))) == 2
+
+
+def test_the_onnx_engine_is_refused_off_the_cpu_and_unknown_engines(predictors):
+    torch_engine, _, weights = predictors
+    with pytest.raises(InputError, match="unknown engine"):
+        torch_engine.use_engine("tensorrt", weights)
+    torch_engine.device = torch.device("cuda")
+    try:
+        with pytest.raises(InputError, match="runs on the CPU"):
+            torch_engine.use_engine("onnx", weights)
+        assert torch_engine.use_engine("auto", weights) == "torch"
+    finally:
+        torch_engine.device = torch.device("cpu")
