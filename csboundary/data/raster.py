@@ -13,6 +13,7 @@ in weakened form. Extra bands beyond 4 are ignored with a warning.
 from __future__ import annotations
 
 import math
+import threading
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -130,6 +131,7 @@ class Mosaic:
         self.width = width
         self.height = height
         self._handles: OrderedDict[Path, rasterio.DatasetReader] = OrderedDict()  # least recently used first
+        self._lock = threading.RLock()  # a prefetching thread and the main thread share the open files
         self.max_open = MAX_OPEN_FILES
         self._boxes = np.array([[t.window.col_off, t.window.row_off, t.window.col_end, t.window.row_end] for t in tiles], dtype=np.int64).reshape(-1, 4)
 
@@ -220,8 +222,10 @@ class Mosaic:
         ``scale`` < 1 gives a reduced picture of ``round(scale * size)`` pixels (area average),
         read in strips so that even a whole city's overview never holds the full window.
         """
-        if scale != 1.0:
-            return self._read_reduced(window, scale)
+        with self._lock:
+            return self._read_reduced(window, scale) if scale != 1.0 else self._read_full(window)
+
+    def _read_full(self, window: PixelWindow) -> WindowRead:
         dtype = np.dtype(self.tiles[0].dtype)
         data = np.zeros((BANDS, window.height, window.width), dtype=dtype)
         valid = np.zeros((window.height, window.width), dtype=bool)
@@ -304,7 +308,11 @@ class Mosaic:
         """Pickled without its open files (a Dask worker opens the tiles it reads itself)."""
         state = dict(self.__dict__)
         state["_handles"] = OrderedDict()
+        del state["_lock"]
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state, _lock=threading.RLock())
 
     def __enter__(self) -> "Mosaic":
         return self

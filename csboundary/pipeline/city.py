@@ -115,13 +115,19 @@ class CityJob:
     threads: int | None = None  # torch threads in a worker process (None: leave as is)
     overview_scale: float | None = None  # keep each core reduced by this for overview.png (None: do not)
 
-    def predict_maps(self, indices: list[Index]) -> tuple[list[bool], dict[str, float]]:
-        """Read and predict one FPN batch and store its maps; returns whether each window had
-        imagery (the FPN skips those without) and the seconds per stage."""
+    def read_batch(self, indices: list[Index]) -> list:
+        """The windows of one FPN batch (safe to run in a prefetching thread)."""
+        with rasterio.Env(**GDAL_ENV):
+            return [self.mosaic.read(self.grid.patch(*i).expanded) for i in indices]
+
+    def predict_maps(self, indices: list[Index], reads: list | None = None) -> tuple[list[bool], dict[str, float]]:
+        """Predict one FPN batch (reading it unless ``reads`` are given) and store its maps;
+        returns whether each window had imagery (the FPN skips those without) and the seconds
+        per stage."""
         timed = _Timer()
         patches = [self.grid.patch(*i) for i in indices]
-        with rasterio.Env(**GDAL_ENV):
-            reads = timed("read", lambda: [self.mosaic.read(p.expanded) for p in patches])
+        if reads is None:
+            reads = timed("read", self.read_batch, indices)
         has_pixels = [bool(r.valid.any()) for r in reads]
         work = [k for k, ok in enumerate(has_pixels) if ok]
         predicted = timed("fpn", self.model.patch_maps, [patches[k] for k in work], [reads[k].data for k in work]) if work else []
@@ -246,13 +252,25 @@ class CityRun:
 
 def run_here(run: CityRun) -> None:
     """Do a run's remaining work in this process, in row-major order: a window is connected as
-    soon as its last covering patch is predicted."""
+    soon as its last covering patch is predicted. The next batch is read by a second thread
+    while this one is predicted (GDAL reads without holding the GIL); "read" then counts only
+    the time spent waiting for it."""
+    from concurrent.futures import ThreadPoolExecutor
+
     for index in run.schedule.ready():  # windows an interrupted run left ready
         run.connect_here(index)
-    for batch in run.batches:
-        has_pixels, seconds = run.job.predict_maps(batch)
-        for index in run.maps_finished(batch, seconds):
-            run.connect_here(index)
+    batches = run.batches
+    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-prefetch") as pool:
+        upcoming = pool.submit(run.job.read_batch, batches[0]) if batches else None
+        for k, batch in enumerate(batches):
+            start = time.perf_counter()
+            reads = upcoming.result()
+            waited = time.perf_counter() - start
+            upcoming = pool.submit(run.job.read_batch, batches[k + 1]) if k + 1 < len(batches) else None
+            has_pixels, seconds = run.job.predict_maps(batch, reads)
+            seconds["read"] = seconds.get("read", 0.0) + waited
+            for index in run.maps_finished(batch, seconds):
+                run.connect_here(index)
 
 
 def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(),

@@ -1,0 +1,74 @@
+"""FPN alone against the whole pipeline, for the torch and onnx engines, in one run (issue 15).
+
+    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1]
+
+CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synthesized if
+missing). For each engine, in this one process: the FPN alone on every patch's window (read
+beforehand, batch 1: the network's time and nothing else), then ``run_prediction`` end to end on
+the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, every output
+file). Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
+table, and whether the two engines' graph.json are identical (and the largest difference in
+vertex count and edge count when not).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+
+from csboundary.data.grid import PatchGrid
+from csboundary.data.raster import Mosaic
+from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.run import run_prediction, stage_table
+
+
+def fpn_only(predictor: PatchPredictor, images: list, repeat: int) -> float:
+    predictor.patch_maps([None], [images[0]])  # warm-up (first-call allocations, session set-up)
+    start = time.perf_counter()
+    for _ in range(repeat):
+        for image in images:
+            predictor.patch_maps([None], [image])
+    return (time.perf_counter() - start) / (repeat * len(images))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("city", nargs="?", type=Path, default=Path("data/cities/test-s7-2x2-2000"))
+    parser.add_argument("--repeat", type=int, default=1)
+    args = parser.parse_args()
+    if not (args.city / "city.json").exists():
+        subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "7", "--split", "test", "--tiles", "2x2",
+                        "--tile-size", "2000", "--quiet"], check=True)
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp, Mosaic.open(args.city / "tiles") as mosaic:
+        grid = PatchGrid.for_mosaic(mosaic)
+        images = [mosaic.read(p.expanded).data for p in grid]
+        for engine in ("torch", "onnx"):
+            predictor = PatchPredictor.load(None, torch.device("cpu"))
+            predictor.use_engine(engine)
+            fpn = fpn_only(predictor, images, args.repeat)
+            out = Path(tmp) / engine
+            _, summary = run_prediction(mosaic, predictor, out, progress=False, settings={"engine": engine})
+            n = summary["patches"]
+            total = summary["seconds"]["total"] / n
+            rows[engine] = (fpn, total, summary, (out / "graph.json").read_bytes())
+            print(f"{engine:5s}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
+                  f"{summary['km2_per_hour']} km2/h\n       {stage_table(summary)}", flush=True)
+    (tf, tt, ts, tg), (of, ot, os_, og) = rows["torch"], rows["onnx"]
+    print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
+    if tg == og:
+        print("graph.json identical for both engines")
+    else:
+        a, b = json.loads(tg), json.loads(og)
+        print(f"graph.json differs: {len(a['vertices'])} vs {len(b['vertices'])} vertices, {len(a['edges'])} vs {len(b['edges'])} edges")
+
+
+if __name__ == "__main__":
+    main()
