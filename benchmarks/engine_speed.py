@@ -61,7 +61,7 @@ def main() -> None:
             rows[engine] = (fpn, total, summary, (out / "graph.json").read_bytes())
             print(f"{engine:5s}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
                   f"{summary['km2_per_hour']} km2/h\n       {stage_table(summary)}", flush=True)
-    (tf, tt, ts, tg), (of, ot, os_, og) = rows["torch"], rows["onnx"]
+    (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
     print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
     if tg == og:
         print("graph.json identical for both engines")

@@ -141,7 +141,7 @@ class RunStore:
         """Patches whose FPN maps are stored (or known empty)."""
         if self.root is None:
             return set(self._maps)
-        pending = {index for folder, index in self._pending if folder == "maps"}
+        pending = {index for folder, index in list(self._pending) if folder == "maps"}
         return pending | {_index(n.rsplit(".", 1)[0]) for n in os.listdir(self.root / "maps") if not n.startswith(".")}
 
     def empty_patches(self) -> set[Index]:
@@ -183,8 +183,9 @@ class RunStore:
 
     def _get(self, folder: str, index: Index) -> np.ndarray | None:
         """A stored array (pending or memory-mapped), None if there is none."""
-        if (folder, index) in self._pending:
-            return self._pending[folder, index][0]
+        entry = self._pending.get((folder, index))  # single dict operations: safe beside the writer's user thread
+        if entry is not None:
+            return entry[0]
         path = self.root / folder / f"{_stem(index)}.npy"
         try:
             return np.load(path, mmap_mode="r", allow_pickle=False)
@@ -192,18 +193,19 @@ class RunStore:
             return None
 
     def _drop(self, folder: str, index: Index) -> None:
-        if (folder, index) in self._pending:
-            self._pending.pop((folder, index))[1].result()  # the write must not recreate the file after it is removed
+        entry = self._pending.pop((folder, index), None)
+        if entry is not None:
+            entry[1].result()  # the write must not recreate the file after it is removed
         (self.root / folder / f"{_stem(index)}.npy").unlink(missing_ok=True)
 
     def _settle(self, keep: int = 0) -> None:
         """Forget finished background writes, waiting until at most ``keep`` are pending; a
         failed write (a full disk) raises here."""
         for key in list(self._pending):
-            _, future = self._pending[key]
-            if future.done() or len(self._pending) > keep:
-                future.result()
-                del self._pending[key]
+            entry = self._pending.get(key)
+            if entry is not None and (entry[1].done() or len(self._pending) > keep):
+                entry[1].result()
+                self._pending.pop(key, None)
 
     def flush(self) -> None:
         """Wait for every background write."""
@@ -247,7 +249,7 @@ class RunStore:
         if self.root is None:
             return sum(m.nbytes for m in self._maps.values() if m is not None)
         self._settle(len(self._pending))  # forget the writes that are done
-        pending = sum(m.nbytes for (folder, _), (m, _) in self._pending.items() if folder == "maps")
+        pending = sum(m.nbytes for (folder, _), (m, _) in list(self._pending.items()) if folder == "maps")
         return pending + sum(e.stat().st_size for e in os.scandir(self.root / "maps") if e.name.endswith(".npy"))
 
     # -- overview thumbnails -------------------------------------------------------------------
