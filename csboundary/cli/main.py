@@ -6,6 +6,7 @@ documented fallbacks (no CRS, 3-band RGB) as ``warning: ...`` lines.
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import sys
@@ -105,13 +106,12 @@ def import_masks_cmd(
 ) -> None:
     """Images + raster masks (road edge or road surface) -> cities with vector ground truth at the
     model's pixel size, for evaluate-set, evaluate-model and training."""
-    import math as _math
 
     from csboundary.data.mask_import import MaskRule, import_masks
 
-    if gsd is not None and (not _math.isfinite(gsd) or gsd <= 0):
+    if gsd is not None and (not math.isfinite(gsd) or gsd <= 0):
         raise typer.BadParameter(f"--gsd must be a positive number of metres, got {gsd}")
-    if not _math.isfinite(target_gsd) or target_gsd <= 0:
+    if not math.isfinite(target_gsd) or target_gsd <= 0:
         raise typer.BadParameter(f"--target-gsd must be a positive number of metres, got {target_gsd}")
     try:
         rule = MaskRule(kind=kind, channel=channel - 1, threshold=threshold, invert=invert)
@@ -165,6 +165,16 @@ def evaluate_set_cmd(
     typer.echo(format_set(result))
     if json_out is not None:
         write_scores(json_out, result)
+
+
+def _parse_floats(text: str, count: int, option: str, form: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise typer.BadParameter(f"expected {form}, got {text!r}", param_hint=option)
+    return values
 
 
 def _parse_ints(text: str, count: int, option: str, form: str) -> list[int]:
@@ -261,13 +271,7 @@ def show(
                 raise typer.BadParameter("width and height must be positive", param_hint="--window")
             win = PixelWindow(c, r, w, h)
         elif bounds:
-            try:
-                values = [float(v) for v in bounds.split(",")]
-            except ValueError:
-                values = []
-            if len(values) != 4:
-                raise typer.BadParameter(f"expected MINX,MINY,MAXX,MAXY, got {bounds!r}", param_hint="--bounds")
-            win = mosaic.window_from_bounds(*values)
+            win = mosaic.window_from_bounds(*_parse_floats(bounds, 4, "--bounds", "MINX,MINY,MAXX,MAXY"))
         else:
             win = mosaic.window
         inside = win.intersection(mosaic.window)
@@ -448,6 +452,7 @@ def predict(
     max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
+    lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of imagery without a CRS (needed then)."),
     restart: bool = typer.Option(False, "--restart", help="Discard the unfinished run in --out instead of resuming it."),
     scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
@@ -497,9 +502,34 @@ def predict(
             options = {"executor": dask_executor(client), "threads": threads or worker_threads}
             settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
         _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=not quiet,
-                                    settings=settings, units=view.units, restart=restart, **options)
+                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, **options)
     c = summary["counts"]
     typer.echo(f"{out}: {c['edges']} edges, {c['vertices']} vertices, {c['boundary_km']} km of boundary\n{stage_table(summary)}")
+
+
+@app.command("export-lanelet2")
+def export_lanelet2(
+    prediction: Path = typer.Argument(..., help="A predict output folder (its graph.json), or a graph.json file."),
+    out: Path = typer.Option(..., "--out", help="Lanelet2 OSM file to write; map_projector_info.yaml goes beside it."),
+    origin: Optional[str] = typer.Option(None, help="Projection origin LAT,LON (default: the middle of the boundaries)."),
+) -> None:
+    """The predicted boundaries as a Lanelet2 map: one road_border linestring per boundary (closed
+    loops closed), confidence as an attribute, UTM projector around the origin (Autoware's
+    map_projector_info.yaml beside it)."""
+    from csboundary.graph import BoundaryGraph
+    from csboundary.pipeline.lanelet2_export import write_lanelet2
+
+    source = prediction / "graph.json" if prediction.is_dir() else prediction
+    _out_file(out, (".osm",))
+    at = None
+    if origin is not None:
+        lat, lon = (float(v) for v in _parse_floats(origin, 2, "--origin", "LAT,LON"))
+        if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+            raise typer.BadParameter(f"{origin!r} is not a latitude,longitude", param_hint="--origin")
+        at = (lat, lon)
+    written = write_lanelet2(BoundaryGraph.read_json(source), out, at)
+    typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
+               f"in {written['projector_info']}")
 
 
 @app.command("predict-patch")

@@ -8,6 +8,7 @@
 * ``overview.png`` (the whole mosaic, downsampled, prediction in orange over the patch grid) and
   ``detail.png`` (full resolution, the core of the patch with the most boundary);
 * optionally ``maps.tif``: the stitched probability maps as a Cloud-Optimized GeoTIFF;
+* optionally ``map.osm`` + ``map_projector_info.yaml``: the boundaries as a Lanelet2 map;
 * ``summary.json``, written last: time per stage, seconds per patch, km2/h, counts, settings.
 
 Every file is written under a temporary name and renamed when complete; ``summary.json`` existing
@@ -41,7 +42,8 @@ from csboundary.viz.overlay import overview_scale
 from csboundary.pipeline.outputs import write_graph_outputs
 
 ORANGE = (255, 140, 0)
-OVERVIEW_PX = 2000  # longest side of overview.png
+OVERVIEW_PX = 2000
+LANELET2_MAP = "map.osm"  # longest side of overview.png
 SUMMARY = "summary.json"
 RUN_ONLY_SETTINGS = {"cluster"}  # how the work is spread, not what it computes: a run may resume on another cluster
 PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
@@ -50,7 +52,8 @@ PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel siz
 def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, write_maps: bool = False, batch_size: int = 1,
                    grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(), progress: bool = True,
                    settings: dict | None = None, ground_truth=(), units: GroundUnits | None = None, restart: bool = False,
-                   executor: Callable[[CityRun], None] = run_here, threads: int | None = None) -> tuple[CityResult, dict]:
+                   executor: Callable[[CityRun], None] = run_here, threads: int | None = None,
+                   lanelet2: bool = False) -> tuple[CityResult, dict]:
     """Predict ``mosaic`` and write every output into ``out_dir``; returns the result and the summary.
 
     ``ground_truth`` (world LineStrings), when given, is drawn in cyan under the prediction.
@@ -78,6 +81,11 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         files.update(write_overlays(mosaic, result, stage, ground_truth, store))
         if write_maps:
             files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
+        if lanelet2:
+            from csboundary.pipeline.lanelet2_export import write_lanelet2
+
+            written = write_lanelet2(result.graph, stage / LANELET2_MAP)
+            files.update(lanelet2=written["path"], projector_info=written["projector_info"])
         seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
         seconds["total"] = time.perf_counter() - start
         summary = summarize(mosaic, result, seconds, files, settings or {}, units)

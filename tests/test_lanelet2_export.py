@@ -1,0 +1,67 @@
+"""Lanelet2 export: the map loads with lanelet2.io.load, has one road_border linestring per
+boundary of the GeoPackage, and its geometry matches the GeoPackage within 1 cm after projection."""
+
+from __future__ import annotations
+
+import geopandas as gpd
+import numpy as np
+import pytest
+
+lanelet2 = pytest.importorskip("lanelet2")
+
+from csboundary.graph import BoundaryGraph  # noqa: E402
+from csboundary.pipeline.lanelet2_export import local_xy, projector_for, read_origin, to_wgs84, write_lanelet2  # noqa: E402
+from helpers import run_cli  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    """The demo city predicted by the shipped model, with --lanelet2."""
+    root = tmp_path_factory.mktemp("l2")
+    done = run_cli("demo", "--out", str(root / "demo"), "--device", "cpu", timeout=600)
+    assert done.returncode == 0, done.stderr
+    pred = root / "pred"
+    done = run_cli("predict", str(root / "demo" / "city"), "--out", str(pred), "--lanelet2", "--device", "cpu", "--quiet", timeout=600)
+    assert done.returncode == 0, done.stderr
+    return pred
+
+
+def test_the_demo_city_round_trips_through_lanelet2(demo):
+    info = demo / "map_projector_info.yaml"
+    projector = projector_for(read_origin(info))
+    loaded = lanelet2.io.load(str(demo / "map.osm"), projector)
+    borders = {int(ls.attributes["boundary_id"]): ls for ls in loaded.lineStringLayer if ls.attributes["type"] == "road_border"}
+    frame = gpd.read_file(demo / "boundaries.gpkg", layer="road_boundaries")
+    assert len(frame) > 10 and set(borders) == set(frame["boundary_id"])
+    to_lonlat = to_wgs84(str(frame.crs))
+    worst, closed = 0.0, 0
+    for row in frame.itertuples():
+        coords = np.asarray(row.geometry.coords)[:, :2]
+        expected = local_xy(projector, *to_lonlat(coords[:, 0], coords[:, 1]))
+        line = borders[row.boundary_id]
+        got = np.array([(p.x, p.y) for p in line])
+        assert got.shape == expected.shape
+        worst = max(worst, float(np.abs(got - expected).max()))
+        if np.allclose(coords[0], coords[-1], rtol=0, atol=1e-9):
+            closed += 1
+            assert line[0].id == line[len(line) - 1].id  # a loop is a closed linestring, not two points that coincide
+        assert float(line.attributes["confidence"]) == pytest.approx(row.confidence_mean, abs=1e-4)
+    assert worst < 0.01  # metres
+    assert closed >= 1
+
+
+def test_export_lanelet2_writes_the_same_map_from_a_prediction_folder(demo, tmp_path):
+    out = tmp_path / "again.osm"
+    done = run_cli("export-lanelet2", str(demo), "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert out.read_text() == (demo / "map.osm").read_text()  # same origin, same ids
+
+
+def test_a_map_without_crs_is_refused(tmp_path):
+    graph = BoundaryGraph(np.array([[0.0, 0.0], [10.0, 0.0]]), [[0, 1]])
+    from rasterio.transform import Affine
+
+    graph.transform = Affine.identity()
+    with pytest.raises(Exception, match="needs georeferenced"):
+        write_lanelet2(graph, tmp_path / "m.osm")
+    assert not (tmp_path / "m.osm").exists()
