@@ -1,0 +1,146 @@
+"""A reviewer's edits applied to a predicted graph (``csboundary apply-review``).
+
+The review page exports its edits as a GeoJSON FeatureCollection in the graph's CRS; each
+feature's ``action`` property says what a person did:
+
+* ``delete`` (``edge``: the edge's index in graph.json): the edge goes;
+* ``accept`` (``edge``): the edge stays and is recorded as checked;
+* ``move`` (``vertex``: its index, Point geometry): the vertex moves, and so do the ends of
+  the edges at it;
+* ``add`` (LineString geometry): a new edge, kind ``manual``, score 1; its ends join existing
+  vertices within ``snap_px`` pixels, else become new vertices.
+
+:func:`apply_edits` is pure: it returns the new graph and a record of what changed, with the
+old and new edge indices of every edge that was kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from csboundary.data.windows import world_to_pixel
+from csboundary.graph.boundary_graph import BoundaryGraph
+
+ACTIONS = ("delete", "accept", "move", "add")
+MANUAL = "manual"
+
+
+class EditError(ValueError):
+    """An edit that does not fit the graph (unknown action, edge or vertex; bad geometry)."""
+
+
+@dataclass
+class ReviewRecord:
+    deleted: list[int] = field(default_factory=list)  # old edge indices
+    accepted: list[int] = field(default_factory=list)  # new edge indices
+    moved: list[int] = field(default_factory=list)  # vertex indices
+    added: list[int] = field(default_factory=list)  # new edge indices
+    kept: dict[int, int] = field(default_factory=dict)  # old edge index -> new edge index
+
+    def to_dict(self) -> dict:
+        return {"deleted_edges": self.deleted, "accepted_edges": self.accepted, "moved_vertices": self.moved, "added_edges": self.added,
+                "edge_index_map": {str(k): v for k, v in self.kept.items()}}
+
+
+def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0) -> tuple[BoundaryGraph, ReviewRecord]:
+    """``graph`` with the edits of ``features`` (GeoJSON features in the graph's CRS)."""
+    if graph.transform is None:
+        raise EditError("the graph has no transform: world coordinates of the edits cannot be placed")
+    vertices = graph.vertices.copy()
+    n_edges = graph.n_edges
+    kinds = list(graph.edge_kinds or ["normal"] * n_edges)
+    polylines = list(graph.edge_polylines or [None] * n_edges)
+    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(n_edges, np.nan), float).copy()
+    patches = np.asarray(graph.edge_patches if graph.edge_patches is not None else np.full((n_edges, 2), -1), np.int64).copy()
+    vertex_kinds = list(graph.vertex_kinds or ["vertex"] * graph.n_vertices)
+    edges = [tuple(int(x) for x in e) for e in graph.edges]
+    deleted, accepted, moved = set(), set(), []
+    added: list[np.ndarray] = []
+
+    def pixel(xy) -> np.ndarray:
+        x, y = np.asarray(xy, float)[..., 0], np.asarray(xy, float)[..., 1]
+        cols, rows = world_to_pixel(graph.transform, x, y)
+        return np.stack([cols, rows], axis=-1)
+
+    def edge_index(props: dict, what: str) -> int:
+        k = props.get("edge")
+        if not isinstance(k, int) or not 0 <= k < n_edges:
+            raise EditError(f"{what}: edge {k!r} is not an edge of the graph (0..{n_edges - 1})")
+        return k
+
+    for number, feature in enumerate(features):
+        props = feature.get("properties") or {}
+        action = props.get("action")
+        geometry = feature.get("geometry") or {}
+        what = f"edit {number} ({action})"
+        if action == "delete":
+            deleted.add(edge_index(props, what))
+        elif action == "accept":
+            accepted.add(edge_index(props, what))
+        elif action == "move":
+            i = props.get("vertex")
+            if not isinstance(i, int) or not 0 <= i < len(vertices):
+                raise EditError(f"{what}: vertex {i!r} is not a vertex of the graph")
+            if geometry.get("type") != "Point":
+                raise EditError(f"{what}: needs a Point geometry")
+            vertices[i] = pixel(geometry["coordinates"][:2])
+            moved.append(i)
+        elif action == "add":
+            if geometry.get("type") != "LineString" or len(geometry.get("coordinates", [])) < 2:
+                raise EditError(f"{what}: needs a LineString of at least 2 points")
+            line = pixel(np.asarray(geometry["coordinates"], float)[:, :2])
+            if not np.isfinite(line).all():
+                raise EditError(f"{what}: coordinates are not finite")
+            added.append(line)
+        else:
+            raise EditError(f"{what}: unknown action (one of {', '.join(ACTIONS)})")
+
+    # moved vertices carry the ends of their edges' polylines
+    for k, (u, v) in enumerate(edges):
+        if polylines[k] is not None and (u in moved or v in moved):
+            line = np.asarray(polylines[k], float).copy()
+            line[0], line[-1] = vertices[u], vertices[v]
+            polylines[k] = line
+
+    record = ReviewRecord(deleted=sorted(deleted), moved=sorted(set(moved)))
+    new_edges, new_kinds, new_lines, new_scores, new_patches = [], [], [], [], []
+    for k in range(n_edges):
+        if k in deleted:
+            continue
+        record.kept[k] = len(new_edges)
+        new_edges.append(edges[k])
+        new_kinds.append(kinds[k])
+        new_lines.append(polylines[k])
+        new_scores.append(scores[k])
+        new_patches.append(patches[k])
+    record.accepted = sorted(record.kept[k] for k in accepted if k in record.kept)
+
+    def vertex_at(point: np.ndarray) -> int:
+        nonlocal vertices
+        if len(vertices):
+            d = np.linalg.norm(vertices - point, axis=1)
+            if d.min() <= snap_px:
+                return int(d.argmin())
+        vertices = np.vstack([vertices, point[None]])
+        vertex_kinds.append(MANUAL)
+        return len(vertices) - 1
+
+    for line in added:
+        u, v = vertex_at(line[0]), vertex_at(line[-1])
+        if u == v:
+            raise EditError("an added edge starts and ends on the same vertex")
+        line = line.copy()
+        line[0], line[-1] = vertices[u], vertices[v]
+        record.added.append(len(new_edges))
+        new_edges.append((u, v))
+        new_kinds.append(MANUAL)
+        new_lines.append(line if len(line) > 2 else None)
+        new_scores.append(1.0)
+        new_patches.append(np.array([-1, -1]))
+
+    result = BoundaryGraph(vertices, np.array(new_edges, np.int64).reshape(-1, 2), vertex_kinds=vertex_kinds, edge_kinds=new_kinds,
+                           edge_polylines=new_lines, edge_scores=np.array(new_scores, float),
+                           edge_patches=np.array(new_patches, np.int64).reshape(-1, 2), transform=graph.transform, crs=graph.crs)
+    return result, record

@@ -1,0 +1,113 @@
+"""A static review page for a prediction: imagery at full resolution, the boundaries coloured by
+confidence, the doubtful edges first, and edits a person exports as GeoJSON.
+
+``write_review_page`` writes a folder that opens from disk (``index.html``) or any static web
+server, with nothing fetched from the network: the page's script and style ship with the package
+(``viz/static``), the data is a script (``data.js``, since browsers refuse ``fetch`` on file://),
+and the imagery is an image pyramid of 512 px JPEG tiles (level 0 = full resolution, each level
+half the one below) so a city opens as fast as a patch. Coordinates on the page are the
+mosaic's pixels; the graph's vertices and the ground truth are brought into them through their
+world coordinates, and the edits go out in the graph's CRS (``apply-review`` reads them).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from importlib import resources
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from csboundary.data.atomic import atomic_path
+from csboundary.data.raster import Mosaic
+from csboundary.data.windows import PixelWindow, pixel_to_world, world_to_pixel
+from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.viz.overlay import to_display
+
+TILE = 512
+JPEG_QUALITY = 85
+STATIC = ("review.html", "review.js", "review.css")
+
+
+def pyramid_levels(width: int, height: int, tile: int = TILE) -> int:
+    """Levels until the whole image fits one tile (at least 1)."""
+    return 1 + max(0, math.ceil(math.log2(max(width, height) / tile))) if max(width, height) > tile else 1
+
+
+def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
+    """``folder/L/R_C.jpg`` tiles of every level; level 0 read from the mosaic one tile at a time,
+    each higher level from the four tiles below it. Returns the number of levels."""
+    levels = pyramid_levels(mosaic.width, mosaic.height)
+    width, height = mosaic.width, mosaic.height
+    rows, cols = math.ceil(height / TILE), math.ceil(width / TILE)
+    bar = tqdm(total=rows * cols, desc="review tiles", unit="tile", disable=not progress)
+    (folder / "0").mkdir(parents=True, exist_ok=True)
+    for r in range(rows):
+        for c in range(cols):
+            win = PixelWindow(c * TILE, r * TILE, min(TILE, width - c * TILE), min(TILE, height - r * TILE))
+            read = mosaic.read(win)
+            cv2.imwrite(str(folder / "0" / f"{r}_{c}.jpg"), to_display(read.data, read.valid)[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+            bar.update(1)
+    bar.close()
+    for level in range(1, levels):
+        (folder / str(level)).mkdir(exist_ok=True)
+        below_rows, below_cols = rows, cols
+        rows, cols = math.ceil(below_rows / 2), math.ceil(below_cols / 2)
+        for r in range(rows):
+            for c in range(cols):
+                parts = [[cv2.imread(str(folder / str(level - 1) / f"{2 * r + dr}_{2 * c + dc}.jpg")) if 2 * r + dr < below_rows and 2 * c + dc < below_cols
+                          else None for dc in (0, 1)] for dr in (0, 1)]
+                top = np.hstack([p for p in parts[0] if p is not None])
+                bottom = np.hstack([p for p in parts[1] if p is not None]) if any(p is not None for p in parts[1]) else None
+                image = np.vstack([top, bottom]) if bottom is not None else top
+                small = cv2.resize(image, (max(1, image.shape[1] // 2), max(1, image.shape[0] // 2)), interpolation=cv2.INTER_AREA)
+                cv2.imwrite(str(folder / str(level) / f"{r}_{c}.jpg"), small, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    return levels
+
+
+def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=()) -> dict:
+    """What the page draws, in mosaic pixels: vertices, edges (polyline, score, kind) and the
+    ground truth; plus the mosaic's transform to send edits back in world coordinates."""
+
+    def to_mosaic(points_px: np.ndarray) -> np.ndarray:
+        xs, ys = pixel_to_world(graph.transform, points_px[:, 0], points_px[:, 1])
+        cols, rows = world_to_pixel(mosaic.transform, np.asarray(xs), np.asarray(ys))
+        return np.stack([cols, rows], axis=1)
+
+    vertices = to_mosaic(graph.vertices) if graph.n_vertices else np.zeros((0, 2))
+    edges = []
+    for k, (u, v) in enumerate(graph.edges):
+        line = graph.edge_polyline(k)
+        score = float(graph.edge_scores[k]) if graph.edge_scores is not None and np.isfinite(graph.edge_scores[k]) else None
+        edges.append({"id": k, "u": int(u), "v": int(v), "line": np.round(to_mosaic(np.asarray(line, float)), 2).tolist(), "score": score,
+                      "kind": graph.edge_kinds[k] if graph.edge_kinds is not None else "normal"})
+    gt = []
+    for line in ground_truth:
+        xy = np.asarray(line.coords)[:, :2]
+        cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
+        gt.append(np.round(np.stack([cols, rows], axis=1), 2).tolist())
+    return {"width": mosaic.width, "height": mosaic.height, "tile": TILE, "levels": levels, "crs": graph.crs,
+            "transform": list(mosaic.transform)[:6], "vertices": np.round(vertices, 3).tolist(), "edges": edges, "ground_truth": gt}
+
+
+def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, ground_truth=(), progress: bool = True) -> Path:
+    """The review folder ``out`` (``index.html``, ``data.js``, the scripts, ``tiles/``)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    tiles = out / "tiles"
+    if tiles.exists():
+        shutil.rmtree(tiles)
+    levels = write_pyramid(mosaic, tiles, progress)
+    data = page_data(graph, mosaic, levels, ground_truth)
+    with atomic_path(out / "data.js") as tmp:
+        tmp.write_text("window.REVIEW_DATA = " + json.dumps(data, separators=(",", ":")) + ";\n")
+    static = resources.files("csboundary") / "viz" / "static"
+    for name in STATIC:
+        target = out / ("index.html" if name == "review.html" else name)
+        with atomic_path(target) as tmp:
+            tmp.write_text((static / name).read_text())
+    return out / "index.html"

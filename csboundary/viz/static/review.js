@@ -1,0 +1,265 @@
+// csboundary review page: pan/zoom over an image pyramid, edges coloured by confidence,
+// accept / delete / move / draw, edits exported as GeoJSON in the prediction's CRS.
+(function () {
+  "use strict";
+  const D = window.REVIEW_DATA;
+  const canvas = document.getElementById("view");
+  const ctx = canvas.getContext("2d");
+  const listEl = document.getElementById("edge-list");
+  const statusEl = document.getElementById("status");
+  const gtBox = document.getElementById("show-gt");
+  const tiles = new Map();
+  const state = { scale: 1, ox: 0, oy: 0, selected: null, deleted: new Set(), accepted: new Set(), moved: new Map(),
+                  added: [], drawing: null, drag: null, frames: 0 };
+  const rows = {};
+
+  const pos = (i) => state.moved.get(i) || D.vertices[i];
+  function edgeLine(e) {
+    const line = e.line.map((p) => p.slice());
+    line[0] = pos(e.u).slice();
+    line[line.length - 1] = pos(e.v).slice();
+    return line;
+  }
+  const colour = (s) => (s === null ? "#bbb" : `hsl(${Math.round(120 * Math.max(0, Math.min(1, s)))}, 90%, 50%)`);
+  const toScreen = (p) => [(p[0] - state.ox) * state.scale, (p[1] - state.oy) * state.scale];
+  const toImage = (x, y) => [x / state.scale + state.ox, y / state.scale + state.oy];
+
+  function resize() {
+    canvas.width = canvas.clientWidth;
+    canvas.height = canvas.clientHeight;
+    render();
+  }
+  function fit() {
+    state.scale = Math.min(canvas.clientWidth / D.width, canvas.clientHeight / D.height);
+    state.ox = (D.width - canvas.clientWidth / state.scale) / 2;
+    state.oy = (D.height - canvas.clientHeight / state.scale) / 2;
+  }
+  function centreOn(p, minScale) {
+    state.scale = Math.max(state.scale, minScale || 0);
+    state.ox = p[0] - canvas.width / 2 / state.scale;
+    state.oy = p[1] - canvas.height / 2 / state.scale;
+  }
+
+  let pending = false;
+  function render() {
+    if (pending) return;
+    pending = true;
+    requestAnimationFrame(draw);
+  }
+  function tile(level, r, c) {
+    const key = `${level}/${r}_${c}`;
+    let img = tiles.get(key);
+    if (!img) {
+      img = new Image();
+      img.onload = render;
+      img.src = `tiles/${key}.jpg`;
+      tiles.set(key, img);
+    }
+    return img;
+  }
+  function drawTiles() {
+    const level = Math.max(0, Math.min(D.levels - 1, Math.floor(Math.log2(1 / state.scale))));
+    const f = 2 ** level, span = D.tile * f;
+    const [x0, y0] = toImage(0, 0), [x1, y1] = toImage(canvas.width, canvas.height);
+    const rMax = Math.ceil(D.height / span) - 1, cMax = Math.ceil(D.width / span) - 1;
+    for (let r = Math.max(0, Math.floor(y0 / span)); r <= Math.min(rMax, Math.floor(y1 / span)); r++) {
+      for (let c = Math.max(0, Math.floor(x0 / span)); c <= Math.min(cMax, Math.floor(x1 / span)); c++) {
+        const img = tile(level, r, c);
+        if (img.complete && img.naturalWidth) {
+          const [sx, sy] = toScreen([c * span, r * span]);
+          ctx.drawImage(img, sx, sy, img.naturalWidth * f * state.scale, img.naturalHeight * f * state.scale);
+        }
+      }
+    }
+  }
+  function stroke(line, style, width, dash) {
+    ctx.beginPath();
+    line.forEach((p, k) => { const [x, y] = toScreen(p); if (k) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+    ctx.strokeStyle = style;
+    ctx.lineWidth = width;
+    ctx.setLineDash(dash || []);
+    ctx.stroke();
+    ctx.setLineDash([]);
+  }
+  function draw() {
+    pending = false;
+    state.frames += 1;
+    ctx.fillStyle = "#333";
+    ctx.fillRect(0, 0, canvas.width, canvas.height);
+    drawTiles();
+    if (gtBox.checked) D.ground_truth.forEach((line) => stroke(line, "#0ff", 1.5));
+    for (const e of D.edges) {
+      if (state.deleted.has(e.id)) continue;
+      const line = edgeLine(e);
+      if (state.accepted.has(e.id)) stroke(line, "#fff", 5);
+      stroke(line, colour(e.score), e.id === state.selected ? 4 : 2);
+    }
+    state.added.forEach((line) => stroke(line, "#f0f", 3));
+    if (state.drawing) stroke(state.drawing, "#f0f", 2, [6, 4]);
+    if (state.selected !== null) {
+      const e = D.edges[state.selected];
+      for (const i of [e.u, e.v]) {
+        const [x, y] = toScreen(pos(i));
+        ctx.fillStyle = "#fff";
+        ctx.fillRect(x - 4, y - 4, 8, 8);
+      }
+    }
+    statusEl.textContent = `${D.edges.length} edges, ${state.deleted.size} deleted, ${state.accepted.size} accepted, ` +
+      `${state.moved.size} vertices moved, ${state.added.length} added`;
+  }
+
+  function distanceToLine(p, line) {
+    let best = Infinity;
+    for (let k = 1; k < line.length; k++) {
+      const [ax, ay] = line[k - 1], [bx, by] = line[k];
+      const dx = bx - ax, dy = by - ay, len = dx * dx + dy * dy;
+      const t = len ? Math.max(0, Math.min(1, ((p[0] - ax) * dx + (p[1] - ay) * dy) / len)) : 0;
+      best = Math.min(best, Math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy));
+    }
+    return best;
+  }
+  function pick(p) {
+    let best = null, bestD = 6 / state.scale;
+    for (const e of D.edges) {
+      if (state.deleted.has(e.id)) continue;
+      const d = distanceToLine(p, edgeLine(e));
+      if (d < bestD) { best = e.id; bestD = d; }
+    }
+    return best;
+  }
+  function select(id, centre) {
+    if (state.selected !== null && rows[state.selected]) rows[state.selected].classList.remove("selected");
+    state.selected = id;
+    if (id !== null) {
+      rows[id].classList.add("selected");
+      rows[id].scrollIntoView({ block: "nearest" });
+      if (centre) {
+        const line = edgeLine(D.edges[id]);
+        centreOn(line[Math.floor(line.length / 2)], 1);
+      }
+    }
+    render();
+  }
+  function mark() {
+    for (const e of D.edges) {
+      rows[e.id].classList.toggle("deleted", state.deleted.has(e.id));
+      rows[e.id].classList.toggle("accepted", state.accepted.has(e.id));
+    }
+  }
+  function accept() {
+    if (state.selected === null) return;
+    state.accepted.add(state.selected);
+    state.deleted.delete(state.selected);
+    mark();
+    render();
+  }
+  function remove() {
+    if (state.selected === null) return;
+    state.deleted.add(state.selected);
+    state.accepted.delete(state.selected);
+    mark();
+    select(null);
+  }
+  function startDrawing() {
+    state.drawing = [];
+    document.getElementById("draw").classList.add("on");
+  }
+  function finishDrawing(keep) {
+    if (state.drawing && keep && state.drawing.length >= 2) state.added.push(state.drawing);
+    state.drawing = null;
+    document.getElementById("draw").classList.remove("on");
+    render();
+  }
+
+  const world = (p) => { const t = D.transform; return [t[0] * p[0] + t[1] * p[1] + t[2], t[3] * p[0] + t[4] * p[1] + t[5]]; };
+  function exportEdits() {
+    const features = [];
+    const edgeGeometry = (id) => ({ type: "LineString", coordinates: edgeLine(D.edges[id]).map(world) });
+    [...state.deleted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "delete", edge: id }, geometry: edgeGeometry(id) }));
+    [...state.accepted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "accept", edge: id }, geometry: edgeGeometry(id) }));
+    [...state.moved.keys()].sort((a, b) => a - b).forEach((i) => features.push({ type: "Feature", properties: { action: "move", vertex: i }, geometry: { type: "Point", coordinates: world(pos(i)) } }));
+    state.added.forEach((line) => features.push({ type: "Feature", properties: { action: "add" }, geometry: { type: "LineString", coordinates: line.map(world) } }));
+    const text = JSON.stringify({ type: "FeatureCollection", properties: { crs: D.crs, tool: "csboundary review" }, features }, null, 1);
+    document.getElementById("export-text").value = text;
+    const link = document.getElementById("download");
+    link.href = URL.createObjectURL(new Blob([text], { type: "application/geo+json" }));
+    link.hidden = false;
+    return text;
+  }
+
+  // the edge list, least confident first
+  const order = D.edges.map((e) => e.id).sort((a, b) => {
+    const sa = D.edges[a].score, sb = D.edges[b].score;
+    return (sa === null) - (sb === null) || (sa - sb) || a - b;
+  });
+  const fragment = document.createDocumentFragment();
+  for (const id of order) {
+    const e = D.edges[id];
+    const li = document.createElement("li");
+    li.id = `edge-${id}`;
+    li.dataset.edge = id;
+    li.textContent = `edge ${id} · ${e.score === null ? "?" : e.score.toFixed(3)} · ${e.kind}`;
+    li.onclick = () => select(id, true);
+    rows[id] = li;
+    fragment.appendChild(li);
+  }
+  listEl.appendChild(fragment);
+
+  canvas.addEventListener("mousedown", (ev) => {
+    const p = toImage(ev.offsetX, ev.offsetY);
+    if (state.drawing) { state.drawing.push(p); render(); return; }
+    if (state.selected !== null) {
+      const e = D.edges[state.selected];
+      for (const i of [e.u, e.v]) {
+        const [x, y] = toScreen(pos(i));
+        if (Math.abs(x - ev.offsetX) <= 6 && Math.abs(y - ev.offsetY) <= 6) { state.drag = { vertex: i }; return; }
+      }
+    }
+    state.drag = { x: ev.offsetX, y: ev.offsetY, ox: state.ox, oy: state.oy, moved: false };
+  });
+  canvas.addEventListener("mousemove", (ev) => {
+    const d = state.drag;
+    if (!d) return;
+    if (d.vertex !== undefined) { state.moved.set(d.vertex, toImage(ev.offsetX, ev.offsetY)); render(); return; }
+    if (Math.abs(ev.offsetX - d.x) + Math.abs(ev.offsetY - d.y) > 3) d.moved = true;
+    state.ox = d.ox - (ev.offsetX - d.x) / state.scale;
+    state.oy = d.oy - (ev.offsetY - d.y) / state.scale;
+    render();
+  });
+  canvas.addEventListener("mouseup", (ev) => {
+    const d = state.drag;
+    state.drag = null;
+    if (d && d.vertex === undefined && !d.moved) select(pick(toImage(ev.offsetX, ev.offsetY)));
+  });
+  canvas.addEventListener("wheel", (ev) => {
+    ev.preventDefault();
+    const before = toImage(ev.offsetX, ev.offsetY);
+    state.scale = Math.max(1 / 2 ** (D.levels + 1), Math.min(8, state.scale * Math.exp(-ev.deltaY * 0.0015)));
+    state.ox = before[0] - ev.offsetX / state.scale;
+    state.oy = before[1] - ev.offsetY / state.scale;
+    render();
+  }, { passive: false });
+  document.addEventListener("keydown", (ev) => {
+    if (ev.target.tagName === "TEXTAREA") return;
+    if (ev.key === "a") accept();
+    else if (ev.key === "Delete" || ev.key === "Backspace") remove();
+    else if (ev.key === "d") startDrawing();
+    else if (ev.key === "Enter") finishDrawing(true);
+    else if (ev.key === "Escape") finishDrawing(false);
+  });
+  document.getElementById("accept").onclick = accept;
+  document.getElementById("delete").onclick = remove;
+  document.getElementById("draw").onclick = startDrawing;
+  document.getElementById("finish").onclick = () => finishDrawing(true);
+  document.getElementById("export").onclick = exportEdits;
+  gtBox.onchange = render;
+  gtBox.disabled = D.ground_truth.length === 0;
+  window.addEventListener("resize", resize);
+
+  canvas.width = canvas.clientWidth;
+  canvas.height = canvas.clientHeight;
+  fit();
+  render();
+  const loadedTiles = () => [...tiles.values()].filter((img) => img.complete && img.naturalWidth).length;
+  window.review = { state, select, accept, remove, exportEdits, loadedTiles, render, edgeCount: () => listEl.children.length };
+})();

@@ -1,0 +1,130 @@
+"""The review page in a real browser (headless Chromium): it renders the imagery and every
+edge, the lowest-confidence edge is first in the list; deleting it and exporting gives edits
+that apply-review turns into a graph with exactly that edge less. Plus apply_edits by hand."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rasterio.transform import Affine
+
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.review_edits import EditError, apply_edits
+from helpers import run_cli
+
+CHROMIUM, DRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+
+
+@pytest.fixture(scope="module")
+def reviewed(tmp_path_factory):
+    """A predicted demo city (its own copy) and its review page."""
+    root = tmp_path_factory.mktemp("review")
+    done = run_cli("demo", "--out", str(root / "demo"), "--device", "cpu", timeout=600)
+    assert done.returncode == 0, done.stderr
+    pred = root / "pred"
+    shutil.copytree(root / "demo" / "prediction", pred)
+    done = run_cli("review", str(pred), "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert "ground truth" in done.stdout  # the demo city's own, found through the prediction's inputs
+    return pred
+
+
+@pytest.fixture
+def browser():
+    webdriver = pytest.importorskip("selenium.webdriver")
+    if not (CHROMIUM.exists() and DRIVER.exists()):
+        pytest.skip("needs Debian's chromium and chromium-driver (.ci/run installs them)")
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in ("--headless=new", "--no-sandbox", "--disable-background-networking", "--disable-gpu", "--window-size=1400,900",
+                 "--allow-file-access-from-files"):
+        options.add_argument(flag)
+    from selenium.webdriver.chrome.service import Service
+
+    driver = webdriver.Chrome(service=Service(str(DRIVER)), options=options)
+    yield driver
+    driver.quit()
+
+
+def _wait(driver, script: str, timeout: float = 20.0):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        value = driver.execute_script(script)
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for: {script}")
+
+
+def test_delete_the_least_sure_edge_in_the_browser_and_apply_it(reviewed, browser, tmp_path):
+    import cv2
+    from selenium.webdriver.common.by import By
+
+    graph = json.loads((reviewed / "graph.json").read_text())
+    scores = [e["score"] for e in graph["edges"]]
+    lowest = int(np.argmin(scores))
+
+    browser.get((reviewed / "review" / "index.html").as_uri())
+    _wait(browser, "return window.review && window.review.loadedTiles() > 0")
+    rows = browser.find_elements(By.CSS_SELECTOR, "#edge-list li")
+    assert len(rows) == len(graph["edges"]) == browser.execute_script("return window.review.edgeCount()")
+    assert int(rows[0].get_attribute("data-edge")) == lowest
+    shot = cv2.imdecode(np.frombuffer(browser.find_element(By.ID, "view").screenshot_as_png, np.uint8), cv2.IMREAD_COLOR)
+    assert shot.std() > 20  # imagery and lines, not an empty canvas
+
+    rows[0].click()
+    assert browser.execute_script("return window.review.state.selected") == lowest
+    browser.find_element(By.ID, "delete").click()
+    browser.find_element(By.ID, "export").click()
+    edits = browser.find_element(By.ID, "export-text").get_attribute("value")
+    collection = json.loads(edits)
+    assert [f["properties"] for f in collection["features"]] == [{"action": "delete", "edge": lowest}]
+
+    (tmp_path / "edits.geojson").write_text(edits)
+    done = run_cli("apply-review", str(reviewed), str(tmp_path / "edits.geojson"))
+    assert done.returncode == 0, done.stderr
+    after = json.loads((reviewed / "graph.json").read_text())
+    strip = lambda e: (e["u"], e["v"], e.get("score"), e.get("kind"))  # noqa: E731
+    assert [strip(e) for e in after["edges"]] == [strip(e) for k, e in enumerate(graph["edges"]) if k != lowest]
+    assert after["vertices"] == graph["vertices"]
+    log = json.loads((reviewed / "review.json").read_text())["reviews"][-1]
+    assert log["deleted_edges"] == [lowest] and log["edges_after"] == len(graph["edges"]) - 1
+
+
+def _square() -> BoundaryGraph:
+    # pixel (col, row) -> world (x, y) = (100 + 0.5 col, 200 - 0.5 row)
+    return BoundaryGraph(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]), [[0, 1], [1, 2]], edge_kinds=["normal", "corner"],
+                         edge_polylines=[None, np.array([[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]])], edge_scores=np.array([0.3, 0.9]),
+                         transform=Affine(0.5, 0, 100, 0, -0.5, 200), crs="EPSG:32618")
+
+
+def test_edits_by_hand():
+    features = [
+        {"properties": {"action": "delete", "edge": 0}, "geometry": None},
+        {"properties": {"action": "accept", "edge": 1}, "geometry": None},
+        {"properties": {"action": "move", "vertex": 2}, "geometry": {"type": "Point", "coordinates": [105.0, 194.0]}},  # pixel (10, 12)
+        {"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[100.2, 200.0], [90.0, 190.0]]}},
+    ]
+    graph, record = apply_edits(_square(), features)
+    assert graph.n_edges == 2 and record.deleted == [0] and record.accepted == [0] and record.moved == [2] and record.added == [1]
+    assert np.allclose(graph.vertices[2], [10, 12])
+    assert np.allclose(graph.edge_polylines[0][-1], [10, 12])  # the corner edge's polyline follows its moved end
+    assert tuple(graph.edges[1]) == (0, 3)  # starts on vertex 0 (0.4 px away: snapped), ends on a new vertex
+    assert np.allclose(graph.vertices[3], [-20, 20]) and graph.edge_kinds[1] == "manual" and graph.edge_scores[1] == 1.0
+    assert record.kept == {1: 0}
+
+
+@pytest.mark.parametrize("feature, message", [
+    ({"properties": {"action": "delete", "edge": 5}}, "not an edge"),
+    ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}}, "Point"),
+    ({"properties": {"action": "paint"}}, "unknown action"),
+    ({"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[100, 200]]}}, "at least 2"),
+])
+def test_bad_edits_are_refused(feature, message):
+    with pytest.raises(EditError, match=message):
+        apply_edits(_square(), [feature])
