@@ -261,5 +261,14 @@
   fit();
   render();
   const loadedTiles = () => [...tiles.values()].filter((img) => img.complete && img.naturalWidth).length;
-  window.review = { state, select, accept, remove, exportEdits, loadedTiles, render, edgeCount: () => listEl.children.length };
+  const drawNow = () => { const t = performance.now(); draw(); return performance.now() - t; };  // for benchmarks
+  const zoomAt = (x, y, factor) => {
+    const before = toImage(x, y);
+    state.scale *= factor;
+    state.ox = before[0] - x / state.scale;
+    state.oy = before[1] - y / state.scale;
+  };
+  const pendingTiles = () => [...tiles.values()].filter((img) => !img.complete).length;
+  window.review = { state, select, fit: () => { fit(); render(); }, accept, remove, exportEdits, loadedTiles, pendingTiles, render, drawNow, zoomAt,
+                    edgeCount: () => listEl.children.length };
 })();
