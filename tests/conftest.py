@@ -107,3 +107,15 @@ def tile_factory(tmp_path):
 def write_tif():
     """The :func:`write_raster` helper, for tests that fabricate one-off files."""
     return write_raster
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory) -> Path:
+    """``csboundary demo`` run once per session (the shipped model on the demo city): its folder
+    holds ``city/`` and ``prediction/``. Read-only: copy what a test changes."""
+    from helpers import run_cli
+
+    out = tmp_path_factory.mktemp("demo") / "demo"
+    done = run_cli("demo", "--out", str(out), "--device", "cpu", timeout=600)
+    assert done.returncode == 0, done.stderr
+    return out

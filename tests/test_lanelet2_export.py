@@ -15,13 +15,10 @@ from helpers import run_cli  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory):
+def demo(demo_run, tmp_path_factory):
     """The demo city predicted by the shipped model, with --lanelet2."""
-    root = tmp_path_factory.mktemp("l2")
-    done = run_cli("demo", "--out", str(root / "demo"), "--device", "cpu", timeout=600)
-    assert done.returncode == 0, done.stderr
-    pred = root / "pred"
-    done = run_cli("predict", str(root / "demo" / "city"), "--out", str(pred), "--lanelet2", "--device", "cpu", "--quiet", timeout=600)
+    pred = tmp_path_factory.mktemp("l2") / "pred"
+    done = run_cli("predict", str(demo_run / "city"), "--out", str(pred), "--lanelet2", "--device", "cpu", "--quiet", timeout=600)
     assert done.returncode == 0, done.stderr
     return pred
 

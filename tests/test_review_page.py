@@ -21,13 +21,10 @@ CHROMIUM, DRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
 
 
 @pytest.fixture(scope="module")
-def reviewed(tmp_path_factory):
+def reviewed(demo_run, tmp_path_factory):
     """A predicted demo city (its own copy) and its review page."""
-    root = tmp_path_factory.mktemp("review")
-    done = run_cli("demo", "--out", str(root / "demo"), "--device", "cpu", timeout=600)
-    assert done.returncode == 0, done.stderr
-    pred = root / "pred"
-    shutil.copytree(root / "demo" / "prediction", pred)
+    pred = tmp_path_factory.mktemp("review") / "pred"
+    shutil.copytree(demo_run / "prediction", pred)
     done = run_cli("review", str(pred), "--quiet")
     assert done.returncode == 0, done.stderr
     assert "ground truth" in done.stdout  # the demo city's own, found through the prediction's inputs
