@@ -88,11 +88,30 @@
     ctx.fillRect(0, 0, canvas.width, canvas.height);
     drawTiles();
     if (gtBox.checked) D.ground_truth.forEach((line) => stroke(line, "#0ff", 1.5));
+    // one path per colour bucket (a few strokes instead of one per edge), edges off screen skipped
+    const [vx0, vy0] = toImage(0, 0), [vx1, vy1] = toImage(canvas.width, canvas.height);
+    const buckets = new Map();
     for (const e of D.edges) {
-      if (state.deleted.has(e.id)) continue;
+      if (state.deleted.has(e.id) || e.id === state.selected) continue;
+      const b = e.box;
+      if (!state.moved.has(e.u) && !state.moved.has(e.v) && (b[2] < vx0 || b[0] > vx1 || b[3] < vy0 || b[1] > vy1)) continue;
       const line = edgeLine(e);
       if (state.accepted.has(e.id)) stroke(line, "#fff", 5);
-      stroke(line, colour(e.score), e.id === state.selected ? 4 : 2);
+      const key = e.score === null ? -1 : Math.round(e.score * 20);
+      if (!buckets.has(key)) buckets.set(key, []);
+      buckets.get(key).push(line);
+    }
+    for (const [key, lines] of buckets) {
+      ctx.beginPath();
+      for (const line of lines) line.forEach((p, k) => { const [x, y] = toScreen(p); if (k) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+      ctx.strokeStyle = colour(key < 0 ? null : key / 20);
+      ctx.lineWidth = 2;
+      ctx.stroke();
+    }
+    if (state.selected !== null && !state.deleted.has(state.selected)) {
+      const e = D.edges[state.selected];
+      if (state.accepted.has(e.id)) stroke(edgeLine(e), "#fff", 6);
+      stroke(edgeLine(e), colour(e.score), 4);
     }
     state.added.forEach((line) => stroke(line, "#f0f", 3));
     if (state.drawing) stroke(state.drawing, "#f0f", 2, [6, 4]);
@@ -185,6 +204,11 @@
     link.href = URL.createObjectURL(new Blob([text], { type: "application/geo+json" }));
     link.hidden = false;
     return text;
+  }
+
+  for (const e of D.edges) {  // bounding boxes, to skip edges off screen
+    const xs = e.line.map((p) => p[0]), ys = e.line.map((p) => p[1]);
+    e.box = [Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)];
   }
 
   // the edge list, least confident first
