@@ -20,7 +20,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.metrics import evaluate
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.pipeline.city import predict_city, patch_scale_graph
-from csboundary.pipeline.maps import predict_mosaic_maps
+from csboundary.models.maps import predict_mosaic_maps
 from csboundary.pipeline.oracle import OracleModel
 from csboundary.pipeline.patch import PatchPredictor
 

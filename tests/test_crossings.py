@@ -44,7 +44,8 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
-    from csboundary.pipeline.patch import PatchPredictor, shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
+    from csboundary.pipeline.patch import PatchPredictor
 
     shipped = load_checkpoint(shipped_weights(), ("bundle",))
     save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])

@@ -59,7 +59,8 @@ def test_predictor_applies_the_check(tmp_path):
     """A predictor with the check on never returns an AfANet edge the map does not back."""
     import torch
 
-    from csboundary.pipeline.patch import PatchPredictor, shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
+    from csboundary.pipeline.patch import PatchPredictor
 
     predictor = PatchPredictor.load(shipped_weights(), torch.device("cpu"))
     rng = np.random.default_rng(0)

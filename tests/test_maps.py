@@ -10,7 +10,7 @@ from csboundary.data.geotiff import write_geotiff
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.pipeline.maps import predict_mosaic_maps, predict_probabilities
+from csboundary.models.maps import predict_mosaic_maps, predict_probabilities
 
 
 def test_overlaps_are_the_mean_of_the_patches_covering_them(tmp_path):

@@ -11,7 +11,7 @@ from affine import Affine
 
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
-from csboundary.data.mask_import import MaskRule, import_masks, mask_polylines, surface_outline
+from csboundary.labels.mask_import import MaskRule, import_masks, mask_polylines, surface_outline
 from csboundary.errors import InputError
 from helpers import run_cli
 

@@ -32,7 +32,7 @@ def patch_image(tmp_path_factory):
 def predictors(tmp_path_factory):
     import shutil
 
-    from csboundary.pipeline.patch import shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
 
     weights = tmp_path_factory.mktemp("w") / "bundle.pt"
     shutil.copy(shipped_weights(), weights)  # the export is cached beside it, not in the package

@@ -116,7 +116,8 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
     from csboundary.data.raster import Mosaic
     from csboundary.models.checkpoint import file_sha256
     from csboundary.pipeline.distributed import dask_executor
-    from csboundary.pipeline.patch import PatchPredictor, shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
+    from csboundary.pipeline.patch import PatchPredictor
     from csboundary.pipeline.run import run_prediction
 
     predictor = PatchPredictor.load(None, torch.device("cpu"))

@@ -107,7 +107,7 @@ def import_masks_cmd(
     """Images + raster masks (road edge or road surface) -> cities with vector ground truth at the
     model's pixel size, for evaluate-set, evaluate-model and training."""
 
-    from csboundary.data.mask_import import MaskRule, import_masks
+    from csboundary.labels.mask_import import MaskRule, import_masks
 
     if gsd is not None and (not math.isfinite(gsd) or gsd <= 0):
         raise typer.BadParameter(f"--gsd must be a positive number of metres, got {gsd}")
@@ -471,7 +471,7 @@ def predict(
 
     from csboundary.data.model_view import model_view
     from csboundary.models.checkpoint import file_sha256
-    from csboundary.pipeline.patch import shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.run import run_prediction, stage_table
 
     mosaic, _ = _open_inputs(inputs, None)
@@ -684,7 +684,7 @@ def benchmark(
     from csboundary.models.device import resolve_device
     from csboundary.models.training_data import CitySpec
     from csboundary.pipeline.benchmark import METHODS, run_benchmark
-    from csboundary.pipeline.patch import shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
 
     chosen = [m.strip() for m in methods.split(",")] if methods else None
     unknown = set(chosen or []) - {m.key for m in METHODS}

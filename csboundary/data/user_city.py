@@ -19,7 +19,7 @@ from shapely.geometry import box
 
 from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, write_meta
 from csboundary.data.ground_truth import read_ground_truth, write_ground_truth
-from csboundary.data.mask_import import MODEL_GSD
+from csboundary.data.units import MODEL_GSD
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import pixel_to_world
 from csboundary.errors import InputError, InputWarning

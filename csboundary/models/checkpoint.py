@@ -34,6 +34,16 @@ def code_version() -> str:
         return __version__
 
 
+SHIPPED_WEIGHTS = "csboundary-synthetic.pt"
+
+
+def shipped_weights() -> Path:
+    """Path of the weights shipped inside the package (trained by ``csboundary train``)."""
+    from importlib import resources
+
+    return Path(str(resources.files("csboundary") / "weights" / SHIPPED_WEIGHTS))
+
+
 def file_sha256(path: str | Path) -> str:
     """Hex SHA-256 of a file (identifies weights in a run's manifest)."""
     import hashlib

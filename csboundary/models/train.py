@@ -33,7 +33,7 @@ from csboundary.models.checkpoint import code_version, load_checkpoint, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.augmentation import AugmentConfig, photometric
 from csboundary.models.training_data import CitySpec, TrainingCity, WorldsConfig
-from csboundary.pipeline.maps import predict_mosaic_maps
+from csboundary.models.maps import predict_mosaic_maps
 
 
 @dataclass

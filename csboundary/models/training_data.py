@@ -22,7 +22,7 @@ from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.writer import CityLabels
 from csboundary.models.augmentation import AugmentConfig, draw_geometry, photometric, source_side, warp
 from csboundary.models.augmentation import flip_rotate90 as augment  # also the baselines' flips
-from csboundary.pipeline.maps import unit_bands
+from csboundary.models.maps import unit_bands
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from tqdm import tqdm
 
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
-from csboundary.data.mask_import import SET_FILE
+from csboundary.labels.mask_import import SET_FILE
 from csboundary.data.model_view import model_view
 from csboundary.data.units import MODEL_GSD
 from csboundary.data.raster import Mosaic

@@ -20,7 +20,7 @@ from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.writer import CityLabels
-from csboundary.pipeline.patch import graph_from_adjacency
+from csboundary.models.decoding import graph_from_adjacency
 
 
 @dataclass

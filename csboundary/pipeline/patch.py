@@ -9,45 +9,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import torch
-from shapely.geometry import LineString
 
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
-from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits, edges_from_adjacency
+from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
 from csboundary.data.units import MODEL_GSD
 from csboundary.errors import InputError
-from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
+from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model, shipped_weights
+from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN
 from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
-from csboundary.pipeline.maps import image_tensor, predict_probabilities, unit_bands
-
-SHIPPED_WEIGHTS = "csboundary-synthetic.pt"
-CORNER_SIMPLIFY_PX = 0.75  # skeleton staircases -> smooth polylines (they are ~5 % too long otherwise)
-
-
-def _smooth(polyline: np.ndarray | None) -> np.ndarray | None:
-    """A corner edge's skeleton path without its pixel staircase (Douglas-Peucker, ends kept)."""
-    if polyline is None or len(polyline) < 3:
-        return polyline
-    return np.asarray(LineString(polyline).simplify(CORNER_SIMPLIFY_PX).coords)
-
-
-def _sha(text: str) -> str:
-    import hashlib
-
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def shipped_weights() -> Path:
-    """Path of the weights shipped inside the package (trained by ``csboundary train``)."""
-    return Path(str(resources.files("csboundary") / "weights" / SHIPPED_WEIGHTS))
+from csboundary.models.maps import image_tensor, predict_probabilities, unit_bands
 
 
 @dataclass
@@ -85,8 +63,12 @@ class PatchPredictor:
         from csboundary.models.checkpoint import file_sha256
 
         path = Path(weights) if weights else shipped_weights()
-        digest = file_sha256(path) + (file_sha256(fpn_weights) if fpn_weights else "")
-        self.onnx = OnnxNetworks.for_weights(path, digest if not fpn_weights else _sha(digest), self.fpn, self.afanet)
+        digest = file_sha256(path)
+        if fpn_weights:  # both files decide the networks
+            import hashlib
+
+            digest = hashlib.sha256((digest + file_sha256(fpn_weights)).encode()).hexdigest()
+        self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet)
         return "onnx"
 
     @classmethod
@@ -178,28 +160,3 @@ def inference_settings(settings, path: str | Path) -> dict:
             kind = "an integer" if integer else "a number"
             raise InputError(path, f"inference setting {key} = {value!r} must be {kind} from {low:g} to {high:g}")
     return settings
-
-
-def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: float, max_degree: int | None) -> BoundaryGraph:
-    """Extracted vertices + an (M, M) edge probability matrix -> the patch graph.
-
-    Corner edges from vertex extraction are always kept (kind ``corner``, their skeleton smoothed
-    into the polyline, score = mean keypoint probability along it); the other edges are decoded
-    from ``probs`` (kind ``normal``, score = their probability).
-    """
-    corner = [tuple(int(x) for x in e) for e in found.edges]
-    polylines = {tuple(sorted(e)): _smooth(found.edge_polylines[k]) for k, e in enumerate(corner)} if found.edge_polylines else {}
-    corner_scores = {tuple(sorted(e)): float(found.edge_scores[k]) for k, e in enumerate(corner)} if found.edge_scores is not None else {}
-    edges = edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), threshold, max_degree, fixed=corner) if len(probs) >= 2 else [tuple(sorted(e)) for e in corner]
-    kinds, lines, scores = [], [], []
-    for u, v in edges:
-        line = polylines.get((u, v))
-        if line is not None:
-            line = np.asarray(line)
-            if np.linalg.norm(line[0] - found.vertices[u]) > np.linalg.norm(line[0] - found.vertices[v]):
-                line = line[::-1]
-        kinds.append("corner" if line is not None else "normal")
-        lines.append(line)
-        scores.append(corner_scores.get((u, v), 1.0) if line is not None else float(probs[u, v]))
-    return BoundaryGraph(found.vertices, np.array(edges, dtype=np.int64).reshape(-1, 2), vertex_kinds=found.vertex_kinds,
-                         edge_kinds=kinds, edge_polylines=lines, edge_scores=np.array(scores, dtype=float))

@@ -53,8 +53,8 @@ from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_mode
 from csboundary.models.fpn import FPN
 from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity
-from csboundary.pipeline.maps import image_tensor, predict_mosaic_maps, predict_probabilities, unit_bands
-from csboundary.pipeline.patch import shipped_weights
+from csboundary.models.maps import image_tensor, predict_mosaic_maps, predict_probabilities, unit_bands
+from csboundary.models.checkpoint import shipped_weights
 
 KIND = "icurb"
 # training-only options (TrainConfig.options); the rest of the options are ICurbConfig fields

@@ -32,7 +32,7 @@ from csboundary.models.checkpoint import load_checkpoint, restore_model
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity
-from csboundary.pipeline.maps import image_tensor
+from csboundary.models.maps import image_tensor
 
 KIND = "orientation-refine"
 IGNORE = -100

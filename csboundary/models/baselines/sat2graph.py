@@ -45,8 +45,9 @@ from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_mode
 from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
 from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
 from csboundary.models.training_data import TrainingCity, augment
-from csboundary.pipeline.maps import image_tensor, unit_bands
-from csboundary.pipeline.patch import graph_from_adjacency, shipped_weights
+from csboundary.models.maps import image_tensor, unit_bands
+from csboundary.models.checkpoint import shipped_weights
+from csboundary.models.decoding import graph_from_adjacency
 
 KIND = "sat2graph"
 SLOTS = 6

@@ -1,0 +1,79 @@
+"""The package's layers only import downward, so data can be followed one way:
+
+    errors < data < graph < labels, metrics, viz < models < pipeline < cli
+
+Every ``import`` of every module is read (top-level and inside functions alike); an import of a
+higher layer, or between the three peers of one layer, fails with the module and line named.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import csboundary
+
+LAYERS = {"errors": 0, "data": 1, "graph": 2, "labels": 3, "metrics": 3, "viz": 3, "models": 4, "pipeline": 5, "cli": 6, "__main__": 7}
+PACKAGE = Path(csboundary.__file__).parent
+
+
+def layer_of(module: str) -> str | None:
+    """The top-level part of a ``csboundary.X...`` module name (None for the package itself)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "csboundary" else None
+
+
+def imports_of(path: Path) -> list[tuple[int, str]]:
+    """(line, module) of every csboundary import in a source file."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            # ``from csboundary import X``: a layer when X is one (``__version__`` is the package's own)
+            names = [node.module] if node.module != "csboundary" else [f"csboundary.{a.name}" for a in node.names if a.name in LAYERS]
+            found += [(node.lineno, name) for name in names if name.startswith("csboundary")]
+        elif isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names if a.name.startswith("csboundary")]
+    return found
+
+
+def upward_imports(root: Path = PACKAGE) -> list[str]:
+    problems = []
+    for path in sorted(root.rglob("*.py")):
+        relative = path.relative_to(root)
+        source = relative.parts[0].removesuffix(".py") if relative.parts else ""
+        if source not in LAYERS:
+            if source != "__init__":
+                problems.append(f"{relative}: not in any layer (add it to LAYERS)")
+            continue
+        for line, module in imports_of(path):
+            target = layer_of(module)
+            if target is None or target == source:
+                continue
+            if target not in LAYERS:
+                problems.append(f"{relative}:{line} imports {module}: not in any layer")
+            elif LAYERS[target] >= LAYERS[source]:
+                problems.append(f"{relative}:{line} imports {module}: {target} is not below {source}")
+    return problems
+
+
+def test_every_import_points_down():
+    assert upward_imports() == []
+
+
+def test_an_upward_import_is_caught(tmp_path):
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "fine.py").write_text("from csboundary.errors import InputError\n")
+    (tmp_path / "data" / "bad.py").write_text("def f():\n    from csboundary.pipeline.run import run_prediction\n")
+    (tmp_path / "viz").mkdir()
+    (tmp_path / "viz" / "peer.py").write_text("import csboundary.metrics.apls\n")
+    assert upward_imports(tmp_path) == [
+        "data/bad.py:2 imports csboundary.pipeline.run: pipeline is not below data",
+        "viz/peer.py:1 imports csboundary.metrics.apls: metrics is not below viz",
+    ]
+
+
+@pytest.mark.parametrize("module, layer", [("csboundary.models.fpn", "models"), ("csboundary", None), ("numpy", None)])
+def test_layer_of(module, layer):
+    assert layer_of(module) == layer
