@@ -32,6 +32,7 @@ from shapely.geometry import LineString
 from csboundary.data.atomic import atomic_path
 from csboundary.data.windows import pixel_to_world, world_to_pixel
 from csboundary.errors import InputError
+from csboundary.graph.polyline import polyline_length
 
 FORMAT = "csboundary-graph"
 VERSION = 1
@@ -79,7 +80,7 @@ class BoundaryGraph:
 
     def edge_lengths(self) -> np.ndarray:
         """Pixel length of every edge along its polyline."""
-        return np.array([_polyline_length(self.edge_polyline(k)) for k in range(self.n_edges)], dtype=float)
+        return np.array([polyline_length(self.edge_polyline(k)) for k in range(self.n_edges)], dtype=float)
 
     def world_vertices(self) -> np.ndarray:
         if self.transform is None:
@@ -204,7 +205,3 @@ class BoundaryGraph:
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise InputError(path, f"not JSON ({exc})") from exc
         return cls.from_dict(data, str(path))
-
-
-def _polyline_length(points: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum()) if len(points) > 1 else 0.0

@@ -20,6 +20,7 @@ from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import chains
+from csboundary.graph.polyline import polyline_length
 
 
 @dataclass(frozen=True)
@@ -77,10 +78,6 @@ def skeleton_graph(probability: np.ndarray, config: SkeletonConfig = SkeletonCon
                          edge_polylines=polylines, edge_scores=np.ones(len(edges)))
 
 
-def _length(line: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-
-
 def _prune(lines: list[np.ndarray], ends: list[tuple[int, int]], config: SkeletonConfig):
     """Drop short end spurs (a chain with one free end and one junction) and short pieces."""
     degree: dict[int, int] = {}
@@ -90,7 +87,7 @@ def _prune(lines: list[np.ndarray], ends: list[tuple[int, int]], config: Skeleto
     keep = []
     for line, (a, b) in zip(lines, ends):
         spur = (degree[a] == 1) != (degree[b] == 1) and max(degree[a], degree[b]) >= 3
-        keep.append(not (spur and _length(line) < config.spur_px))
+        keep.append(not (spur and polyline_length(line) < config.spur_px))
     lines = [l for l, k in zip(lines, keep) if k]
     ends = [e for e, k in zip(ends, keep) if k]
     # connected pieces by union-find over chain ends
@@ -105,6 +102,6 @@ def _prune(lines: list[np.ndarray], ends: list[tuple[int, int]], config: Skeleto
         parent[root(a)] = root(b)
     total: dict[int, float] = {}
     for line, (a, _) in zip(lines, ends):
-        total[root(a)] = total.get(root(a), 0.0) + _length(line)
+        total[root(a)] = total.get(root(a), 0.0) + polyline_length(line)
     long_enough = [total[root(a)] >= config.min_length_px for a, _ in ends]
     return [l for l, k in zip(lines, long_enough) if k], [e for e, k in zip(ends, long_enough) if k]

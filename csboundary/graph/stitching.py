@@ -36,6 +36,7 @@ from scipy.spatial import cKDTree
 
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.polyline import arc_lengths
 
 Index = tuple[int, int]
 
@@ -76,10 +77,10 @@ def owner_bounds(patch: Patch, grid: PatchGrid) -> tuple[float, float, float, fl
 def polyline_midpoint(points: np.ndarray) -> np.ndarray:
     """The point at half the arc length of a polyline."""
     points = np.asarray(points, float)
-    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    if len(points) < 2 or steps.sum() == 0:
+    cum = arc_lengths(points)
+    if len(points) < 2 or cum[-1] == 0:
         return points[0]
-    cum = np.concatenate([[0.0], np.cumsum(steps)])
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)  # exact segment lengths (a difference of sums is not)
     half = cum[-1] / 2
     k = min(int(np.searchsorted(cum, half, side="right")) - 1, len(steps) - 1)
     t = (half - cum[k]) / steps[k] if steps[k] > 0 else 0.0

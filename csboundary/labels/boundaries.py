@@ -8,6 +8,7 @@ import numpy as np
 from affine import Affine
 
 from csboundary.data.windows import world_to_pixel
+from csboundary.graph.polyline import arc_lengths
 
 
 @dataclass(frozen=True)
@@ -21,7 +22,7 @@ class Boundary:
     @property
     def cumulative(self) -> np.ndarray:
         """Arc length at every vertex (N,)."""
-        return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(self.points, axis=0), axis=1))])
+        return arc_lengths(self.points)
 
     @property
     def length(self) -> float:
