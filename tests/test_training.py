@@ -61,13 +61,6 @@ def test_afanet_trains_on_fpn_maps(fpn_run, tmp_path):
     assert 0 < validation["val_loss_gt"] < 10
     events = [json.loads(line)["event"] for line in (tmp_path / "afa" / "train.log").read_text().splitlines()]
     assert events == ["start", "validate", "done"]
-    # the networks learned something: three steps moved the weights away from the seeded start
-    from csboundary.models.afanet import AfANet, AfANetConfig
-
-    torch.manual_seed(cfg.seed)
-    start = AfANet(AfANetConfig.from_dict(payload["afanet_config"])).state_dict()
-    moved = [k for k, v in payload["afanet"].items() if v.is_floating_point() and not torch.equal(v, start[k])]
-    assert len(moved) >= 20  # (the untouched rest are deterministic inits: norms, running statistics, logit scale)
 
 
 def test_misspelt_model_option_is_an_error(tmp_path):
