@@ -39,6 +39,6 @@ class LabelConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "LabelConfig":
-        data = dict(data)
-        grid = GridConfig(**data.pop("grid", {}))
-        return cls(grid=grid, **{k: v for k, v in data.items() if k in cls.__dataclass_fields__})
+        from csboundary.config import config_from_dict
+
+        return config_from_dict(cls, data, "labels")

@@ -24,6 +24,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from csboundary.config import config_from_dict
+
 
 @dataclass(frozen=True)
 class AfANetConfig:
@@ -47,7 +49,7 @@ class AfANetConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "AfANetConfig":
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in cls.__dataclass_fields__})
+        return config_from_dict(cls, data)
 
 
 class ConvEncoder(nn.Module):

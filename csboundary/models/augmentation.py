@@ -15,6 +15,8 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
+from csboundary.config import config_from_dict
+
 
 @dataclass(frozen=True)
 class AugmentConfig:
@@ -42,7 +44,7 @@ class AugmentConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "AugmentConfig":
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+        return config_from_dict(cls, data, "augment")
 
 
 def source_side(crop: int, angle: float, scale: float) -> int:

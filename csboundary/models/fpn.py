@@ -28,6 +28,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from csboundary.config import config_from_dict
+
 KEYPOINT, SEGMENTATION = 0, 1
 
 
@@ -48,7 +50,7 @@ class FPNConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "FPNConfig":
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in cls.__dataclass_fields__})
+        return config_from_dict(cls, data)
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:

@@ -24,8 +24,9 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
+from csboundary.config import config_from_dict
 from csboundary.data import city as layout
-from csboundary.errors import InputError, reject_unknown
+from csboundary.errors import InputError
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
@@ -82,16 +83,7 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "TrainConfig":
-        data = dict(data)
-        for key in ("train_city", "valid_city"):
-            if key in data and data[key] is not None:
-                spec = dict(data[key])
-                reject_unknown(spec, CitySpec.__dataclass_fields__, key)
-                if "tiles" in spec:
-                    spec["tiles"] = tuple(spec["tiles"])
-                data[key] = CitySpec(**spec)
-        reject_unknown(data, cls.__dataclass_fields__, "training")
-        return cls(**data)
+        return config_from_dict(cls, data, "training", nested={"train_city": CitySpec, "valid_city": CitySpec})
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -378,7 +370,6 @@ def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path,
 
 def _model_config(cls, overrides: dict):
     """A model config from the training config's overrides; a misspelt key is an error."""
-    reject_unknown(overrides, cls.__dataclass_fields__, cls.__name__)
     return cls.from_dict(overrides)
 
 

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from csboundary.config import config_from_dict
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
-from csboundary.errors import reject_unknown
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
@@ -67,11 +67,7 @@ class WorldsConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "WorldsConfig":
-        reject_unknown(data, cls.__dataclass_fields__, "worlds")
-        data = dict(data)
-        if "tiles" in data:
-            data["tiles"] = tuple(data["tiles"])
-        return cls(**data)
+        return config_from_dict(cls, data, "worlds")
 
     def specs(self) -> list[CitySpec]:
         from csboundary.data.synth.styles import draw_style

@@ -105,10 +105,11 @@ class SynthConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "SynthConfig":
-        """Rebuild a recorded config; keys this version does not know are ignored (older
-        ``city.json`` files carry fewer keys, which then take their defaults)."""
-        known = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**known)
+        """Rebuild a recorded config (older ``city.json`` files carry fewer keys, which take
+        their defaults; a key this version does not know is an error)."""
+        from csboundary.config import config_from_dict
+
+        return config_from_dict(cls, data, "synth")
 
 
 def city_rng(split: str, seed: int, *stream: int) -> np.random.Generator:

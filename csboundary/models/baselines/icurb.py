@@ -45,13 +45,15 @@ from shapely.geometry import LineString
 from skimage.morphology import skeletonize
 from torch import nn
 
+from csboundary.config import config_from_dict
 from csboundary.graph import BoundaryGraph
 from csboundary.labels.boundaries import Boundary
 from csboundary.labels.select import near_window
 from csboundary.models.afanet import crop_rois
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, reject_unknown, seed_everything
+from csboundary.errors import reject_unknown
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, seed_everything
 from csboundary.models.training_data import TrainingCity
 from csboundary.models.maps import image_tensor, predict_mosaic_maps, predict_probabilities, unit_bands
 from csboundary.models.checkpoint import shipped_weights
@@ -79,13 +81,13 @@ class ICurbConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "ICurbConfig":
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in cls.__dataclass_fields__})
+        return config_from_dict(cls, data, "icurb")
 
 
 def split_options(options: dict) -> tuple[ICurbConfig, dict]:
     """TrainConfig.options -> (agent config, training options); a misspelt key is an error."""
     reject_unknown(options, {*ICurbConfig.__dataclass_fields__, *TRAIN_OPTIONS}, "icurb")
-    return ICurbConfig.from_dict(options), {k: options.get(k, v) for k, v in TRAIN_OPTIONS.items()}
+    return ICurbConfig.from_dict({k: v for k, v in options.items() if k not in TRAIN_OPTIONS}), {k: options.get(k, v) for k, v in TRAIN_OPTIONS.items()}
 
 
 class Agent(nn.Module):

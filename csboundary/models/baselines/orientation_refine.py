@@ -30,7 +30,8 @@ from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 from csboundary.labels.rasterize import orientation_label
 from csboundary.models.checkpoint import load_checkpoint, restore_model
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
+from csboundary.config import config_from_dict
 from csboundary.models.training_data import TrainingCity
 from csboundary.models.maps import image_tensor
 
@@ -49,8 +50,7 @@ class Options:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Options":
-        reject_unknown(data, cls.__dataclass_fields__, "orientation-refine")
-        return cls(**data)
+        return config_from_dict(cls, data, "orientation-refine")
 
 
 # -- labels ---------------------------------------------------------------------------------------

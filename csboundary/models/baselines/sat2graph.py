@@ -43,7 +43,8 @@ from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, reject_unknown, seed_everything
+from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
+from csboundary.config import config_from_dict
 from csboundary.models.training_data import TrainingCity, augment
 from csboundary.models.maps import image_tensor, unit_bands
 from csboundary.models.checkpoint import shipped_weights
@@ -73,8 +74,7 @@ class Sat2GraphOptions:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Sat2GraphOptions":
-        reject_unknown(data, cls.__dataclass_fields__, "sat2graph")
-        return cls(**data)
+        return config_from_dict(cls, data, "sat2graph")
 
 
 # -- graph tensor ---------------------------------------------------------------------------------
