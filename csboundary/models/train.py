@@ -233,8 +233,12 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
             logits = model(image.to(device))
         return fpn_loss(logits.float(), target.to(device), valid.to(device), config), {}
 
-    return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
-                    lambda step: validate_fpn(model, valid_batches, device, config), progress)
+    try:
+        return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
+                        lambda step: validate_fpn(model, valid_batches, device, config), progress)
+    finally:
+        for city in (*train_cities, valid_city):
+            city.close()
 
 
 # -- AfANet -------------------------------------------------------------------------------------------
@@ -337,6 +341,8 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
                 metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()})
             _record(out_dir, "afanet", metrics, model, model_config, config, step, history, optimizer, rng, log)
     bar.close()
+    for city in (*train_cities, cities["valid"]):
+        city.close()
     return _finish(out_dir, "afanet", model, model_config, config, step, history, log)
 
 

@@ -88,6 +88,16 @@ class TrainingCity:
         self.config = config
         self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
 
+    def close(self) -> None:
+        """Close the imagery's files (a training run closes its cities when it ends)."""
+        self.mosaic.close()
+
+    def __enter__(self) -> "TrainingCity":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def random_window(self, rng: np.random.Generator, size: int) -> PixelWindow:
         col = int(rng.integers(0, max(1, self.mosaic.width - size + 1)))
         row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
