@@ -79,3 +79,21 @@ def test_benchmark_writes_every_table_and_the_figure(weights, tmp_path):
     assert "Table I" in md and "Table IV" in md and "Enhanced-iCurb" in md
     assert (out / "fig7-comparison.png").stat().st_size > 0
     assert (out / "predictions" / "csboundary" / "boundaries.gpkg").exists()
+
+    # Table II reports the scores of the prediction it wrote: re-scored here from graph.json and
+    # the city's ground truth, independently of the benchmark's own bookkeeping
+    from csboundary.data import city as layout
+    from csboundary.data.ground_truth import read_ground_truth
+    from csboundary.data.raster import Mosaic
+    from csboundary.graph import BoundaryGraph
+    from csboundary.metrics import evaluate
+    from csboundary.pipeline.benchmark import TABLE_METRICS
+
+    predicted = BoundaryGraph.read_json(out / "predictions" / "csboundary" / "graph.json")
+    with Mosaic.open(layout.tiles_dir(city)) as mosaic:
+        gt = BoundaryGraph.from_world_lines(list(read_ground_truth(layout.ground_truth_path(city), mosaic.crs).geometry), mosaic.transform)
+        again = evaluate(predicted, gt, scale="city", seed=0, extent=(0, 0, mosaic.width, mosaic.height))["metrics"]
+    table2 = {row[0]: row[1:] for row in list(csv.reader(open(out / "tableII.csv")))[1:]}
+    reported = dict(zip(TABLE_METRICS, map(float, table2["csBoundary"])))
+    assert reported == pytest.approx({k: again[k] for k in TABLE_METRICS}, abs=2e-3)
+    assert 0 <= reported["precision@5"] <= 1 and 0 <= reported["apls"] <= 1
