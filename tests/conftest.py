@@ -1,5 +1,8 @@
 """Shared fixtures: small aligned GeoTIFF tiles fabricated with rasterio in a temporary directory.
 
+The test folders mirror the package (tests/data for csboundary/data, ...); this folder is put on
+the import path so every test file can import ``helpers`` and this module.
+
 The default mosaic is 2x2 tiles of 60x40 px, 4-band uint8, EPSG:32618, 0.5 m/px, with its
 top-left corner at (500000, 4400000). The stitched full array is returned alongside the files so
 tests can compare any window read from the mosaic against a plain numpy slice.
@@ -7,6 +10,7 @@ tests can compare any window read from the mosaic against a plain numpy slice.
 
 from __future__ import annotations
 
+import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +20,8 @@ import pytest
 import rasterio
 from affine import Affine
 from rasterio.errors import NotGeoreferencedWarning
+
+sys.path.insert(0, str(Path(__file__).parent))
 
 CRS = "EPSG:32618"
 GSD = 0.5
