@@ -56,10 +56,10 @@ def test_json_round_trip(points, with_extras, tmp_path_factory):
     back = BoundaryGraph.read_json(g.write_json(path))
     assert np.array_equal(back.vertices, g.vertices) and np.array_equal(back.edges, g.edges)
     assert back.transform == T and back.crs == "EPSG:32618"
-    if with_extras:
+    if with_extras and g.n_edges:  # (points closer than the snap make a graph without edges: nothing per edge to keep)
         assert np.allclose(back.edge_scores, g.edge_scores) and back.edge_kinds == g.edge_kinds
         assert np.array_equal(back.edge_patches, g.edge_patches)
-    else:
+    elif not with_extras:
         assert back.edge_patches is None
     data = json.loads(path.read_text())
     assert data["vertices"][0]["xy"] == pytest.approx(list(T @ tuple(pts[0])))
