@@ -542,33 +542,11 @@ def review(
     """A self-contained review page: imagery with pan and zoom, boundaries coloured by
     confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
     for apply-review. Open OUT/index.html (no network needed)."""
-    import json
+    from csboundary.pipeline.review import write_review
 
-    from csboundary.data import city as layout
-    from csboundary.data.ground_truth import read_ground_truth
-    from csboundary.data.raster import Mosaic
-    from csboundary.graph import BoundaryGraph
-    from csboundary.viz.review_page import write_review_page
-
-    summary_path = prediction / "summary.json"
-    if not summary_path.exists():
-        raise InputError(prediction, "not a finished prediction (no summary.json)")
-    try:
-        inputs = [Path(p) for p in json.loads(summary_path.read_text())["inputs"]]
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(summary_path, "damaged summary (no list of inputs)") from exc
-    graph = BoundaryGraph.read_json(prediction / "graph.json")
-    out = out or prediction / "review"
-    _out_dir(out)
-    mosaic = Mosaic.open(inputs)
-    if ground_truth is None and inputs:
-        city_dir = inputs[0].parent.parent
-        if layout.is_city_dir(city_dir) and layout.ground_truth_path(city_dir).exists():
-            ground_truth = layout.ground_truth_path(city_dir)
-    lines = list(read_ground_truth(ground_truth, mosaic.crs).geometry) if ground_truth is not None else []
-    with mosaic:
-        page = write_review_page(graph, mosaic, out, lines, progress=not quiet)
-    typer.echo(f"{page}: {graph.n_edges} edges to review{', ground truth ' + str(ground_truth) if lines else ''}")
+    _out_dir(out or prediction / "review")
+    done = write_review(prediction, out, ground_truth, progress=not quiet)
+    typer.echo(f"{done['page']}: {done['edges']} edges to review{', ground truth ' + str(done['ground_truth']) if done['ground_truth'] else ''}")
 
 
 @app.command("apply-review")
@@ -578,44 +556,12 @@ def apply_review(
 ) -> None:
     """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
     GeoJSON and map.osm (when present), and appends what a person changed to review.json."""
-    import json
-    import time as _time
+    from csboundary.pipeline.review import apply_review as merge
 
-    from csboundary.data.atomic import atomic_path
-    from csboundary.graph import BoundaryGraph
-    from csboundary.graph.review_edits import EditError, apply_edits
-    from csboundary.pipeline.outputs import write_graph_outputs
-
-    graph_path = prediction / "graph.json"
-    graph = BoundaryGraph.read_json(graph_path)
-    try:
-        collection = json.loads(edits.read_text())
-        features = collection["features"]
-    except FileNotFoundError as exc:
-        raise InputError(edits, "file not found") from exc
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(edits, "not a GeoJSON FeatureCollection of edits") from exc
-    crs = (collection.get("properties") or {}).get("crs")
-    if crs is not None and graph.crs is not None and crs != graph.crs:
-        raise InputError(edits, f"edits are in {crs}, the prediction in {graph.crs}")
-    try:
-        updated, record = apply_edits(graph, features)
-    except EditError as exc:
-        raise InputError(edits, str(exc)) from exc
-    write_graph_outputs(updated, prediction)
-    if (prediction / "map.osm").exists():
-        from csboundary.pipeline.lanelet2_export import PROJECTOR_INFO, read_origin, write_lanelet2
-
-        info = prediction / PROJECTOR_INFO
-        write_lanelet2(updated, prediction / "map.osm", read_origin(info) if info.exists() else None)
-    log_path = prediction / "review.json"
-    log = json.loads(log_path.read_text()) if log_path.exists() else {"reviews": []}
-    log["reviews"].append({"time": _time.strftime("%Y-%m-%dT%H:%M:%S"), "edits": str(edits), "edges_before": graph.n_edges,
-                           "edges_after": updated.n_edges, **record.to_dict()})
-    with atomic_path(log_path) as tmp:
-        tmp.write_text(json.dumps(log, indent=1) + "\n")
-    typer.echo(f"{prediction}: {len(record.deleted)} deleted, {len(record.accepted)} accepted, {len(record.moved)} vertices moved, "
-               f"{len(record.added)} added: {graph.n_edges} -> {updated.n_edges} edges; recorded in {log_path}")
+    done = merge(prediction, edits)
+    typer.echo(f"{prediction}: {len(done['deleted_edges'])} deleted, {len(done['accepted_edges'])} accepted, "
+               f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added: "
+               f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}")
 
 
 @app.command("predict-patch")

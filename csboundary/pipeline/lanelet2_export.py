@@ -27,6 +27,7 @@ from csboundary.pipeline.outputs import graph_frames
 
 ROAD_BORDER = "road_border"
 PROJECTOR_INFO = "map_projector_info.yaml"
+LANELET2_MAP = "map.osm"  # the map's name in a prediction folder
 
 
 def to_wgs84(crs: str):

@@ -42,8 +42,7 @@ from csboundary.viz.overlay import overview_scale
 from csboundary.pipeline.outputs import write_graph_outputs
 
 ORANGE = (255, 140, 0)
-OVERVIEW_PX = 2000
-LANELET2_MAP = "map.osm"  # longest side of overview.png
+OVERVIEW_PX = 2000  # longest side of overview.png
 SUMMARY = "summary.json"
 RUN_ONLY_SETTINGS = {"cluster"}  # how the work is spread, not what it computes: a run may resume on another cluster
 PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
@@ -82,7 +81,7 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         if write_maps:
             files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
         if lanelet2:
-            from csboundary.pipeline.lanelet2_export import write_lanelet2
+            from csboundary.pipeline.lanelet2_export import LANELET2_MAP, write_lanelet2
 
             written = write_lanelet2(result.graph, stage / LANELET2_MAP)
             files.update(lanelet2=written["path"], projector_info=written["projector_info"])
