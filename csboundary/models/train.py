@@ -318,32 +318,27 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     rng = np.random.default_rng(config.seed)
     step, history = _maybe_resume(resume, "afanet", model, optimizer, rng)
     log.write(event="start", model="afanet", step=step, code_version=_RUN_CODE_VERSION["at_start"], parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
-    model.train()
-    bar = tqdm(total=config.steps, initial=step, desc="train afanet", unit="step", disable=not progress)
-    while step < config.steps:
+
+    def loss_at(step: int):
         stage = "gt" if step < config.gt_steps else "pred"
         city = train_cities[int(rng.integers(len(train_cities)))] if len(train_cities) > 1 else train_cities[0]
         tensor, vertices, label = _afanet_sample(city, city.random_window(rng, config.window), rng, stage, config, vertex_config, augmentation)
-        step += 1
-        bar.update(1)
-        if len(vertices) >= 2:
-            lr = _cosine_lr(config, step)
-            for group in optimizer.param_groups:
-                group["lr"] = lr
-            loss = adjacency_loss(model(tensor.to(device), vertices.to(device)), label.to(device), config.max_pos_weight)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            bar.set_postfix(loss=f"{loss.item():.4f}", stage=stage, m=len(vertices))
-        if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "stage": stage}
-            for name, samples in valid_sets.items():
-                metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()})
-            _record(out_dir, "afanet", metrics, model, model_config, config, step, history, optimizer, rng, log)
-    bar.close()
-    for city in (*train_cities, cities["valid"]):
-        city.close()
-    return _finish(out_dir, "afanet", model, model_config, config, step, history, log)
+        extras = {"stage": stage, "m": len(vertices)}
+        if len(vertices) < 2:  # nothing to connect in this window
+            return None, extras
+        return adjacency_loss(model(tensor.to(device), vertices.to(device)), label.to(device), config.max_pos_weight), extras
+
+    def validate(step: int) -> dict:
+        metrics = {}
+        for name, samples in valid_sets.items():
+            metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()})
+        return metrics
+
+    try:
+        return optimize("afanet", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at, validate, progress)
+    finally:
+        for city in (*train_cities, cities["valid"]):
+            city.close()
 
 
 # -- shared -------------------------------------------------------------------------------------------
@@ -351,24 +346,30 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
 
 def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path, optimizer, rng: np.random.Generator, step: int,
              history: list, log: RunLog, loss_at, validate, progress: bool = True) -> Path:
-    """The loop every dense trainer shares: cosine learning rate, one optimizer step per
-    ``loss_at(step) -> (loss, extras)``, a validation (``validate(step) -> dict``, logged with the
-    extras) and a resumable checkpoint every ``validate_every`` steps, the final weights at the end."""
+    """The loop every trainer shares (the FPN, AfANet, the dense baselines): cosine learning
+    rate, one optimizer step per ``loss_at(step) -> (loss, extras)`` (a ``None`` loss, e.g. an
+    AfANet window with fewer than two vertices, counts the step without an update), a validation
+    (``validate(step) -> dict``, logged with the extras) and a resumable checkpoint every
+    ``validate_every`` steps, the final weights at the end."""
     model.train()
     bar = tqdm(total=config.steps, initial=step, desc=f"train {kind}", unit="step", disable=not progress)
+    last = None
     while step < config.steps:
         lr = _cosine_lr(config, step)
         for group in optimizer.param_groups:
             group["lr"] = lr * group.get("lr_scale", 1.0)
         loss, extras = loss_at(step)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
+        if loss is not None:
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            last = loss.item()
         step += 1
         bar.update(1)
-        bar.set_postfix(loss=f"{loss.item():.4f}", **{k: f"{v:.3g}" if isinstance(v, float) else v for k, v in extras.items()})
+        if last is not None:
+            bar.set_postfix(loss=f"{last:.4f}", **{k: f"{v:.3g}" if isinstance(v, float) else v for k, v in extras.items()})
         if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "train_loss": loss.item(), "lr": lr, **extras, **validate(step)}
+            metrics = {"step": step, "train_loss": last, "lr": lr, **extras, **validate(step)}
             _record(out_dir, kind, metrics, model, model_config, config, step, history, optimizer, rng, log)
     bar.close()
     return _finish(out_dir, kind, model, model_config, config, step, history, log)

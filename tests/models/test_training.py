@@ -93,3 +93,19 @@ def test_extra_city_that_is_not_a_city_is_an_error(tmp_path):
     cfg = config(tmp_path, extra_train_cities=[str(tmp_path)])
     with pytest.raises(InputError, match="not a city directory"):
         train_fpn(cfg, tmp_path / "run", torch.device("cpu"), progress=False)
+
+
+def test_afanet_resumed_run_equals_uninterrupted_run(fpn_run, tmp_path):
+    """AfANet trains on the shared loop, so it resumes exactly too (weights, optimizer, every
+    random stream)."""
+    tmp, fpn_weights = fpn_run
+    # the whole 400 px city as the window and ground-truth vertices throughout: every step has edges to learn
+    common = dict(model="afanet", fpn_weights=str(fpn_weights), afanet=TINY_AFANET, window=400, gt_steps=4, validate_every=2)
+    whole = train_afanet(config(tmp, steps=4, **common), tmp_path / "whole", torch.device("cpu"), progress=False)
+    logged = [json.loads(line) for line in (tmp_path / "whole" / "train.log").read_text().splitlines()]
+    assert all(isinstance(e["train_loss"], float) and e["m"] >= 2 for e in logged if e["event"] == "validate")
+    train_afanet(config(tmp, steps=2, **common), tmp_path / "half", torch.device("cpu"), progress=False)
+    resumed = train_afanet(config(tmp, steps=4, **common), tmp_path / "half", torch.device("cpu"),
+                           resume=str(tmp_path / "half" / "afanet-last.pt"), progress=False)
+    a, b = load_checkpoint(whole, ("afanet",))["afanet"], load_checkpoint(resumed, ("afanet",))["afanet"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
