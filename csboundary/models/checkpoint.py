@@ -44,15 +44,23 @@ def shipped_weights() -> Path:
     return Path(str(resources.files("csboundary") / "weights" / SHIPPED_WEIGHTS))
 
 
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
 def file_sha256(path: str | Path) -> str:
-    """Hex SHA-256 of a file (identifies weights in a run's manifest)."""
+    """Hex SHA-256 of a file (identifies weights in a run's manifest and their ONNX exports);
+    remembered per path, size and modification time, so one run hashes its weights once."""
     import hashlib
 
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    stat = Path(path).stat()
+    key = (str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns)
+    if key not in _DIGESTS:
+        digest = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        _DIGESTS[key] = digest.hexdigest()
+    return _DIGESTS[key]
 
 
 def save_checkpoint(path: str | Path, kind: str, **content: Any) -> Path:

@@ -40,17 +40,12 @@ def onnxruntime_available() -> bool:
 
 def cache_dir(weights: Path) -> Path:
     """Where the exports of ``weights`` go: beside it if writable, else the user cache."""
-    beside = weights.parent / ".onnx-cache"
+    from csboundary.data.atomic import check_output_dir
+
     try:
-        beside.mkdir(exist_ok=True)
-        probe = beside / f".probe-{os.getpid()}"
-        probe.touch()
-        probe.unlink()
-        return beside
-    except OSError:
-        root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "csboundary" / "onnx"
-        root.mkdir(parents=True, exist_ok=True)
-        return root
+        return check_output_dir(weights.parent / ".onnx-cache", create=True)
+    except InputError:
+        return check_output_dir(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "csboundary" / "onnx", create=True)
 
 
 class _AfANetLogits(torch.nn.Module):

@@ -116,7 +116,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             raise InputError(scheduler, f"cannot reach the Dask scheduler ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
         with client:
             if not client.nthreads():
-                client.wait_for_workers(1, timeout=60)
+                try:
+                    client.wait_for_workers(1, timeout=60)
+                except TimeoutError as exc:
+                    raise InputError(scheduler, "the scheduler has no workers (none joined within 60 s)") from exc
             yield client, None
         return
     threads = max(1, (os.cpu_count() or 1) // workers)
