@@ -81,8 +81,7 @@ class RunStore:
         self._pending: dict[tuple[str, Index], tuple[np.ndarray, Future]] = {}
         self._maps: dict[Index, np.ndarray | None] = {}
         self._graphs: dict[Index, BoundaryGraph] = {}
-        self._cores: dict[Index, np.ndarray] = {}
-        self._thumbs: dict[Index, np.ndarray] = {}
+        self._memory: dict[tuple[str, Index], np.ndarray] = {}  # thumbnails and cores of a store in memory
         self._channels: int | None = None
         if self.root is not None:
             for sub in ("maps", "images", "thumbs", "graphs", "cores"):
@@ -172,6 +171,9 @@ class RunStore:
             self._put("maps", index, maps)
 
     def _put(self, folder: str, index: Index, array: np.ndarray) -> None:
+        if self.root is None:
+            self._memory[folder, index] = array
+            return
         path = self.root / folder / f"{_stem(index)}.npy"
         if not self.write_behind:
             _atomic_save(path, lambda f: np.save(f, array, allow_pickle=False))
@@ -183,6 +185,8 @@ class RunStore:
 
     def _get(self, folder: str, index: Index) -> np.ndarray | None:
         """A stored array (pending or memory-mapped), None if there is none."""
+        if self.root is None:
+            return self._memory.get((folder, index))
         entry = self._pending.get((folder, index))  # single dict operations: safe beside the writer's user thread
         if entry is not None:
             return entry[0]
@@ -193,6 +197,9 @@ class RunStore:
             return None
 
     def _drop(self, folder: str, index: Index) -> None:
+        if self.root is None:
+            self._memory.pop((folder, index), None)
+            return
         entry = self._pending.pop((folder, index), None)
         if entry is not None:
             entry[1].result()  # the write must not recreate the file after it is removed
@@ -239,11 +246,10 @@ class RunStore:
 
     def load_image(self, index: Index) -> np.ndarray | None:
         """The kept image, or None (not kept: read it from the imagery)."""
-        return None if self.root is None else self._get("images", index)
+        return self._get("images", index)
 
     def drop_image(self, index: Index) -> None:
-        if self.root is not None:
-            self._drop("images", index)
+        self._drop("images", index)
 
     def held_map_bytes(self) -> int:
         if self.root is None:
@@ -254,14 +260,9 @@ class RunStore:
 
     # -- overview thumbnails -------------------------------------------------------------------
     def save_thumb(self, index: Index, thumb: np.ndarray) -> None:
-        if self.root is None:
-            self._thumbs[index] = thumb
-        else:
-            self._put("thumbs", index, thumb)
+        self._put("thumbs", index, thumb)
 
     def load_thumb(self, index: Index) -> np.ndarray | None:
-        if self.root is None:
-            return self._thumbs.get(index)
         thumb = self._get("thumbs", index)
         return None if thumb is None else np.asarray(thumb)
 
@@ -280,15 +281,13 @@ class RunStore:
 
     def save_core(self, index: Index, values: np.ndarray) -> None:
         """The stitched maps of a patch core, uint8 (for ``maps.tif``)."""
-        if self.root is None:
-            self._cores[index] = values
-        else:
-            _atomic_save(self.root / "cores" / f"{_stem(index)}.npy", lambda f: np.save(f, values, allow_pickle=False))
+        self._put("cores", index, values)
 
     def load_core(self, index: Index) -> np.ndarray:
-        if self.root is None:
-            return self._cores[index]
-        return np.load(self.root / "cores" / f"{_stem(index)}.npy", allow_pickle=False)
+        core = self._get("cores", index)
+        if core is None:
+            raise KeyError(f"stitched maps of patch {index} are not in the run store")
+        return np.asarray(core)
 
 
 def graph_arrays(graph: BoundaryGraph) -> dict[str, np.ndarray]:
