@@ -1,9 +1,8 @@
 """A boundary graph from a binary mask: threshold -> skeleton -> graph, the segmentation family's
 post-processing (e.g. OrientationRefine, Batra et al. 2019).
 
-The skeleton's pixels are joined to their 8-neighbours, except that a diagonal step is left out
-when an orthogonal path around it exists (otherwise every corner of a thin line would be a little
-triangle, i.e. a false junction). The maximal chains of that pixel graph (between ends and
+The skeleton's pixels are joined to their 8-neighbours, leaving out a diagonal step when an
+orthogonal path around it exists (graph/skeleton_pixels.py). The maximal chains of that pixel graph (between ends and
 junctions, or closed loops) become edges whose polylines run through the pixel centres,
 simplified by Douglas-Peucker; end spurs shorter than ``spur_px`` and pieces shorter than
 ``min_length_px`` are dropped. Coordinates: continuous (col, row) in the mask's pixel frame,
@@ -21,6 +20,7 @@ from skimage.morphology import skeletonize
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import chains
 from csboundary.graph.polyline import polyline_length
+from csboundary.graph.skeleton_pixels import skeleton_pixel_links
 
 
 @dataclass(frozen=True)
@@ -31,33 +31,12 @@ class SkeletonConfig:
     min_length_px: float = 20.0  # connected pieces shorter than this are dropped
 
 
-def pixel_graph(skeleton: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(N, 2) pixel (row, col) of a one-pixel-wide mask and its (E, 2) neighbour pairs."""
-    rows, cols = np.nonzero(skeleton)
-    ids = -np.ones(skeleton.shape, np.int64)
-    ids[rows, cols] = np.arange(len(rows))
-    padded = np.pad(ids, 1, constant_values=-1)
-    on = padded >= 0
-    pairs = []
-    h, w = skeleton.shape
-    centre = padded[1 : h + 1, 1 : w + 1]
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        other = padded[1 + dr : h + 1 + dr, 1 + dc : w + 1 + dc]
-        link = (centre >= 0) & (other >= 0)
-        if dr and dc:  # diagonal: only where no orthogonal two-step path joins the same pixels
-            side_a = on[1 : h + 1, 1 + dc : w + 1 + dc]
-            side_b = on[1 + dr : h + 1 + dr, 1 : w + 1]
-            link &= ~(side_a | side_b)
-        pairs.append(np.stack([centre[link], other[link]], axis=1))
-    return np.stack([rows, cols], axis=1), np.concatenate(pairs).reshape(-1, 2)
-
-
 def skeleton_graph(probability: np.ndarray, config: SkeletonConfig = SkeletonConfig()) -> BoundaryGraph:
     """The graph of a (h, w) boundary probability map; edges carry their polylines."""
     mask = np.asarray(probability) >= config.threshold
     if not mask.any():
         return BoundaryGraph(edge_kinds=[], edge_polylines=[])
-    pixels, links = pixel_graph(skeletonize(mask))
+    pixels, links, _ = skeleton_pixel_links(skeletonize(mask), corner_diagonals=False)
     points = pixels[:, ::-1].astype(float) + 0.5
     found = chains(len(points), links)
     lines = [points[seq] for seq in found.vertices]

@@ -34,11 +34,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, sparse
+from scipy import ndimage
 from scipy.sparse import csgraph
 from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.skeleton_pixels import skeleton_distance_graph
 
 ISOLATED = "isolated"  # vertex at the centre of a short piece (same names as csboundary.labels.keypoints)
 CORNER = "corner"  # vertex at an end of a long piece; also the kind of the edge joining the two ends
@@ -191,13 +192,11 @@ def _centres_and_peaks(prob: np.ndarray, labels: np.ndarray, n: int, threshold: 
 def _longest_skeleton_paths(mask: np.ndarray, labels: np.ndarray, n: int) -> list[tuple[np.ndarray | None, float]]:
     """Per piece: the skeleton's (approximate) geodesic diameter as (m, 2) pixel (row, col) from
     one end to the other, and its length in px; ``(None, 0.0)`` if the piece has no skeleton."""
-    skeleton = skeletonize(mask)
-    rows, cols = np.nonzero(skeleton)
+    pixels, graph = skeleton_distance_graph(skeletonize(mask))
     out: list[tuple[np.ndarray | None, float]] = [(None, 0.0)] * n
-    if len(rows) == 0:
+    if len(pixels) == 0:
         return out
-    piece = labels[rows, cols]  # 1..n; pixels come in raster order
-    graph = _pixel_graph(skeleton, rows, cols)
+    piece = labels[pixels[:, 0], pixels[:, 1]]  # 1..n; pixels come in raster order
 
     present, first = np.unique(piece, return_index=True)
     dist = csgraph.dijkstra(graph, directed=False, indices=first, min_only=True)
@@ -210,25 +209,8 @@ def _longest_skeleton_paths(mask: np.ndarray, labels: np.ndarray, n: int) -> lis
         while nodes[-1] != start:
             nodes.append(pred[nodes[-1]])
         nodes = np.array(nodes[::-1])
-        out[k - 1] = (np.stack([rows[nodes], cols[nodes]], axis=1), float(dist[end]))
+        out[k - 1] = (pixels[nodes], float(dist[end]))
     return out
-
-
-def _pixel_graph(skeleton: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> sparse.csr_matrix:
-    """Undirected graph of 8-neighbouring skeleton pixels (weights 1 and sqrt(2)), one node per pixel."""
-    h, w = skeleton.shape
-    ids = np.full((h, w), -1, dtype=np.int64)
-    ids[rows, cols] = np.arange(len(rows))
-    heads, tails, weights = [], [], []
-    for dr, dc, weight in ((0, 1, 1.0), (1, 0, 1.0), (1, 1, np.sqrt(2.0)), (1, -1, np.sqrt(2.0))):
-        a = ids[: h - dr, max(0, -dc) : w - max(0, dc)]  # pixel (r, c) ...
-        b = ids[dr:, max(0, dc) : w + min(0, dc)]  # ... and its neighbour (r + dr, c + dc)
-        both = (a >= 0) & (b >= 0)
-        heads.append(a[both])
-        tails.append(b[both])
-        weights.append(np.full(int(both.sum()), weight))
-    n = len(rows)
-    return sparse.csr_matrix((np.concatenate(weights), (np.concatenate(heads), np.concatenate(tails))), shape=(n, n))
 
 
 def _farthest_per_piece(dist: np.ndarray, piece: np.ndarray) -> np.ndarray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from csboundary.graph.skeleton_graph import SkeletonConfig, pixel_graph, skeleton_graph
+from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 
 
 def drawn(lines, shape=(200, 200), width=3) -> np.ndarray:
@@ -43,14 +43,6 @@ def test_a_ring_is_a_closed_edge_and_spurs_and_specks_go():
     spur = drawn(ring + [[(100, 150), (100, 156)]])
     assert skeleton_graph(spur).n_edges == 1  # the 6 px spur is removed
     assert skeleton_graph(drawn(ring + [[(100, 150), (100, 190)]])).n_edges == 2  # a 40 px branch stays: the ring (now a loop through the junction) + the branch
-
-
-def test_diagonal_steps_never_make_triangles():
-    skeleton = np.zeros((5, 5), bool)
-    skeleton[2, 1:4] = True
-    skeleton[1, 3] = True  # an L corner: (2,3)-(1,3) orthogonal, (2,2)-(1,3) diagonal must be skipped
-    _, links = pixel_graph(skeleton)
-    assert len(links) == 3
 
 
 def test_an_empty_map_gives_an_empty_graph():
