@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from csboundary.cli.evaluate import format_rows, write_scores
+from csboundary.metrics.report import format_rows, write_scores
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic

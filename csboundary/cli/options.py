@@ -1,10 +1,22 @@
-"""Checks shared by the command line's options."""
+"""What the commands share: option checks and parsers that turn bad values into usage errors,
+output checks made before any work, and the help texts of options several commands take."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Sequence
 
 import typer
+
+from csboundary.errors import InputError
+
+SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check; default: the weights')."
+LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit; default: the weights')."
+THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
+ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
+DEVICE_HELP = "auto | cpu | cuda."
+WEIGHTS_HELP = "Weights bundle (default: the shipped weights)."
 
 
 def finite(value: float | None) -> float | None:
@@ -13,3 +25,46 @@ def finite(value: float | None) -> float | None:
     if value is not None and not math.isfinite(value):
         raise typer.BadParameter(f"must be a finite number, got {value}")
     return value
+
+
+def parse_tiles(text: str) -> tuple[int, int]:
+    """``ROWSxCOLS`` such as ``2x2``, each at least 1."""
+    try:
+        rows, cols = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise typer.BadParameter(f"expected ROWSxCOLS such as 2x2, got {text!r}")
+    if rows < 1 or cols < 1:
+        raise typer.BadParameter(f"tiles must be at least 1x1, got {text!r}")
+    return rows, cols
+
+
+def parse_numbers(text: str, count: int, option: str, form: str, kind: type = float) -> list:
+    """``count`` comma-separated finite numbers of ``kind`` (float or int), else a usage error
+    on ``option`` showing the expected ``form``."""
+    try:
+        values = [kind(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise typer.BadParameter(f"expected {form}, got {text!r}", param_hint=option)
+    return values
+
+
+def out_dir(out: Path, inputs: Sequence[Path] = ()) -> None:
+    """The output folder is checked (and made) before any work, outside every input folder."""
+    from csboundary.data.atomic import check_output_dir
+
+    check_output_dir(out, inputs=inputs)
+
+
+def out_file(path: Path, suffixes: tuple[str, ...]) -> None:
+    """An output file is checked (name, place, writable) before any work."""
+    from csboundary.data.atomic import check_output_file
+
+    check_output_file(path, suffixes)
+
+
+def no_file_at(out: Path) -> None:
+    """A folder-making command whose target is an existing file."""
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "exists and is not a folder")

@@ -11,7 +11,7 @@ import os
 import re
 import shutil
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 from csboundary.errors import InputError
 
@@ -38,13 +38,19 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
             tmp.unlink()
 
 
-def check_output_dir(path: str | Path, create: bool = False) -> Path:
+def check_output_dir(path: str | Path, create: bool = False, inputs: Sequence[str | Path] = ()) -> Path:
     """Check that outputs can be written into the folder ``path`` before any work is done (a run
-    of hours must not learn at the end that it cannot write); ``create`` makes it. Raises
-    InputError naming the folder. Without ``create`` nothing is left on disk."""
+    of hours must not learn at the end that it cannot write); ``create`` makes it. The folder
+    must not lie inside one of the ``inputs`` folders, where the next run would read its outputs
+    (maps.tif) as imagery. Raises InputError naming the folder. Without ``create`` nothing is
+    left on disk."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(path, "exists and is not a folder (choose a folder for the outputs)")
+    resolved = path.resolve()
+    for item in map(Path, inputs):
+        if item.is_dir() and (resolved == item.resolve() or item.resolve() in resolved.parents):
+            raise InputError(path, f"is inside the input folder {item}; its outputs would be read as imagery next time")
     if create:
         try:
             path.mkdir(parents=True, exist_ok=True)

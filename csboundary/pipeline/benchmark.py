@@ -132,6 +132,39 @@ def steps_per_epoch(config: dict) -> float:
     return area / (config["batch"] * config["crop"] ** 2)
 
 
+def unknown_methods(methods) -> list[str]:
+    """The names in ``methods`` that are no method's key, sorted."""
+    return sorted(set(methods or []) - {m.key for m in METHODS})
+
+
+def benchmark_to_folder(out: Path, city_dir: Path | None = None, weights_dir: Path | None = None, device=None, methods=None, seed: int = 0,
+                        progress: bool = True, command: str = "") -> dict:
+    """``csboundary benchmark``: :func:`run_benchmark` on ``city_dir`` (default: the test-split
+    city seed 1, 1x1 tile of 5000 px, built on first use under data/cities) with the weights in
+    ``weights_dir`` (default: the shipped ones), plus OUT/benchmark.json recording the
+    ``command``, code version, city, weights and every score; returns the results."""
+    import sys
+
+    import torch
+
+    from csboundary.models.checkpoint import code_version, shipped_weights
+    from csboundary.models.training_data import CitySpec
+
+    if unknown_methods(methods):
+        raise ValueError(f"unknown method(s) {', '.join(unknown_methods(methods))}")
+    city_dir = Path(city_dir or CitySpec("test", 1, (1, 1), 5000).ensure("data/cities"))
+    weights_dir = Path(weights_dir or shipped_weights().parent)
+    results = run_benchmark(city_dir, out, weights_dir, device or torch.device("cpu"), methods, seed, progress=progress)
+    record = {"command": command or "csboundary " + " ".join(sys.argv[1:]), "code_version": code_version(), "city": str(city_dir),
+              "weights": str(weights_dir),
+              "results": {k: {"method": r["method"].name, **({"missing": r["missing"]} if "missing" in r else
+                              {"scores": {s: v["metrics"] for s, v in r["scores"].items()}, "training": r["training"],
+                               "inference_seconds": r["summary"]["seconds"]})} for k, r in results.items()}}
+    with atomic_path(out / "benchmark.json") as tmp:
+        tmp.write_text(json.dumps(record, indent=1, default=float) + "\n")
+    return results
+
+
 def run_benchmark(city_dir: Path, out: Path, weights_dir: Path, device, methods=None, seed: int = 0, progress: bool = True) -> dict:
     """Predict ``city_dir`` with every method, score it, write the tables; returns the results."""
     from csboundary.data import city as layout

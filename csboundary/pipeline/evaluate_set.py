@@ -18,6 +18,7 @@ from tqdm import tqdm
 
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
+from csboundary.data.inputs import open_imagery
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.data.model_view import model_view
 from csboundary.data.units import MODEL_GSD
@@ -61,6 +62,21 @@ def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[
         result = predict_city(mosaic, model, progress=False)
     scores = evaluate_run(result, lines, seed)["city"]
     scores["counts"] = {"pred_edges": int(result.graph.n_edges), "gt_lines": len(lines)}
+    return scores
+
+
+def evaluate_city(city_dir: str | Path, model: PatchModel, seed: int = 0, batch_size: int = 1, progress: bool = True) -> dict[str, dict]:
+    """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
+    ``model`` on a city directory with ground truth, read as ``predict`` reads it, without
+    writing the prediction."""
+    layout.read_meta(city_dir)
+    mosaic, lines = open_imagery([city_dir])
+    view = model_view(mosaic, model_gsd=getattr(model, "pixel_size_m", MODEL_GSD))
+    with view.mosaic:
+        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress)
+    scores = evaluate_run(result, lines, seed)
+    for item in scores.values():
+        item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}
     return scores
 
 

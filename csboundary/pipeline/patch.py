@@ -160,3 +160,26 @@ def inference_settings(settings, path: str | Path) -> dict:
             kind = "an integer" if integer else "a number"
             raise InputError(path, f"inference setting {key} = {value!r} must be {kind} from {low:g} to {high:g}")
     return settings
+
+
+def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
+                   min_edge_support: float | None = None, max_edge_length: float | None = None, max_degree: int | None = None,
+                   fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
+    """The predictor of a weights bundle (the shipped one by default) with overrides of its
+    inference settings (None keeps the bundle's; ``max_degree`` 0 means no cap), on the chosen
+    engine (``auto``: ONNX Runtime on a CPU when installed) and device (``auto``: CUDA if present)."""
+    import dataclasses
+
+    from csboundary.models.device import resolve_device
+
+    predictor = PatchPredictor.load(weights, resolve_device(device), fpn_weights)
+    if edge_threshold is not None:
+        predictor.edge_threshold = edge_threshold
+    if min_edge_support is not None:
+        predictor.support = dataclasses.replace(predictor.support, min_support=min_edge_support)
+    if max_edge_length is not None:
+        predictor.support = dataclasses.replace(predictor.support, max_length_px=max_edge_length)
+    if max_degree is not None:
+        predictor.max_degree = max_degree or None
+    predictor.use_engine(engine, weights, fpn_weights)
+    return predictor

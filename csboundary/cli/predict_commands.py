@@ -1,0 +1,163 @@
+"""Commands that predict boundaries, and what follows a prediction: a Lanelet2 map, a review
+page, a reviewer's edits merged back, and the demo that shows it all on a synthetic city."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from csboundary.cli.options import (DEVICE_HELP, ENGINE_HELP, LENGTH_HELP, SUPPORT_HELP, THRESHOLD_HELP, WEIGHTS_HELP, finite, out_dir,
+                                    out_file, parse_numbers)
+
+
+def predict(
+    inputs: list[Path] = typer.Argument(..., help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
+    out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
+    weights: Optional[Path] = typer.Option(None, help=WEIGHTS_HELP),
+    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP),
+    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
+    batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
+    write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
+    lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
+    gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of imagery without a CRS (needed then)."),
+    restart: bool = typer.Option(False, "--restart", help="Discard the unfinished run in --out instead of resuming it."),
+    scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
+    workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
+    threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
+    engine: str = typer.Option("auto", help=ENGINE_HELP),
+    device: str = typer.Option("auto", help=DEVICE_HELP),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """City-scale prediction: patch grid -> FPN -> averaged maps -> vertices -> AfANet -> stitched
+    city graph, written in the input's CRS. Any pixel size from 0.03 to 1 m, any CRS (metres,
+    feet, degrees) and 8/16-bit or float imagery are resampled and stretched on the fly
+    (docs/city-inference.md). Work is kept as it is done: the same command after an interruption
+    continues where it stopped (docs/scaling.md)."""
+    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.predict import predict_to_folder
+    from csboundary.pipeline.run import stage_table
+
+    if scheduler and workers:
+        raise typer.BadParameter("give --scheduler or --workers, not both")
+    predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
+                               max_edge_length=max_edge_length, engine=engine)
+
+    def announce(plan, view) -> None:
+        typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
+                   f"at {predictor.pixel_size_m:g} m", err=True)
+
+    summary = predict_to_folder(inputs, out, predictor, weights=weights, gsd=gsd, batch_size=batch_size, write_maps=write_maps,
+                                lanelet2=lanelet2, restart=restart, scheduler=scheduler, workers=workers, threads=threads,
+                                progress=not quiet, on_plan=announce)
+    c = summary["counts"]
+    typer.echo(f"{out}: {c['edges']} edges, {c['vertices']} vertices, {c['boundary_km']} km of boundary\n{stage_table(summary)}")
+
+
+def predict_patch(
+    image: Path = typer.Argument(..., help="One patch: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
+    out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
+    weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
+    fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
+    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP),
+    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
+    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
+    max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
+    gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
+    engine: str = typer.Option("auto", help=ENGINE_HELP),
+    device: str = typer.Option("auto", help=DEVICE_HELP),
+) -> None:
+    """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
+    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.predict import predict_patch_to_folder
+
+    out_dir(out, [image] if image.is_dir() else [])
+    predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
+                               max_edge_length=max_edge_length, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine)
+    graph = predict_patch_to_folder(image, out, predictor, gsd)
+    typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({sum(k == 'corner' for k in graph.edge_kinds or [])} corner)")
+
+
+def export_lanelet2(
+    prediction: Path = typer.Argument(..., help="A predict output folder (its graph.json), or a graph.json file."),
+    out: Path = typer.Option(..., "--out", help="Lanelet2 OSM file to write; map_projector_info.yaml goes beside it."),
+    origin: Optional[str] = typer.Option(None, help="Projection origin LAT,LON (default: the middle of the boundaries)."),
+) -> None:
+    """The predicted boundaries as a Lanelet2 map: one road_border linestring per boundary (closed
+    loops closed), confidence as an attribute, UTM projector around the origin (Autoware's
+    map_projector_info.yaml beside it)."""
+    from csboundary.graph import BoundaryGraph
+    from csboundary.pipeline.lanelet2_export import write_lanelet2
+
+    source = prediction / "graph.json" if prediction.is_dir() else prediction
+    out_file(out, (".osm",))
+    at = None
+    if origin is not None:
+        lat, lon = parse_numbers(origin, 2, "--origin", "LAT,LON")
+        if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+            raise typer.BadParameter(f"{origin!r} is not a latitude,longitude", param_hint="--origin")
+        at = (lat, lon)
+    written = write_lanelet2(BoundaryGraph.read_json(source), out, at)
+    typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
+               f"in {written['projector_info']}")
+
+
+def review(
+    prediction: Path = typer.Argument(..., help="A predict output folder."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Folder of the page (default: PREDICTION/review)."),
+    ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to show as a toggle (default: the city's own, if any)."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+) -> None:
+    """A self-contained review page: imagery with pan and zoom, boundaries coloured by
+    confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
+    for apply-review. Open OUT/index.html (no network needed)."""
+    from csboundary.pipeline.review import write_review
+
+    out_dir(out or prediction / "review")
+    done = write_review(prediction, out, ground_truth, progress=not quiet)
+    typer.echo(f"{done['page']}: {done['edges']} edges to review{', ground truth ' + str(done['ground_truth']) if done['ground_truth'] else ''}")
+
+
+def apply_review(
+    prediction: Path = typer.Argument(..., help="The predict output folder the review page was made from."),
+    edits: Path = typer.Argument(..., help="The edits the page exported (edits.geojson)."),
+) -> None:
+    """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
+    GeoJSON and map.osm (when present), and appends what a person changed to review.json."""
+    from csboundary.pipeline.review import apply_review as merge
+
+    done = merge(prediction, edits)
+    typer.echo(f"{prediction}: {len(done['deleted_edges'])} deleted, {len(done['accepted_edges'])} accepted, "
+               f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added: "
+               f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}")
+
+
+def demo(
+    out: Path = typer.Option(Path("out/demo"), help="Output directory."),
+    seed: int = typer.Option(0, min=0, help="City seed (test split)."),
+    engine: str = typer.Option("auto", help=ENGINE_HELP),
+    device: str = typer.Option("auto", help=DEVICE_HELP),
+) -> None:
+    """The main job on an embedded default: a small test-split city, predicted and scored.
+
+    Synthesizes a 3000x3000 px city (2x2 tiles, 3x3 patches) into OUT/city, predicts it with the
+    shipped weights exactly as `csboundary predict` does (outputs in OUT/prediction), scores it
+    against the ground truth at patch and city scale (OUT/scores.json) and prints the table.
+    """
+    from csboundary.metrics.report import format_rows
+    from csboundary.pipeline.demo import run_demo
+    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.run import stage_table
+
+    out_dir(out)
+    done = run_demo(out, load_predictor(None, device, engine=engine), seed)
+    meta, (width, height) = done["meta"], done["size"]
+    typer.echo(format_rows(done["scores"]))
+    typer.echo(
+        f"demo city (test split, seed {seed}): {width}x{height} px, {len(meta['tiles'])} tiles, "
+        f"{meta['counts']['boundaries']} boundaries ({meta['counts']['boundary_km']} km)\n{stage_table(done['summary'])}\n"
+        f"wrote {out / 'prediction'} (boundaries.gpkg, boundaries.geojson, graph.json, overview.png, detail.png, summary.json), "
+        f"{out / 'scores.json'}, {out / 'city'}"
+    )

@@ -1,0 +1,55 @@
+"""Scores as people read them: one result as a table, several side by side (the shape of the
+paper's tables), and as JSON with undefined metrics (NaN) written as null."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+
+def write_scores(path: Path, result: dict) -> None:
+    """Scores as JSON, atomically; undefined metrics (NaN) become null."""
+    from csboundary.data.atomic import atomic_path
+    from csboundary.metrics.aggregate import nan_to_none
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(nan_to_none(result), indent=1, default=float) + "\n")
+
+
+def _num(value: float, digits: int = 4) -> str:
+    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
+
+
+def format_table(result: dict) -> str:
+    """A readable summary of :func:`csboundary.metrics.evaluate`'s result."""
+    m, c = result["metrics"], result["counts"]
+    taus = result["config"]["taus"]
+    head = f"{result['inputs']['pred']} vs {result['inputs']['gt']}: {result['scale']} scale, APLS {result['apls_variant']}, seed {result['seed']}"
+    if result["scale"] == "patch":
+        head += f"\n{c['patches_scored']} of {c['patches']} patches scored ({c['patches_with_gt']} with ground truth); per-patch means"
+    lines = [head, f"{'':12s}" + "".join(f"{'tau=' + format(t, 'g'):>10s}" for t in taus)]
+    for label, key in (("precision", "precision"), ("recall", "recall"), ("F1", "f1")):
+        lines.append(f"{label:12s}" + "".join(f"{_num(m[f'{key}@{t:g}']):>10s}" for t in taus))
+    apls_line = f"{'APLS':12s}{_num(m['apls']):>10s}   {result['apls_variant']}"
+    if result["apls_variant"] == "symmetric":
+        apls_line += f": gt->pred {_num(m['apls_gt_to_pred'])}, pred->gt {_num(m['apls_pred_to_gt'])}"
+    lines.append(apls_line)
+    lines.append(f"{'TLTS':12s}{_num(m['tlts']):>10s}   too long {_num(m['tlts_too_long'])}, too short {_num(m['tlts_too_short'])}, "
+                 f"infeasible {_num(m['tlts_infeasible'])}")
+    lines.append(f"{c['pairs']} sampled pairs (phi {result['config']['phi']:g}, snap < {result['config']['snap_radius']:g} px)")
+    return "\n".join(lines)
+
+
+def format_rows(results: dict[str, dict]) -> str:
+    """Several results side by side, one row each (the shape of the paper's tables)."""
+    first = next(iter(results.values()))
+    taus = [f"{t:g}" for t in first["config"]["taus"]]
+    columns = [f"{k}@{t}" for k in ("precision", "recall", "f1") for t in taus] + ["apls", "tlts"]
+    header = ["P@" + t for t in taus] + ["R@" + t for t in taus] + ["F1@" + t for t in taus] + ["APLS", "TLTS"]
+    width = max(12, *(len(k) + 2 for k in results))
+    lines = [f"{'':{width}s}" + "".join(f"{h:>8s}" for h in header)]
+    for label, result in results.items():
+        m = result["metrics"]
+        lines.append(f"{label:{width}s}" + "".join(f"{_num(m[c], 3):>8s}" for c in columns))
+    return "\n".join(lines)

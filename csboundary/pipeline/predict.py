@@ -1,0 +1,86 @@
+"""``predict`` and ``predict-patch`` as library calls: imagery in, a folder of georeferenced
+outputs out. The command line only parses options and prints what these return."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+from typing import Callable, Sequence
+
+import geopandas as gpd
+
+from csboundary.data.atomic import check_output_dir, staging_folder
+from csboundary.data.grid import PatchGrid
+from csboundary.data.inputs import open_imagery
+from csboundary.data.model_view import ModelInput, model_view
+from csboundary.data.raster import Mosaic
+from csboundary.errors import InputError
+from csboundary.graph import BoundaryGraph
+from csboundary.models.checkpoint import file_sha256, shipped_weights
+from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.run import run_prediction
+from csboundary.viz.labels import draw_patch_labels
+from csboundary.viz.overlay import to_display, write_png
+
+
+def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: PatchPredictor, *, weights: str | Path | None = None,
+                      gsd: float | None = None, batch_size: int = 1, write_maps: bool = False, lanelet2: bool = False,
+                      restart: bool = False, scheduler: str | None = None, workers: int | None = None, threads: int | None = None,
+                      progress: bool = True, on_plan: Callable[[PatchGrid, ModelInput], None] | None = None) -> dict:
+    """Predict the city that ``inputs`` name (tiles, a folder of tiles, a city directory) into
+    ``out`` and return the run's summary. ``weights`` names the file ``predictor`` came from (None:
+    the shipped one), for the run's manifest; ``gsd`` is the pixel size of imagery without a
+    CRS; ``scheduler`` (a Dask address) or ``workers`` (a local Dask cluster) spread the patches;
+    ``threads`` sets torch threads per process. ``on_plan`` is told the patch grid before any
+    work. An unfinished run in ``out`` is continued unless ``restart``."""
+    if scheduler and workers:
+        raise ValueError("give a scheduler or a number of workers, not both")
+    mosaic, _ = open_imagery(inputs)
+    view = model_view(mosaic, gsd, predictor.pixel_size_m)
+    check_output_dir(out, inputs=inputs)
+    if on_plan is not None:
+        on_plan(PatchGrid.for_mosaic(view.mosaic), view)
+    if threads and not (scheduler or workers):
+        import torch
+
+        torch.set_num_threads(threads)
+    settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
+                "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
+                "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
+                "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
+                "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
+    with view.mosaic, contextlib.ExitStack() as stack:
+        options = {}
+        if scheduler or workers:
+            from csboundary.pipeline.distributed import dask_client, dask_executor
+
+            client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
+            options = {"executor": dask_executor(client), "threads": threads or worker_threads}
+            settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
+        _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=progress,
+                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, **options)
+    return summary
+
+
+def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: PatchPredictor, gsd: float | None = None) -> BoundaryGraph:
+    """One patch (a raster of at most 1100x1100 px at the model's pixel size) -> ``out``/graph.json,
+    boundaries.geojson and overlay.png (maps and graph over the image); returns the graph."""
+    image, out = Path(image), Path(out)
+    check_output_dir(out, inputs=[image] if image.is_dir() else [])
+    with model_view(Mosaic.open(image), gsd, predictor.pixel_size_m, assume_model_gsd=True).mosaic as mosaic:
+        if mosaic.width > 1100 or mosaic.height > 1100:
+            raise InputError(image, f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a patch)")
+        read = mosaic.read(mosaic.window)
+        maps = predictor.maps(read.data)
+        graph = predictor.graph(read.data, maps)
+        graph.transform, graph.crs = mosaic.transform, (mosaic.crs.to_string() if mosaic.crs else None)
+    frame = gpd.GeoDataFrame(
+        {"kind": graph.edge_kinds or [], "confidence": list(graph.edge_scores) if graph.edge_scores is not None else []},
+        geometry=graph.to_linestrings(world=True), crs=graph.crs,
+    )
+    with staging_folder(check_output_dir(out, create=True), last="graph.json") as stage:
+        graph.write_json(stage / "graph.json")
+        frame.to_file(stage / "boundaries.geojson", driver="GeoJSON", engine="pyogrio", layer="boundaries")
+        arrays = {"segmentation": maps[1] > 0.5, "keypoint_heat": maps[0]}
+        write_png(stage / "overlay.png", draw_patch_labels(to_display(read.data, read.valid), arrays, graph))
+    return graph
