@@ -335,7 +335,9 @@ def train(
 
     from csboundary.models.device import resolve_device
     from csboundary.models.baselines import METHODS, baseline_module
-    from csboundary.models.train import TrainConfig, train_afanet, train_fpn
+    from csboundary.models.training.afanet import train_afanet
+    from csboundary.models.training.config import TrainConfig
+    from csboundary.models.training.fpn import train_fpn
 
     if model not in ("fpn", "afanet", *METHODS):
         raise typer.BadParameter(f"model must be one of fpn, afanet, {', '.join(METHODS)}")
@@ -628,7 +630,7 @@ def benchmark(
     from csboundary.data.atomic import atomic_path
     from csboundary.models.checkpoint import code_version
     from csboundary.models.device import resolve_device
-    from csboundary.models.training_data import CitySpec
+    from csboundary.models.training.data import CitySpec
     from csboundary.pipeline.benchmark import METHODS, run_benchmark
     from csboundary.models.checkpoint import shipped_weights
 

@@ -114,7 +114,7 @@ def training_area_px(config: dict) -> float:
     if city:
         area += (city["tiles"][0] * city["tile_size"]) * (city["tiles"][1] * city["tile_size"])
     if config.get("worlds"):
-        from csboundary.models.training_data import WorldsConfig
+        from csboundary.models.training.data import WorldsConfig
 
         worlds = WorldsConfig.from_dict(config["worlds"])
         area += worlds.cities * worlds.tiles[0] * worlds.tiles[1] * worlds.tile_size**2

@@ -17,8 +17,8 @@ from csboundary.labels.boundaries import Boundary
 from csboundary.models.baselines import icurb
 from csboundary.models.baselines.icurb import Expert, ICurbConfig, Model, border_starts, history_channel, rollout
 from csboundary.models.checkpoint import load_checkpoint
-from csboundary.models.train import TrainConfig
-from csboundary.models.training_data import CitySpec, TrainingCity
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.data import CitySpec, TrainingCity
 from csboundary.pipeline.city import predict_city
 
 

@@ -26,7 +26,7 @@ Choices where the iCurb paper is not specific:
   visited state with the expert's action. States are aggregated in a uint8 ring buffer (inputs
   are 8-bit imagery and probabilities anyway) and batches are drawn from it: MSE on offsets in
   units of roi / 2, BCE on stop (``stop_pos_weight``: about one state in 25 is a stop).
-* Resume restores weights, optimizer and every random stream (``_maybe_resume``), but the buffer
+* Resume restores weights, optimizer and every random stream (``resume_run``), but the buffer
   is not checkpointed (hundreds of MB): it is rebuilt by fresh roll-outs, so a resumed run is
   not bit-identical to an uninterrupted one.
 """
@@ -53,8 +53,9 @@ from csboundary.models.afanet import crop_rois
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN
 from csboundary.errors import reject_unknown
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, optimize, seed_everything
-from csboundary.models.training_data import TrainingCity
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
+from csboundary.models.training.data import TrainingCity
 from csboundary.models.maps import image_tensor, predict_mosaic_maps, predict_probabilities, unit_bands
 from csboundary.models.checkpoint import shipped_weights
 
@@ -473,7 +474,7 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_windows = [cities["valid"].random_window(valid_rng, opts["window"]) for _ in range(config.validation_samples)]
     rng = np.random.default_rng(config.seed)
-    step, history = _maybe_resume(resume, KIND, agent, optimizer, rng)
+    step, history = resume_run(resume, KIND, agent, optimizer, rng)
     buffer = ReplayBuffer(opts["buffer"], model_config.roi)  # not checkpointed: rebuilt after a resume
     log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in agent.parameters()), config=config.to_dict())
 
