@@ -15,8 +15,8 @@ from csboundary.models.baselines.icurb import ICurbConfig
 from csboundary.models.baselines.orientation_refine import Options as OrientationOptions
 from csboundary.models.baselines.sat2graph import Sat2GraphOptions
 from csboundary.models.fpn import FPNConfig
-from csboundary.models.train import TrainConfig
-from csboundary.models.training_data import CitySpec, WorldsConfig
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.data import CitySpec, WorldsConfig
 
 CONFIGS = [FPNConfig, AfANetConfig, AugmentConfig, LabelConfig, SynthConfig, WorldsConfig, TrainConfig, ICurbConfig,
            Sat2GraphOptions, OrientationOptions]

@@ -8,7 +8,6 @@ from typing import Optional
 import typer
 
 from csboundary.cli.options import DEVICE_HELP, finite, out_dir, out_file
-from csboundary.errors import InputError
 
 
 def train(
@@ -22,33 +21,13 @@ def train(
     quiet: bool = typer.Option(False, help="No progress bar."),
 ) -> None:
     """Train the FPN, AfANet or a baseline on synthetic cities (built on first use under the config's cache)."""
-    import json as _json
+    from csboundary.models.training.runs import MODELS, train_from_file
 
-    from csboundary.data.atomic import atomic_path
-    from csboundary.models.device import resolve_device
-    from csboundary.models.baselines import METHODS, baseline_module
-    from csboundary.models.train import TrainConfig, train_afanet, train_fpn
-
-    if model not in ("fpn", "afanet", *METHODS):
-        raise typer.BadParameter(f"model must be one of fpn, afanet, {', '.join(METHODS)}")
-    if not config.exists():
-        raise InputError(config, "file not found")
-    try:
-        cfg = TrainConfig.from_file(config)
-    except (ValueError, TypeError) as exc:
-        raise InputError(config, f"invalid training config ({exc})") from exc
-    if cfg.model != model:
-        raise InputError(config, f"is a {cfg.model} config, not {model}")
-    if steps is not None:
-        cfg.steps = steps
-    if fpn_weights is not None:
-        cfg.fpn_weights = str(fpn_weights)
-    resolved = resolve_device(device)
+    if model not in MODELS:
+        raise typer.BadParameter(f"model must be one of {', '.join(MODELS)}")
     out_dir(out)
-    with atomic_path(out / "config.json") as tmp:
-        tmp.write_text(_json.dumps(cfg.to_dict(), indent=2) + "\n")
-    runner = {"fpn": train_fpn, "afanet": train_afanet}.get(model) or baseline_module(model).train
-    weights = runner(cfg, out, resolved, str(resume) if resume else None, progress=not quiet)
+    weights, cfg = train_from_file(model, config, out, resume=resume, steps=steps, fpn_weights=fpn_weights, device=device,
+                                   progress=not quiet)
     typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
 
 

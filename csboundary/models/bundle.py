@@ -11,7 +11,7 @@ from pathlib import Path
 
 from csboundary.data.units import MODEL_GSD
 from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
-from csboundary.models.train import training_pixel_size
+from csboundary.models.training.config import training_pixel_size
 
 
 def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, edge_threshold: float = 0.5, max_degree: int = 2,

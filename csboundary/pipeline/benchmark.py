@@ -114,7 +114,7 @@ def training_area_px(config: dict) -> float:
     if city:
         area += (city["tiles"][0] * city["tile_size"]) * (city["tiles"][1] * city["tile_size"])
     if config.get("worlds"):
-        from csboundary.models.training_data import WorldsConfig
+        from csboundary.models.training.data import WorldsConfig
 
         worlds = WorldsConfig.from_dict(config["worlds"])
         area += worlds.cities * worlds.tiles[0] * worlds.tiles[1] * worlds.tile_size**2
@@ -148,7 +148,7 @@ def benchmark_to_folder(out: Path, city_dir: Path | None = None, weights_dir: Pa
     import torch
 
     from csboundary.models.checkpoint import code_version, shipped_weights
-    from csboundary.models.training_data import CitySpec
+    from csboundary.models.training.data import CitySpec
 
     if unknown_methods(methods):
         raise ValueError(f"unknown method(s) {', '.join(unknown_methods(methods))}")

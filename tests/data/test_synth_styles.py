@@ -18,8 +18,8 @@ from csboundary.data.synth.render import CameraLook, HAZE_VEIL, apply_look, resa
 from csboundary.data.synth.scene import CONCRETE, GRAVEL, SOIL
 from csboundary.data.synth.streets import rng_share
 from csboundary.data.synth.styles import DEFAULT_MIX, MAJOR_STYLES, STYLES, draw_style, style_config
-from csboundary.models.train import TrainConfig, training_cities
-from csboundary.models.training_data import CitySpec, WorldsConfig
+from csboundary.models.training.config import TrainConfig, training_cities
+from csboundary.models.training.data import CitySpec, WorldsConfig
 from helpers import run_cli
 
 

@@ -82,8 +82,8 @@ def test_scale_draws_stay_in_range():
 
 
 def test_misspelt_augmentation_option_is_an_error(tmp_path):
-    from csboundary.models.train import TrainConfig, _model_config
+    from csboundary.models.training.config import TrainConfig, model_config_with
 
     cfg = TrainConfig.from_dict({"augment": {"rotation": True}})
     with pytest.raises(ValueError, match="rotation"):
-        _model_config(AugmentConfig, cfg.augment)
+        model_config_with(AugmentConfig, cfg.augment)

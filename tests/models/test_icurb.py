@@ -15,10 +15,10 @@ from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.labels.boundaries import Boundary
 from csboundary.models.baselines import icurb
-from csboundary.models.baselines.icurb import Expert, ICurbConfig, Model, border_starts, history_channel, rollout
+from csboundary.models.baselines.icurb import Expert, ICurbConfig, Model, border_starts, history_channel, rollout, tracing
 from csboundary.models.checkpoint import load_checkpoint
-from csboundary.models.train import TrainConfig
-from csboundary.models.training_data import CitySpec, TrainingCity
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.data import CitySpec, TrainingCity
 from csboundary.pipeline.city import predict_city
 
 
@@ -101,12 +101,12 @@ class ExpertAgent:
 
     def __init__(self, expert: Expert, centre, monkeypatch):
         self.expert, self.centre, self.histories = expert, np.asarray(centre, float), None
-        original = icurb.agent_input
+        original = tracing.agent_input
 
         def spy(tensor, history, roi):
             self.histories = history.cpu().numpy()
             return original(tensor, history, roi)
-        monkeypatch.setattr(icurb, "agent_input", spy)
+        monkeypatch.setattr(tracing, "agent_input", spy)  # where rollout looks it up
 
     def __call__(self, x):
         offsets, logits = [], []
@@ -202,7 +202,7 @@ def test_smoke_training_gives_a_model_the_city_pipeline_runs(tmp_path):
 
 
 def test_a_step_leaving_the_window_ends_on_its_border():
-    point, left = icurb._clip(np.array([10.0, 10.0]), np.array([-10.0, 30.0]), (0, 0, 100, 100))
+    point, left = icurb.clip_step(np.array([10.0, 10.0]), np.array([-10.0, 30.0]), (0, 0, 100, 100))
     assert left and np.allclose(point, (0, 20))
-    point, left = icurb._clip(np.array([60.0, 90.0]), np.array([70.0, 95.0]), (50, 50, 250, 250))
+    point, left = icurb.clip_step(np.array([60.0, 90.0]), np.array([70.0, 95.0]), (50, 50, 250, 250))
     assert not left and np.allclose(point, (70, 95))

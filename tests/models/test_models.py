@@ -128,7 +128,7 @@ def one_patch():
 
 
 def test_afanet_overfits_one_patch_and_recovers_its_graph(one_patch):
-    from csboundary.models.train import adjacency_loss
+    from csboundary.models.training.afanet import adjacency_loss
 
     torch.manual_seed(0)
     image, maps, graph, label = one_patch
@@ -152,7 +152,8 @@ def test_afanet_overfits_one_patch_and_recovers_its_graph(one_patch):
 
 
 def test_fpn_overfits_one_patch(one_patch):
-    from csboundary.models.train import TrainConfig, fpn_loss
+    from csboundary.models.training.config import TrainConfig
+    from csboundary.models.training.fpn import fpn_loss
 
     torch.manual_seed(0)
     image, maps, _, _ = one_patch

@@ -16,8 +16,8 @@ from csboundary.models.baselines import baseline_module
 from csboundary.models.baselines.orientation_refine import (IGNORE, KIND, Model, augment_with_vectors, corrupt,
                                                             orientation_classes, train)
 from csboundary.models.checkpoint import load_checkpoint
-from csboundary.models.train import TrainConfig
-from csboundary.models.training_data import CitySpec, TrainingCity
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.data import CitySpec, TrainingCity
 
 TINY_FPN = {"widths": [8, 8, 8, 8], "blocks": [1, 1, 1, 1], "pyramid": 8, "stem": 8}
 

@@ -78,7 +78,8 @@ def test_unknown_backbone_and_scale_are_errors():
 
 
 def test_frozen_encoder_batch_norm_keeps_imagenet_statistics_while_training():
-    from csboundary.models.train import TrainConfig, fpn_parameter_groups
+    from csboundary.models.training.config import TrainConfig
+    from csboundary.models.training.fpn import fpn_parameter_groups
 
     model = FPN(LITE)
     groups = fpn_parameter_groups(model, TrainConfig(encoder_lr_scale=0.1, freeze_encoder_bn=True))

@@ -20,8 +20,8 @@ from csboundary.models.baselines.sat2graph import (
 )
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import TrainConfig
-from csboundary.models.training_data import CitySpec, TrainingCity
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.data import CitySpec, TrainingCity
 
 TINY_FPN = {"widths": [8, 8, 8, 8], "blocks": [1, 1, 1, 1], "pyramid": 8, "stem": 8}
 NO_CAP = Sat2GraphOptions(max_degree=None)

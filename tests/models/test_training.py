@@ -8,7 +8,9 @@ import pytest
 import torch
 
 from csboundary.models.checkpoint import load_checkpoint
-from csboundary.models.train import TrainConfig, train_afanet, train_fpn
+from csboundary.models.training.afanet import train_afanet
+from csboundary.models.training.config import TrainConfig
+from csboundary.models.training.fpn import train_fpn
 
 TINY_FPN = {"widths": [8, 8, 8, 8], "blocks": [1, 1, 1, 1], "pyramid": 8, "stem": 8}
 TINY_AFANET = {"global_size": 32, "roi": 16, "encoder_widths": [8, 8], "dim": 32, "layers": 1}
@@ -71,7 +73,7 @@ def test_misspelt_model_option_is_an_error(tmp_path):
 def test_pretrained_fpn_trains_with_augmentation_on_an_extra_city(tmp_path):
     """The shipped recipe in miniature: EfficientNet-Lite0 FPN, every augmentation, a synthetic
     city plus a city directory of the user's (here: the valid city standing in for one)."""
-    from csboundary.models.training_data import CitySpec
+    from csboundary.models.training.data import CitySpec
 
     extra = CitySpec(split="valid", seed=3, tiles=(1, 1), tile_size=300).ensure(tmp_path / "cities")
     cfg = config(tmp_path, fpn={"backbone": "efficientnet-lite0"}, augment={}, extra_train_cities=[str(extra)], steps=2, crop=64,

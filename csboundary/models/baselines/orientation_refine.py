@@ -30,9 +30,10 @@ from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 from csboundary.labels.rasterize import orientation_label
 from csboundary.models.checkpoint import load_checkpoint, restore_model
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
+from csboundary.models.training.config import TrainConfig, model_config_with
+from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
 from csboundary.config import config_from_dict
-from csboundary.models.training_data import TrainingCity
+from csboundary.models.training.data import TrainingCity
 from csboundary.models.maps import image_tensor
 
 KIND = "orientation-refine"
@@ -65,7 +66,7 @@ def orientation_classes(vectors: np.ndarray, boundary: np.ndarray, bins: int) ->
 
 
 def augment_with_vectors(rng: np.random.Generator, vectors: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
-    """The random rotation / flip of :func:`~csboundary.models.training_data.augment` applied to
+    """The random rotation / flip of :func:`~csboundary.models.training.data.augment` applied to
     (2, h, w) direction vectors too: their positions move and their components turn with them."""
     k = int(rng.integers(4))
     flip = bool(rng.integers(2))
@@ -168,12 +169,12 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     log = RunLog(out_dir / "train.log")
     train_city = TrainingCity(config.train_city.ensure(config.cache))
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
-    model = _Pair(options, _model_config(FPNConfig, {**config.fpn, "out_channels": 1 + options.bins})).to(device)
+    model = _Pair(options, model_config_with(FPNConfig, {**config.fpn, "out_channels": 1 + options.bins})).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_batch(valid_city, valid_rng, config, options, False) for _ in range(config.validation_samples)]
-    step, history = _maybe_resume(resume, KIND, model, optimizer, rng)
+    step, history = resume_run(resume, KIND, model, optimizer, rng)
     stage2_from = round(config.steps * (1 - options.refine_fraction))
     log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
 

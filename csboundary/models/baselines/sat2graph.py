@@ -43,9 +43,10 @@ from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
 from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
-from csboundary.models.train import RunLog, TrainConfig, _maybe_resume, _model_config, optimize, seed_everything
+from csboundary.models.training.config import TrainConfig, model_config_with
+from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
 from csboundary.config import config_from_dict
-from csboundary.models.training_data import TrainingCity, augment
+from csboundary.models.training.data import TrainingCity, augment
 from csboundary.models.maps import image_tensor, unit_bands
 from csboundary.models.checkpoint import shipped_weights
 from csboundary.models.decoding import graph_from_adjacency
@@ -273,19 +274,19 @@ def validate(model: FPN, batches, device, options: Sat2GraphOptions) -> dict[str
 
 def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
     """Train the 19-channel FPN on random crops of the train city (loop and checkpoints as
-    :func:`~csboundary.models.train.train_fpn`); returns the final ``sat2graph.pt``."""
+    :func:`~csboundary.models.training.fpn.train_fpn`); returns the final ``sat2graph.pt``."""
     options = Sat2GraphOptions.from_dict(config.options)
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
     train_city = TrainingCity(config.train_city.ensure(config.cache))
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
-    model_config = _model_config(FPNConfig, {**config.fpn, "out_channels": CHANNELS})
+    model_config = model_config_with(FPNConfig, {**config.fpn, "out_channels": CHANNELS})
     model = FPN(model_config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_batch(valid_city, valid_rng, config, options, train=False) for _ in range(config.validation_samples)]
-    step, history = _maybe_resume(resume, KIND, model, optimizer, rng)
+    step, history = resume_run(resume, KIND, model, optimizer, rng)
     log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
 
     def loss_at(step: int):

@@ -1,0 +1,105 @@
+"""What a training run depends on (:class:`TrainConfig`) and what is read from it: the cities it
+trains on, their pixel size, the model configs built from its overrides."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from csboundary.config import config_from_dict
+from csboundary.data import city as layout
+from csboundary.errors import InputError
+from csboundary.models.training.data import CitySpec, TrainingCity, WorldsConfig
+
+
+@dataclass
+class TrainConfig:
+    """Everything a run depends on; stored in every checkpoint and in the log."""
+
+    model: str = "fpn"  # fpn | afanet
+    seed: int = 0
+    cache: str = "data/cities"
+    train_city: CitySpec | None = field(default_factory=CitySpec)  # null: train on ``worlds`` (and extra cities) only
+    worlds: dict = field(default_factory=dict)  # WorldsConfig: many fresh cities of a style mix; {} = none
+    valid_city: CitySpec = field(default_factory=lambda: CitySpec(split="valid", seed=0, tiles=(1, 1)))
+    steps: int = 2500
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    validate_every: int = 250
+    validation_samples: int = 8
+    extra_train_cities: list = field(default_factory=list)  # city directories (imported, from masks, a user's own) trained on beside train_city
+    augment: dict = field(default_factory=lambda: {"enabled": False})  # AugmentConfig overrides; {} = every augmentation at its defaults
+    snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
+    encoder_lr_scale: float = 1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
+    freeze_encoder_bn: bool = False  # pretrained FPN encoder: keep its batch-norm statistics (ImageNet's, not the synthetic cities')
+    autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
+    # fpn
+    fpn: dict = field(default_factory=dict)  # FPNConfig overrides
+    crop: int = 256
+    batch: int = 4
+    pos_weight_keypoint: float = 20.0
+    pos_weight_segmentation: float = 10.0
+    # afanet
+    afanet: dict = field(default_factory=dict)  # AfANetConfig overrides
+    fpn_weights: str = ""  # the trained FPN whose maps and vertices AfANet learns from
+    window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
+    gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
+    vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1
+    crossing_spacing_px: int = 0  # AfANet stage 2: also the FPN segmentation's grid-crossing vertices (csboundary.graph.crossings)
+    max_vertices: int = 160
+    max_pos_weight: float = 30.0
+    # baselines (csboundary.models.baselines): method-specific settings, documented per method
+    options: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> "TrainConfig":
+        data = json.loads(Path(path).read_text())
+        return cls.from_dict(data)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TrainConfig":
+        return config_from_dict(cls, data, "training", nested={"train_city": CitySpec, "valid_city": CitySpec})
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def training_pixel_size(config: dict) -> float | None:
+    """The pixel size in metres of the cities a (recorded) training config trained on, read from
+    their ``city.json`` without building anything; None when none is on disk or they disagree."""
+    try:
+        cfg = TrainConfig.from_dict(config)
+    except (TypeError, ValueError):
+        return None
+    paths = [cfg.train_city.path(cfg.cache)] if cfg.train_city is not None else []
+    if cfg.worlds:
+        paths += [spec.path(cfg.cache) for spec in WorldsConfig.from_dict(cfg.worlds).specs()]
+    sizes = set()
+    for path in [*paths, *map(Path, cfg.extra_train_cities)]:
+        if layout.is_city_dir(path):
+            gsd = layout.read_meta(path).get("gsd")
+            if isinstance(gsd, (int, float)):
+                sizes.add(round(float(gsd), 6))
+    return sizes.pop() if len(sizes) == 1 else None
+
+
+def training_cities(config: TrainConfig) -> list[TrainingCity]:
+    """The synthetic ``train_city`` and ``worlds`` cities (built on first use) and every
+    ``extra_train_cities`` directory."""
+    specs = [config.train_city] if config.train_city is not None else []
+    if config.worlds:
+        specs += WorldsConfig.from_dict(config.worlds).specs()
+    if not specs and not config.extra_train_cities:
+        raise ValueError("the training config names no training city (train_city, worlds or extra_train_cities)")
+    paths = [spec.ensure(config.cache, progress=len(specs) == 1) for spec in specs] + list(config.extra_train_cities)
+    for path in config.extra_train_cities:
+        if not layout.is_city_dir(path):
+            raise InputError(path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)")
+    return [TrainingCity(p) for p in paths]
+
+
+def model_config_with(cls, overrides: dict):
+    """A model config (``cls``: FPNConfig, AfANetConfig, AugmentConfig, ...) from the training
+    config's overrides; a misspelt key is an error."""
+    return cls.from_dict(overrides)

@@ -1,0 +1,100 @@
+"""FPN training: the weighted BCE on keypoint heat and segmentation, batches of random crops,
+validation by segmentation F1, the optimizer groups of a pretrained encoder, and the trainer."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from csboundary.models.augmentation import AugmentConfig
+from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
+from csboundary.models.training.data import TrainingCity
+from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
+
+
+def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
+    """Optimizer groups: a pretrained encoder at ``encoder_lr_scale`` of the rate, the rest at 1
+    (``lr_scale`` is read by the schedule); sets the encoder's batch-norm freeze."""
+    encoder = getattr(model, "encoder", None)
+    if encoder is None:
+        return [{"params": list(model.parameters()), "lr_scale": 1.0}]
+    model.freeze_encoder_bn = config.freeze_encoder_bn
+    inside = {id(p) for p in encoder.parameters()}
+    return [{"params": list(encoder.parameters()), "lr_scale": config.encoder_lr_scale},
+            {"params": [p for p in model.parameters() if id(p) not in inside], "lr_scale": 1.0}]
+
+
+def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, config: TrainConfig) -> torch.Tensor:
+    weights = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
+    loss = F.binary_cross_entropy_with_logits(logits, target, pos_weight=weights, reduction="none")
+    mask = valid[:, None].to(loss.dtype)
+    return (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
+
+
+def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None):
+    """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
+    (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
+    otherwise (validation)."""
+    areas = np.array([c.mosaic.width * c.mosaic.height for c in cities], float)
+    images, targets, valids = [], [], []
+    for _ in range(config.batch):
+        city = cities[int(rng.choice(len(cities), p=areas / areas.sum()))] if len(cities) > 1 else cities[0]
+        if augmentation is not None:
+            image, target, valid = city.augmented_fpn_sample(rng, config.crop, augmentation)
+        else:
+            image, target, valid = city.fpn_sample(city.random_window(rng, config.crop))
+        images.append(image)
+        targets.append(target)
+        valids.append(valid)
+    return torch.from_numpy(np.stack(images)), torch.from_numpy(np.stack(targets)), torch.from_numpy(np.stack(valids))
+
+
+@torch.no_grad()
+def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, float]:
+    model.eval()
+    losses, tp, fp, fn = [], 0, 0, 0
+    for image, target, valid in batches:
+        logits = model(image.to(device))
+        losses.append(float(fpn_loss(logits, target.to(device), valid.to(device), config)))
+        pred = (torch.sigmoid(logits[:, 1]) > 0.5).cpu() & valid
+        truth = (target[:, 1] > 0.5) & valid
+        tp += int((pred & truth).sum())
+        fp += int((pred & ~truth).sum())
+        fn += int((~pred & truth).sum())
+    model.train()
+    precision, recall = tp / max(tp + fp, 1), tp / max(tp + fn, 1)
+    return {"val_loss": float(np.mean(losses)), "val_seg_precision": precision, "val_seg_recall": recall,
+            "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+
+
+def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+    seed_everything(config.seed)
+    log = RunLog(out_dir / "train.log")
+    train_cities = training_cities(config)
+    valid_city = TrainingCity(config.valid_city.ensure(config.cache))
+    model_config = model_config_with(FPNConfig, config.fpn)
+    model = FPN(model_config).to(device)
+    optimizer = torch.optim.Adam(fpn_parameter_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
+    rng = np.random.default_rng(config.seed)
+    valid_rng = np.random.default_rng(config.seed + 1)
+    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None) for _ in range(config.validation_samples)]
+    augmentation = model_config_with(AugmentConfig, config.augment)
+    step, history = resume_run(resume, "fpn", model, optimizer, rng)
+    log.write(event="start", model="fpn", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+
+    def loss_at(step: int):
+        image, target, valid = _fpn_batch(train_cities, rng, config, augmentation)
+        with autocast(config, device):
+            logits = model(image.to(device))
+        return fpn_loss(logits.float(), target.to(device), valid.to(device), config), {}
+
+    try:
+        return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
+                        lambda step: validate_fpn(model, valid_batches, device, config), progress)
+    finally:
+        for city in (*train_cities, valid_city):
+            city.close()
