@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from csboundary.errors import reject_unknown
 
@@ -40,3 +40,19 @@ def config_from_dict(cls: type[T], data: Mapping[str, Any], what: str | None = N
             value = tuple(value)
         values[key] = value
     return cls(**values)
+
+
+class Config:
+    """Base of every config dataclass: ``from_dict`` reads a table through
+    :func:`config_from_dict` (``config_name`` names it in errors, ``config_nested`` names fields
+    that default to None but hold a config) and ``to_dict`` writes it back."""
+
+    config_name: ClassVar[str | None] = None
+    config_nested: ClassVar[Mapping[str, type] | None] = None
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]):
+        return config_from_dict(cls, data, cls.config_name, cls.config_nested)

@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import finite, no_file_at, out_dir, out_file, parse_numbers, parse_tiles
+from csboundary.cli.options import QuietOption, finite, no_file_at, out_dir, out_file, parse_numbers, parse_tiles
 
 
 def synth(
@@ -20,7 +20,7 @@ def synth(
     gsd: float = typer.Option(0.152, callback=finite, min=0.01, help="Ground sampling distance, metres per pixel."),
     split: str = typer.Option("train", help="train | valid | test."),
     style: str = typer.Option("classic", help="City style: classic, grid, downtown, suburb, rural, irregular, or mix (one drawn from the seed); see docs/styles.md."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    quiet: QuietOption = False,
 ) -> None:
     """Synthesize an aerial city with exact vector road-boundary ground truth."""
     from csboundary.data.synth.city import synthesize_city
@@ -48,7 +48,7 @@ def import_topo_boundary_cmd(
     patch_size: int = typer.Option(1000, min=1, help="Patch side in pixels (the benchmark's is 1000)."),
     splits: int = typer.Option(5, min=1, help="Patches per tile side (the benchmark's is 5)."),
     placement: bool = typer.Option(True, "--placement/--no-placement", help="Place tiles without georeference on the map from their 6-digit ids (an inference, docs/city-inference.md) and write one city per split."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    quiet: QuietOption = False,
 ) -> None:
     """Reassemble Topo-boundary patches into 5000x5000 tiles with vector ground truth, and the
     tiles of each split into one georeferenced city (city-<split>/) for city-scale evaluation."""
@@ -77,7 +77,7 @@ def import_masks_cmd(
     threshold: float = typer.Option(128, callback=finite, help="Mask pixels above this value are labelled."),
     invert: bool = typer.Option(False, "--invert", help="Label pixels below the threshold instead (dark lines on white)."),
     ids: Optional[str] = typer.Option(None, help="Comma-separated ids to import (default: every pair found)."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    quiet: QuietOption = False,
 ) -> None:
     """Images + raster masks (road edge or road surface) -> cities with vector ground truth at the
     model's pixel size, for evaluate-set, evaluate-model and training."""
@@ -121,7 +121,7 @@ def labels(
     aux_spacing: int = typer.Option(250, min=0, help="Auxiliary keypoint grid spacing, px (0 = none)."),
     segmentation_width: int = typer.Option(3, min=1, help="Boundary width in the segmentation label, px."),
     heat_sigma: float = typer.Option(3.0, callback=finite, min=0.1, help="Gaussian sigma of the keypoint map, px."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    quiet: QuietOption = False,
 ) -> None:
     """Write every patch's training labels: segmentation, orientation, keypoint map, graph."""
     from csboundary.data.grid import GridConfig

@@ -9,7 +9,8 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import DEVICE_HELP, ENGINE_HELP, LENGTH_HELP, SUPPORT_HELP, THRESHOLD_HELP, WEIGHTS_HELP, finite, out_dir, out_file
+from csboundary.cli.options import (DeviceOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption,
+                                    QuietOption, WeightsOption, finite, out_dir, out_file)
 
 
 def evaluate(
@@ -63,16 +64,16 @@ def evaluate(
 
 def evaluate_model(
     city: Path = typer.Argument(..., help="A city directory with ground truth (e.g. a valid-split synthetic city)."),
-    weights: Optional[Path] = typer.Option(None, help=WEIGHTS_HELP),
+    weights: WeightsOption = None,
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP),
-    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
+    edge_threshold: EdgeThresholdOption = None,
+    min_edge_support: EdgeSupportOption = None,
+    max_edge_length: EdgeLengthOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
-    engine: str = typer.Option("auto", help=ENGINE_HELP),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    engine: EngineOption = "auto",
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
 ) -> None:
     """Evaluate a model on a city at patch scale (each patch's graph on its core) and city scale
     (the stitched graph), without writing the prediction."""
@@ -94,15 +95,15 @@ def evaluate_model(
 
 def evaluate_set_cmd(
     set_dir: Path = typer.Argument(..., help="A folder of labelled cities (import-masks output, or city directories)."),
-    weights: Optional[Path] = typer.Option(None, help=WEIGHTS_HELP),
+    weights: WeightsOption = None,
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write per-city and mean scores as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP),
-    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
-    engine: str = typer.Option("auto", help=ENGINE_HELP),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    edge_threshold: EdgeThresholdOption = None,
+    min_edge_support: EdgeSupportOption = None,
+    max_edge_length: EdgeLengthOption = None,
+    engine: EngineOption = "auto",
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
 ) -> None:
     """Score a model on every city of a validation set (city scale) and print the per-city and
     mean scores: how to select and compare models on real labelled imagery."""
@@ -127,7 +128,7 @@ def benchmark(
     weights_dir: Optional[Path] = typer.Option(None, help="Weights folder (default: the package's shipped weights)."),
     methods: Optional[str] = typer.Option(None, help="Comma-separated subset of: " + "csboundary, orientation-refine, sat2graph, icurb, ablation-full, no-global, no-local."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
+    device: DeviceOption = "auto",
     quiet: bool = typer.Option(False, help="No progress bars."),
 ) -> None:
     """The paper's comparison (Tables I-IV, Fig. 7): every method predicts one test city through the

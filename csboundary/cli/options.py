@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Annotated, Optional, Sequence
 
 import typer
 
@@ -25,6 +25,16 @@ def finite(value: float | None) -> float | None:
     if value is not None and not math.isfinite(value):
         raise typer.BadParameter(f"must be a finite number, got {value}")
     return value
+
+
+# Options several commands take, declared once (``name: WeightsOption = None``).
+WeightsOption = Annotated[Optional[Path], typer.Option(help=WEIGHTS_HELP)]
+EdgeThresholdOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP)]
+EdgeSupportOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP)]
+EdgeLengthOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, help=LENGTH_HELP)]
+EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
+DeviceOption = Annotated[str, typer.Option(help=DEVICE_HELP)]
+QuietOption = Annotated[bool, typer.Option(help="No progress bar.")]
 
 
 def parse_tiles(text: str) -> tuple[int, int]:

@@ -8,17 +8,17 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (DEVICE_HELP, ENGINE_HELP, LENGTH_HELP, SUPPORT_HELP, THRESHOLD_HELP, WEIGHTS_HELP, finite, out_dir,
-                                    out_file, parse_numbers)
+from csboundary.cli.options import (DeviceOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption,
+                                    QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers)
 
 
 def predict(
     inputs: list[Path] = typer.Argument(..., help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
     out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
-    weights: Optional[Path] = typer.Option(None, help=WEIGHTS_HELP),
-    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP),
-    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
+    weights: WeightsOption = None,
+    edge_threshold: EdgeThresholdOption = None,
+    min_edge_support: EdgeSupportOption = None,
+    max_edge_length: EdgeLengthOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
@@ -27,9 +27,9 @@ def predict(
     scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
     workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
     threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
-    engine: str = typer.Option("auto", help=ENGINE_HELP),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    engine: EngineOption = "auto",
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
 ) -> None:
     """City-scale prediction: patch grid -> FPN -> averaged maps -> vertices -> AfANet -> stitched
     city graph, written in the input's CRS. Any pixel size from 0.03 to 1 m, any CRS (metres,
@@ -61,13 +61,13 @@ def predict_patch(
     out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
-    edge_threshold: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP),
-    min_edge_support: Optional[float] = typer.Option(None, callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP),
-    max_edge_length: Optional[float] = typer.Option(None, callback=finite, min=0.0, help=LENGTH_HELP),
+    edge_threshold: EdgeThresholdOption = None,
+    min_edge_support: EdgeSupportOption = None,
+    max_edge_length: EdgeLengthOption = None,
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
-    engine: str = typer.Option("auto", help=ENGINE_HELP),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
+    engine: EngineOption = "auto",
+    device: DeviceOption = "auto",
 ) -> None:
     """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
     from csboundary.pipeline.patch import load_predictor
@@ -108,7 +108,7 @@ def review(
     prediction: Path = typer.Argument(..., help="A predict output folder."),
     out: Optional[Path] = typer.Option(None, "--out", help="Folder of the page (default: PREDICTION/review)."),
     ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to show as a toggle (default: the city's own, if any)."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    quiet: QuietOption = False,
 ) -> None:
     """A self-contained review page: imagery with pan and zoom, boundaries coloured by
     confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
@@ -137,8 +137,8 @@ def apply_review(
 def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),
     seed: int = typer.Option(0, min=0, help="City seed (test split)."),
-    engine: str = typer.Option("auto", help=ENGINE_HELP),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
+    engine: EngineOption = "auto",
+    device: DeviceOption = "auto",
 ) -> None:
     """The main job on an embedded default: a small test-split city, predicted and scored.
 

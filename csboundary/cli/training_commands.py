@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import DEVICE_HELP, finite, out_dir, out_file
+from csboundary.cli.options import DeviceOption, QuietOption, finite, out_dir, out_file
 
 
 def train(
@@ -17,8 +17,8 @@ def train(
     resume: Optional[Path] = typer.Option(None, help="Checkpoint (*-last.pt) to resume from."),
     steps: Optional[int] = typer.Option(None, min=1, help="Override the config's step count."),
     fpn_weights: Optional[Path] = typer.Option(None, help="AfANet only: the trained FPN (overrides the config)."),
-    device: str = typer.Option("auto", help=DEVICE_HELP),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
 ) -> None:
     """Train the FPN, AfANet or a baseline on synthetic cities (built on first use under the config's cache)."""
     from csboundary.models.training.runs import MODELS, train_from_file

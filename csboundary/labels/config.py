@@ -5,13 +5,15 @@ Pixel units throughout (the paper works in pixels of 0.152 m imagery).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
+from csboundary.config import Config
 from csboundary.data.grid import GridConfig
 
 
 @dataclass(frozen=True)
-class LabelConfig:
+class LabelConfig(Config):
+    config_name = "labels"
     grid: GridConfig = field(default_factory=GridConfig)
     # segmentation / orientation
     segmentation_width: int = 3  # px; boundary drawn this wide (issue default)
@@ -33,12 +35,3 @@ class LabelConfig:
     heat_sigma_px: float = 3.0  # Gaussian sigma of keypoint heat
     # adjacency labels (paper V-B)
     snap_tolerance_px: float = 10.0  # a vertex farther than this from every boundary has no edges
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "LabelConfig":
-        from csboundary.config import config_from_dict
-
-        return config_from_dict(cls, data, "labels")

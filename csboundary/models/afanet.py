@@ -18,17 +18,17 @@ Works for every M, including 0 and 1.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 
 
 @dataclass(frozen=True)
-class AfANetConfig:
+class AfANetConfig(Config):
     in_channels: int = 6
     feature: int = 1024  # global and local feature length (paper: 1024 each)
     roi: int = 64  # L, the local window side in pixels (paper: 64)
@@ -43,13 +43,6 @@ class AfANetConfig:
     @property
     def embedding(self) -> int:
         return self.feature * (int(self.use_global) + int(self.use_local)) + 2
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "AfANetConfig":
-        return config_from_dict(cls, data)
 
 
 class ConvEncoder(nn.Module):

@@ -10,17 +10,18 @@ Images are (bands, h, w) float32 in [0, 1]; bands are R, G, B, NIR.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 
 
 @dataclass(frozen=True)
-class AugmentConfig:
+class AugmentConfig(Config):
     """Ranges of every random change; ``enabled = False`` keeps only flips and 90-degree turns."""
+    config_name = "augment"
 
     enabled: bool = True
     rotate: bool = True  # any angle
@@ -38,13 +39,6 @@ class AugmentConfig:
     jpeg_p: float = 0.3
     jpeg_quality: tuple[int, int] = (30, 90)
     nir_as_green_p: float = 0.5  # RGB-only imagery is read with NIR := green; train on it as often
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "AugmentConfig":
-        return config_from_dict(cls, data, "augment")
 
 
 def source_side(crop: int, angle: float, scale: float) -> int:

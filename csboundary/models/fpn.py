@@ -22,19 +22,19 @@ Two bottom-up paths (``FPNConfig.backbone``):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 
 KEYPOINT, SEGMENTATION = 0, 1
 
 
 @dataclass(frozen=True)
-class FPNConfig:
+class FPNConfig(Config):
     in_channels: int = 4
     widths: tuple[int, ...] = (32, 48, 64, 96)  # bottom-up stages at strides 4, 8, 16, 32
     blocks: tuple[int, ...] = (2, 2, 2, 1)  # residual blocks per stage
@@ -44,13 +44,6 @@ class FPNConfig:
     backbone: str = "resnet"  # resnet (from scratch) | efficientnet-lite0 (ImageNet-pretrained)
     encoder_scale: float = 0.5  # efficientnet-lite0 only: the encoder sees the patch resized by this
     pretrained: bool = True  # efficientnet-lite0 only: start from the ImageNet weights (training)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "FPNConfig":
-        return config_from_dict(cls, data)
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:

@@ -7,17 +7,20 @@ curb, crosswalks and lane markings; the defaults below reproduce those proportio
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
+
+from csboundary.config import Config
 
 SPLITS = ("train", "valid", "test")
 
 
 @dataclass(frozen=True)
-class SynthConfig:
+class SynthConfig(Config):
     """Everything that shapes one synthetic city. All fields are plain numbers, so a config is
     recorded in ``city.json`` and a city is reproduced from (config, split, seed)."""
+    config_name = "synth"
 
     # raster
     tile_size: int = 5000  # px per tile side
@@ -99,17 +102,6 @@ class SynthConfig:
     saturation: tuple[float, float] = (1.0, 1.0)
     gamma: tuple[float, float] = (1.0, 1.0)
     colour_cast: float = 0.0  # +- per-band gain change of the whole city
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "SynthConfig":
-        """Rebuild a recorded config (older ``city.json`` files carry fewer keys, which take
-        their defaults; a key this version does not know is an error)."""
-        from csboundary.config import config_from_dict
-
-        return config_from_dict(cls, data, "synth")
 
 
 def city_rng(split: str, seed: int, *stream: int) -> np.random.Generator:

@@ -32,7 +32,7 @@ from csboundary.models.checkpoint import load_checkpoint, restore_model
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.training.config import TrainConfig, model_config_with
 from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 from csboundary.models.training.data import TrainingCity
 from csboundary.models.maps import image_tensor
 
@@ -41,17 +41,15 @@ IGNORE = -100
 
 
 @dataclass
-class Options:
+class Options(Config):
+    config_name = "orientation-refine"
+
     bins: int = 16  # orientation classes over 180 degrees
     pos_weight: float = 10.0  # BCE weight of boundary pixels (about 3 % of a crop)
     orientation_weight: float = 0.5
     refine_fraction: float = 0.3  # share of the steps spent on stage 2
     refiner: dict = field(default_factory=lambda: {"widths": [16, 24, 32, 48], "pyramid": 24, "stem": 16})
     skeleton: dict = field(default_factory=dict)  # SkeletonConfig overrides
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "Options":
-        return config_from_dict(cls, data, "orientation-refine")
 
 
 # -- labels ---------------------------------------------------------------------------------------
@@ -196,13 +194,10 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
 
 
 @dataclass
-class _PairConfig:
+class _PairConfig(Config):
     stage1: dict
     refiner: dict
     options: dict
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 class _Pair(torch.nn.Module):
@@ -249,6 +244,3 @@ class Model:
 
     def connect(self, patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
         return found
-
-
-

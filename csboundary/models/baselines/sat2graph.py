@@ -45,7 +45,7 @@ from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_mode
 from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
 from csboundary.models.training.config import TrainConfig, model_config_with
 from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 from csboundary.models.training.data import TrainingCity, augment
 from csboundary.models.maps import image_tensor, unit_bands
 from csboundary.models.checkpoint import shipped_weights
@@ -61,8 +61,9 @@ VECTOR_BETA = 0.01  # smooth-L1 knee (2.5 px at 250 px): L1-like, so small offse
 
 
 @dataclass(frozen=True)
-class Sat2GraphOptions:
+class Sat2GraphOptions(Config):
     """Method settings, from ``TrainConfig.options`` (stored in the checkpoint, used at inference)."""
+    config_name = "sat2graph"
 
     radius_px: float = 3.0  # vertex disc radius (pixel centres within it)
     max_edge_px: float = 250.0  # vector scale; components clipped to +-1
@@ -72,10 +73,6 @@ class Sat2GraphOptions:
     pos_weight_vertex: float = 20.0  # BCE weights of the rare positives
     pos_weight_slot: float = 2.0  # ~2 of 6 slots exist at a boundary vertex
     vector_weight: float = 1.0
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "Sat2GraphOptions":
-        return config_from_dict(cls, data, "sat2graph")
 
 
 # -- graph tensor ---------------------------------------------------------------------------------

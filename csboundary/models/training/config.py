@@ -4,18 +4,20 @@ trains on, their pixel size, the model configs built from its overrides."""
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 from csboundary.data import city as layout
 from csboundary.errors import InputError
 from csboundary.models.training.data import CitySpec, TrainingCity, WorldsConfig
 
 
 @dataclass
-class TrainConfig:
+class TrainConfig(Config):
     """Everything a run depends on; stored in every checkpoint and in the log."""
+    config_name = "training"
+    config_nested = {"train_city": CitySpec, "valid_city": CitySpec}
 
     model: str = "fpn"  # fpn | afanet
     seed: int = 0
@@ -56,13 +58,6 @@ class TrainConfig:
     def from_file(cls, path: str | Path) -> "TrainConfig":
         data = json.loads(Path(path).read_text())
         return cls.from_dict(data)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "TrainConfig":
-        return config_from_dict(cls, data, "training", nested={"train_city": CitySpec, "valid_city": CitySpec})
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def training_pixel_size(config: dict) -> float | None:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
@@ -51,13 +51,14 @@ class CitySpec:
 
 
 @dataclass(frozen=True)
-class WorldsConfig:
+class WorldsConfig(Config):
     """Many fresh synthetic cities to train on, their styles drawn from a configurable mix.
 
     City ``i`` is (split "train", seed ``first_seed + i``) in the style ``draw_style`` picks for
     it from ``styles`` (name -> weight), so the set is reproducible and a style left out of the
     mix is never seen; cities are built under the training cache on first use.
     """
+    config_name = "worlds"
 
     styles: dict = field(default_factory=dict)  # style -> weight; {} = csboundary.data.synth.styles.DEFAULT_MIX
     cities: int = 24
@@ -65,9 +66,6 @@ class WorldsConfig:
     tile_size: int = 2500
     first_seed: int = 1000
 
-    @classmethod
-    def from_dict(cls, data: dict) -> "WorldsConfig":
-        return config_from_dict(cls, data, "worlds")
 
     def specs(self) -> list[CitySpec]:
         from csboundary.data.synth.styles import draw_style

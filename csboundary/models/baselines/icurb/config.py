@@ -3,9 +3,9 @@ options, split from a training config's ``options``."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
-from csboundary.config import config_from_dict
+from csboundary.config import Config
 from csboundary.errors import reject_unknown
 
 
@@ -15,8 +15,9 @@ TRAIN_OPTIONS = {"window": 512, "beta_min": 0.1, "beta_decay": 0.5, "buffer": 80
 
 
 @dataclass(frozen=True)
-class ICurbConfig:
+class ICurbConfig(Config):
     """The agent and how it traces (stored in the checkpoint: inference needs all of it)."""
+    config_name = "icurb"
 
     roi: int = 64
     widths: tuple[int, ...] = (16, 32, 64, 64)  # stride-2 conv stages
@@ -26,13 +27,6 @@ class ICurbConfig:
     max_steps: int = 150
     seg_threshold: float = 0.5
     border_px: int = 4  # skeleton pixels this close to the window border give start vertices
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "ICurbConfig":
-        return config_from_dict(cls, data, "icurb")
 
 
 def split_options(options: dict) -> tuple[ICurbConfig, dict]:
