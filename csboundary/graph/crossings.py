@@ -36,9 +36,9 @@ def crossing_points(boundary: np.ndarray, config: CrossingConfig, existing: np.n
     h, w = skeleton.shape
     points = []
     for x in range(config.offset_px, w, config.spacing_px):
-        points += [(x + 0.5, c + 0.5) for c in _run_centres(skeleton[:, x])]
+        points += [(x + 0.5, c + 0.5) for c in run_centres(skeleton[:, x])]
     for y in range(config.offset_px, h, config.spacing_px):
-        points += [(c + 0.5, y + 0.5) for c in _run_centres(skeleton[y, :])]
+        points += [(c + 0.5, y + 0.5) for c in run_centres(skeleton[y, :])]
     kept: list[tuple[float, float]] = []
     others = np.asarray(existing, float).reshape(-1, 2) if existing is not None else np.zeros((0, 2))
     tree = cKDTree(others) if len(others) else None
@@ -60,7 +60,7 @@ def added_crossings(found, boundary: np.ndarray, config: CrossingConfig) -> np.n
     return crossing_points(boundary, config, covered)
 
 
-def _run_centres(line: np.ndarray) -> list[float]:
+def run_centres(line: np.ndarray) -> list[float]:
     """Centres (indices) of the runs of True in a 1-D boolean array."""
     padded = np.concatenate([[False], line.astype(bool), [False]])
     edges = np.flatnonzero(padded[1:] != padded[:-1])

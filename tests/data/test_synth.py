@@ -14,7 +14,7 @@ from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.synth.city import plan_city, synthesize_city
 from csboundary.data.synth.config import SynthConfig, city_rng
-from csboundary.data.synth.streets import _open, boundary_lines
+from csboundary.data.synth.streets import boundary_lines, round_convex_corners
 
 SMALL = SynthConfig(tile_size=600, gsd=0.5)  # 300 m tiles: a few blocks, renders in well under a second
 
@@ -26,7 +26,7 @@ def small_city():
 
 def test_opening_rounds_convex_corners_with_the_given_radius():
     square, r = box(0, 0, 50, 50), 5.0
-    (opened,) = _open(square, r)
+    (opened,) = round_convex_corners(square, r)
     # Each corner loses the region between the square corner and a quarter circle: r^2 (1 - pi/4).
     assert opened.area == pytest.approx(2500 - 4 * r * r * (1 - math.pi / 4), rel=1e-3)
     # The corner point retreats to distance r*sqrt(2) - r from the arc.
@@ -37,7 +37,7 @@ def test_opening_rounds_convex_corners_with_the_given_radius():
 
 def test_opening_keeps_concave_corners_sharp():
     ell = box(0, 0, 40, 20).union(box(0, 0, 20, 40))
-    (opened,) = _open(ell, 4.0)
+    (opened,) = round_convex_corners(ell, 4.0)
     assert opened.boundary.distance(Point(20, 20)) < 0.02  # sharp up to the arc polygonisation (0.1 px)
 
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from csboundary.graph.crossings import CrossingConfig, _run_centres, crossing_points
+from csboundary.graph.crossings import CrossingConfig, crossing_points, run_centres
 
 
 def test_runs_have_their_centres():
-    assert _run_centres(np.array([0, 1, 1, 1, 0, 0, 1, 0], bool)) == [2.0, 6.0]
-    assert _run_centres(np.zeros(5, bool)) == []
+    assert run_centres(np.array([0, 1, 1, 1, 0, 0, 1, 0], bool)) == [2.0, 6.0]
+    assert run_centres(np.zeros(5, bool)) == []
 
 
 def test_a_straight_boundary_crosses_each_line_once():

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import box
 
-from csboundary.data.synth.streets import _open
+from csboundary.data.synth.streets import round_convex_corners
 from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices, extract_vertices_with_scores
@@ -176,7 +176,7 @@ def test_length_rule_separates_isolated_from_gathered():
 
 def test_rounded_square_label_map_gives_four_corner_edges_at_the_run_ends():
     lo, hi, radius = 130.0, 330.0, 30.0  # away from every 1000 px grid and margin line
-    b = [Boundary(np.asarray(_open(box(lo, lo, hi, hi), radius)[0].exterior.coords), True)]
+    b = [Boundary(np.asarray(round_convex_corners(box(lo, lo, hi, hi), radius)[0].exterior.coords), True)]
     kps = compute_keypoints(b, LabelConfig(aux_spacing_px=0))
     assert len(kps[0].runs) == 4
     window = PixelWindow(100, 100, 260, 260)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from shapely.geometry import box
 
 from csboundary.data.grid import PatchGrid
-from csboundary.data.synth.streets import _open
+from csboundary.data.synth.streets import round_convex_corners
 from csboundary.data.windows import PixelWindow
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.boundaries import Boundary, boundaries_from_world
@@ -32,7 +32,7 @@ def ring(polygon) -> Boundary:
 @pytest.mark.parametrize("radius", [20.0, 40.0, 79.0])
 def test_rounded_square_gives_four_gathered_corners_at_the_tangent_points(radius):
     lo, hi = 130.0, 730.0  # away from every 1000 px grid line
-    b = ring(_open(box(lo, lo, hi, hi), radius)[0])
+    b = ring(round_convex_corners(box(lo, lo, hi, hi), radius)[0])
     runs, isolated = curvature_keypoints(b, NO_AUX)
     assert len(runs) == 4 and isolated == []
     tangent_points = [(lo + radius, lo), (hi - radius, lo), (hi, lo + radius), (hi, hi - radius),
@@ -169,7 +169,7 @@ def test_adjacency_needs_the_boundary_between_to_stay_in_the_window():
 def test_keypoints_move_with_the_boundary_by_whole_grid_periods(dx, dy, radius):
     """Shifting geometry by whole periods of the keypoint lines (1000 px: cores, their +-50 px
     expanded edges and the 250 px auxiliary grid all repeat) shifts every keypoint with it."""
-    poly = _open(box(30, 40, 420, 230), radius)[0]
+    poly = round_convex_corners(box(30, 40, 420, 230), radius)[0]
     shift = np.array([dx * 1000.0, dy * 1000.0])
     a = boundary_keypoints(ring(poly))
     b = boundary_keypoints(Boundary(np.asarray(poly.exterior.coords) + shift, True))
@@ -203,7 +203,7 @@ def test_pixel_chain_ground_truth_gives_the_same_corners_after_import_simplifica
     from csboundary.data.topo_boundary import pixels_to_line
 
     radius = 40.0
-    poly = _open(box(130, 130, 730, 730), radius)[0]
+    poly = round_convex_corners(box(130, 130, 730, 730), radius)[0]
     dense, _ = __import__("csboundary.labels.rasterize", fromlist=["dense_samples"]).dense_samples(np.asarray(poly.exterior.coords))
     pixels = np.floor(dense).astype(int)
     keep = np.concatenate([[True], np.any(np.diff(pixels, axis=0) != 0, axis=1)])

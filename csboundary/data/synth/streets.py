@@ -279,7 +279,7 @@ def _bulb_islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stre
     return [p for p in out if p.area > math.pi * 2.0**2]
 
 
-def _open(polygon: Polygon, radius: float) -> list[Polygon]:
+def round_convex_corners(polygon: Polygon, radius: float) -> list[Polygon]:
     """Morphological opening: rounds convex corners to ``radius``, keeps concave corners sharp."""
     if radius <= 0:
         return [polygon]
@@ -324,7 +324,7 @@ def _medians(streets: list[Street], road_by_street: list[Polygon], roadway, avoi
         for piece in getattr(strip, "geoms", [strip]):
             if piece.geom_type != "Polygon" or piece.area < 20.0:
                 continue
-            for rounded in _open(piece, nose):
+            for rounded in round_convex_corners(piece, nose):
                 if rounded.area > 20.0 and inside.contains(rounded):
                     medians.append(rounded)
     return medians
@@ -345,7 +345,7 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         if polygon.geom_type != "Polygon" or polygon.area < 30.0:
             continue
         radius = 0.0 if rng.random() < cfg.sharp_block_share else rng.uniform(*cfg.curb_radius)
-        blocks.extend(Block(p, radius) for p in _open(polygon, radius))
+        blocks.extend(Block(p, radius) for p in round_convex_corners(polygon, radius))
 
     roadway = domain.difference(shapely.union_all([b.polygon for b in blocks]))
     islands = _islands(cfg, rng, streets, roadway)
