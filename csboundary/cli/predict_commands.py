@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (DeviceOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption,
+from csboundary.cli.options import (DeviceOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FragmentOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers)
 
 
@@ -19,6 +19,7 @@ def predict(
     edge_threshold: EdgeThresholdOption = None,
     min_edge_support: EdgeSupportOption = None,
     max_edge_length: EdgeLengthOption = None,
+    min_fragment_length: FragmentOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
@@ -43,7 +44,7 @@ def predict(
     if scheduler and workers:
         raise typer.BadParameter("give --scheduler or --workers, not both")
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, engine=engine)
+                               max_edge_length=max_edge_length, min_fragment_length=min_fragment_length, engine=engine)
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "

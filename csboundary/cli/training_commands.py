@@ -38,6 +38,7 @@ def bundle_weights(
     edge_threshold: float = typer.Option(0.5, callback=finite, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
     min_edge_support: float = typer.Option(0.0, callback=finite, min=0.0, max=1.0, help="Default mean boundary probability along an AfANet edge (0 = no check)."),
     max_edge_length: float = typer.Option(0.0, callback=finite, min=0.0, help="Default longest AfANet edge in pixels (0 = no limit)."),
+    min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0, help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
     grid_crossings: int = typer.Option(0, min=0, help="Add vertices where the boundary crosses grid lines this far apart (0 = off; 250 = the label grid)."),
 ) -> None:
     """Bundle a trained FPN and AfANet (weights + provenance) into one weights file."""
@@ -45,5 +46,5 @@ def bundle_weights(
 
     out_file(out, (".pt",))
     path = make_bundle(fpn, afanet, out, edge_threshold, min_support=min_edge_support, max_length_px=max_edge_length,
-                       crossing_spacing_px=grid_crossings)
+                       crossing_spacing_px=grid_crossings, min_fragment_px=min_fragment_length)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")

@@ -82,6 +82,27 @@ class BoundaryGraph:
         """Pixel length of every edge along its polyline."""
         return np.array([polyline_length(self.edge_polyline(k)) for k in range(self.n_edges)], dtype=float)
 
+    def edge_subgraph(self, keep: np.ndarray) -> "BoundaryGraph":
+        """The graph of the edges where the (E,) boolean ``keep`` is True and the vertices they
+        use (renumbered in their old order); every per-edge and per-vertex field follows."""
+        keep = np.asarray(keep, dtype=bool).reshape(-1)
+        if len(keep) != self.n_edges:
+            raise ValueError(f"keep has {len(keep)} entries for {self.n_edges} edges")
+        edges = self.edges[keep]
+        used = np.unique(edges)
+        renumber = np.full(self.n_vertices, -1, dtype=np.int64)
+        renumber[used] = np.arange(len(used))
+        picked = np.flatnonzero(keep)
+        return BoundaryGraph(
+            self.vertices[used], renumber[edges],
+            vertex_kinds=None if self.vertex_kinds is None else [self.vertex_kinds[i] for i in used],
+            edge_kinds=None if self.edge_kinds is None else [self.edge_kinds[k] for k in picked],
+            edge_polylines=None if self.edge_polylines is None else [self.edge_polylines[k] for k in picked],
+            edge_scores=None if self.edge_scores is None else np.asarray(self.edge_scores)[keep],
+            edge_patches=None if self.edge_patches is None else self.edge_patches[keep],
+            transform=self.transform, crs=self.crs,
+        )
+
     def world_vertices(self) -> np.ndarray:
         if self.transform is None:
             raise ValueError("graph has no transform: its coordinates are pixels only")

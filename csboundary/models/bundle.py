@@ -15,10 +15,11 @@ from csboundary.models.training.config import training_pixel_size
 
 
 def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, edge_threshold: float = 0.5, max_degree: int = 2,
-                min_support: float = 0.0, max_length_px: float = 0.0, crossing_spacing_px: int = 0) -> Path:
+                min_support: float = 0.0, max_length_px: float = 0.0, crossing_spacing_px: int = 0, min_fragment_px: float = 0.0) -> Path:
     """One weights file: both models, their provenance and the inference settings (edge threshold,
-    degree cap, edge-support check, grid-crossing vertices; see :mod:`csboundary.graph.edge_support`
-    and :mod:`csboundary.graph.crossings`), and the pixel size the FPN was trained at (imagery is
+    degree cap, edge-support check, grid-crossing vertices, shortest fragment of the city graph;
+    see :mod:`csboundary.graph.edge_support`, :mod:`csboundary.graph.crossings` and
+    :mod:`csboundary.graph.fragments`), and the pixel size the FPN was trained at (imagery is
     resampled to it)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet",))
@@ -36,6 +37,6 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
         afanet=afanet["afanet"],
         afanet_config=afanet["afanet_config"],
         inference={"edge_threshold": edge_threshold, "max_degree": max_degree, "min_support": min_support, "max_length_px": max_length_px,
-                   "crossing_spacing_px": crossing_spacing_px},
+                   "crossing_spacing_px": crossing_spacing_px, "min_fragment_px": min_fragment_px},
         provenance=provenance,
     )

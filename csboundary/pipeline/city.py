@@ -37,6 +37,7 @@ from tqdm import tqdm
 from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.fragments import drop_short_fragments
 from csboundary.graph.stitching import StitchConfig, stitch_patch_graphs, to_mosaic
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
 from csboundary.pipeline.run_store import RunStore
@@ -244,6 +245,7 @@ class CityRun:
         timed = _Timer()
         with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
             graph = timed("graph_stitching", stitch_patch_graphs, self.patch_graphs, grid, stitch, crs)
+            graph = timed("graph_stitching", drop_short_fragments, graph, getattr(self.job.model, "min_fragment_px", 0.0))
             stitch_bar.update(1)
         self.add_seconds(timed.seconds)
         return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,

@@ -39,6 +39,7 @@ class PatchPredictor:
     support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
     crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
+    min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
 
     @property
@@ -92,7 +93,8 @@ class PatchPredictor:
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support, crossings=crossings, pixel_size_m=float(pixel_size))
+                   support=support, crossings=crossings, pixel_size_m=float(pixel_size),
+                   min_fragment_px=float(settings.get("min_fragment_px", 0.0)))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
         return self.patch_maps([None], [image])[0]
@@ -141,7 +143,8 @@ class PatchPredictor:
 
 # name -> (smallest, largest, integer) of each inference setting a bundle may carry
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
-                      "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True)}
+                      "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
+                      "min_fragment_px": (0.0, 1e6, False)}
 
 
 def inference_settings(settings, path: str | Path) -> dict:
@@ -164,7 +167,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_degree: int | None = None,
-                   fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
+                   min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
     inference settings (None keeps the bundle's; ``max_degree`` 0 means no cap), on the chosen
     engine (``auto``: ONNX Runtime on a CPU when installed) and device (``auto``: CUDA if present)."""
@@ -181,5 +184,7 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.support = dataclasses.replace(predictor.support, max_length_px=max_edge_length)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
+    if min_fragment_length is not None:
+        predictor.min_fragment_px = min_fragment_length
     predictor.use_engine(engine, weights, fpn_weights)
     return predictor

@@ -50,10 +50,12 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
     shipped = load_checkpoint(shipped_weights(), ("bundle",))
     save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
     save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", 0.3, min_support=0.2, crossing_spacing_px=250)
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", 0.3, min_support=0.2, crossing_spacing_px=250,
+                min_fragment_px=160)
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
-    assert predictor.crossings.spacing_px == 250 and predictor.support.min_support == 0.2
+    assert predictor.crossings.spacing_px == 250 and predictor.support.min_support == 0.2 and predictor.min_fragment_px == 160
     maps = np.zeros((2, 400, 400), np.float32)
     maps[1, 119:122, :] = 1.0  # a boundary and no keypoint at all: the crossings are the vertices
     assert sorted(map(tuple, np.round(predictor.extract(maps).vertices, 1))) == [(50.5, 120.5), (300.5, 120.5)]
-    assert PatchPredictor.load(shipped_weights(), torch.device("cpu")).crossings.spacing_px == 0
+    shipped_predictor = PatchPredictor.load(shipped_weights(), torch.device("cpu"))
+    assert shipped_predictor.crossings.spacing_px == 0 and shipped_predictor.min_fragment_px == 0

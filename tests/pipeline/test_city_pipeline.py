@@ -17,6 +17,7 @@ from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.fragments import fragment_lengths
 from csboundary.metrics import evaluate
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.pipeline.city import predict_city, patch_scale_graph
@@ -50,6 +51,20 @@ def test_ground_truth_maps_and_adjacency_give_back_the_ground_truth(city):
     assert len({tuple(p) for p in result.graph.edge_patches.tolist()}) == 9
     patch_scores = evaluate(patch_scale_graph(result), gt, scale="patch", grid=result.grid, seed=0)["metrics"]
     assert patch_scores["f1@5"] >= 0.99 and patch_scores["apls"] >= 0.98
+
+
+def test_a_model_s_shortest_fragment_is_dropped_from_the_city_graph_only(city):
+    mosaic, lines = city
+    model = OracleModel.from_lines(lines, mosaic)
+    whole = predict_city(mosaic, model, progress=False)
+    piece, length = fragment_lengths(whole.graph)
+    limit = float(np.median(length))
+    assert (length < limit).any() and (length >= limit).any()
+    model.min_fragment_px = limit
+    kept = predict_city(mosaic, model, progress=False)
+    assert kept.graph.n_edges == int((length[piece] >= limit).sum())
+    assert np.isclose(kept.graph.edge_lengths().sum(), length[length >= limit].sum())
+    assert all(kept.patch_graphs[i].n_edges == g.n_edges for i, g in whole.patch_graphs.items())  # patch scale untouched
 
 
 class _TinyModel:
