@@ -19,23 +19,32 @@ _STEPS = ((0, 1, 1.0), (1, 0, 1.0), (1, 1, np.sqrt(2.0)), (1, -1, np.sqrt(2.0)))
 
 def skeleton_pixel_links(skeleton: np.ndarray, corner_diagonals: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 2) pixel (row, col) of the skeleton's pixels in raster order, (E, 2) node pairs of
-    8-neighbours (each pair once), and (E,) their distances in px."""
+    8-neighbours (each pair once, grouped by step and in raster order of the first pixel), and
+    (E,) their distances in px. Works on the pixel list (a binary search per neighbour), so the
+    cost follows the skeleton's size, not the map's."""
     mask = np.asarray(skeleton, dtype=bool)
     rows, cols = np.nonzero(mask)
+    pixels = np.stack([rows, cols], axis=1)
+    if len(rows) == 0:
+        return pixels, np.zeros((0, 2), np.int64), np.zeros(0)
     h, w = mask.shape
-    ids = np.full((h + 2, w + 2), -1, dtype=np.int64)
-    ids[rows + 1, cols + 1] = np.arange(len(rows))
-    on = ids >= 0
-    centre = ids[1 : h + 1, 1 : w + 1]
+    flat = rows * w + cols  # increasing: np.nonzero is in raster order
+
+    def node_at(r: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Node of pixel (r, c), -1 where it is off the map or not a skeleton pixel."""
+        key = np.where((r >= 0) & (r < h) & (c >= 0) & (c < w), r * w + c, -1)
+        at = np.minimum(np.searchsorted(flat, key), len(flat) - 1)
+        return np.where(flat[at] == key, at, -1)
+
     pairs, lengths = [], []
     for dr, dc, length in _STEPS:
-        other = ids[1 + dr : h + 1 + dr, 1 + dc : w + 1 + dc]
-        link = (centre >= 0) & (other >= 0)
+        other = node_at(rows + dr, cols + dc)
+        link = other >= 0
         if dr and dc and not corner_diagonals:
-            link &= ~(on[1 : h + 1, 1 + dc : w + 1 + dc] | on[1 + dr : h + 1 + dr, 1 : w + 1])
-        pairs.append(np.stack([centre[link], other[link]], axis=1))
+            link &= (node_at(rows, cols + dc) < 0) & (node_at(rows + dr, cols) < 0)
+        pairs.append(np.stack([np.flatnonzero(link), other[link]], axis=1))
         lengths.append(np.full(int(link.sum()), length))
-    return np.stack([rows, cols], axis=1), np.concatenate(pairs).reshape(-1, 2), np.concatenate(lengths)
+    return pixels, np.concatenate(pairs).astype(np.int64), np.concatenate(lengths)
 
 
 def skeleton_distance_graph(skeleton: np.ndarray) -> tuple[np.ndarray, sparse.csr_matrix]:
