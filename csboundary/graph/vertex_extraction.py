@@ -158,11 +158,12 @@ def _pieces(prob: np.ndarray, config: VertexConfig) -> tuple[np.ndarray, int]:
     labels, n = ndimage.label(prob >= config.threshold, structure=_EIGHT)
     if n == 0:
         return labels, 0
-    area = np.bincount(labels.ravel(), minlength=n + 1)
-    keep = area >= config.min_area_px
+    rows, cols = np.nonzero(labels)  # keypoint pixels are a few percent of the map: relabel only them
+    piece = labels[rows, cols]
+    keep = np.bincount(piece, minlength=n + 1) >= config.min_area_px
     keep[0] = False
-    relabel = np.cumsum(keep) * keep
-    return relabel[labels].astype(np.int32, copy=False), int(keep.sum())
+    labels[rows, cols] = (np.cumsum(keep) * keep)[piece]
+    return labels.astype(np.int32, copy=False), int(keep.sum())
 
 
 def _centres_and_peaks(prob: np.ndarray, labels: np.ndarray, n: int, threshold: float) -> tuple[np.ndarray, np.ndarray]:
