@@ -2,8 +2,8 @@
 # Scores of a weights bundle on the Ottawa crops (imported to /tmp/ottawa, see docs/real-imagery.md)
 # and on the synthetic test cities of every style. Usage: scripts/eval_bundle.sh BUNDLE TAG (OUT=folder)
 set -e
-mkdir -p "${OUT:-runs/eval}"
 cd "$(dirname "$0")/.."
+mkdir -p "${OUT:-runs/eval}"
 cs=".venv/bin/csboundary"
 B=$1; T=$2
 $cs evaluate-set /tmp/ottawa --weights $B --json ${OUT:-runs/eval}/$T-ottawa.json --quiet > ${OUT:-runs/eval}/$T-ottawa.txt 2>&1
