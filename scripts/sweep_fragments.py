@@ -10,33 +10,17 @@ folder of cities from ``csboundary import-masks``, by the mean over its cities, 
 from __future__ import annotations
 
 import argparse
-import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from csboundary.data import city as layout
-from csboundary.data.ground_truth import read_ground_truth
-from csboundary.data.model_view import model_view
-from csboundary.data.raster import Mosaic
-from csboundary.errors import InputWarning
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.fragments import drop_short_fragments
 from csboundary.metrics import evaluate
-from csboundary.pipeline.city import predict_city
-from csboundary.pipeline.evaluate_set import set_cities
+from csboundary.pipeline.evaluate_set import predicted_city, set_cities
 from csboundary.pipeline.patch import PatchPredictor
-
-
-def predicted(city_dir: Path, predictor: PatchPredictor):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", InputWarning)
-        mosaic = model_view(Mosaic.open(layout.tiles_dir(city_dir)), model_gsd=predictor.pixel_size_m, assume_model_gsd=True).mosaic
-    with mosaic:
-        lines = list(read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs).geometry)
-        result = predict_city(mosaic, predictor, progress=False)
-    return result, BoundaryGraph.from_world_lines(lines, result.grid.transform)
 
 
 def main() -> None:
@@ -51,10 +35,10 @@ def main() -> None:
     table = {}
     for s in args.sets:
         cities = [Path(s)] if layout.is_city_dir(s) else set_cities(s)
-        runs = [predicted(c, predictor) for c in cities]
+        runs = [predicted_city(c, predictor, assume_model_gsd=True) for c in cities]
         for length in lengths:
-            metrics = [evaluate(drop_short_fragments(r.graph, length), gt, scale="city", seed=0,
-                                extent=(0, 0, r.grid.width, r.grid.height))["metrics"] for r, gt in runs]
+            metrics = [evaluate(drop_short_fragments(r.graph, length), BoundaryGraph.from_world_lines(lines, r.grid.transform), scale="city",
+                                seed=0, extent=(0, 0, r.grid.width, r.grid.height))["metrics"] for r, lines in runs]
             table[s, length] = {k: float(np.mean([np.nan_to_num(m[k]) for m in metrics])) for k in ("precision@5", "recall@5", "f1@5", "apls", "tlts")}
         print(f"{Path(s).name}: predicted {len(cities)} cities", flush=True)
     print("L_px  " + " ".join(f"{Path(s).name[:16]:>16s}:P5/R5/F1@5/APLS/TLTS" for s in args.sets))

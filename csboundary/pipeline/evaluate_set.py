@@ -17,14 +17,12 @@ from typing import Any
 from tqdm import tqdm
 
 from csboundary.data import city as layout
-from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.inputs import open_imagery
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.data.model_view import model_view
 from csboundary.data.units import MODEL_GSD
-from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError, InputWarning
-from csboundary.pipeline.city import PatchModel, predict_city
+from csboundary.pipeline.city import CityResult, PatchModel, predict_city
 from csboundary.pipeline.run import evaluate_run
 
 HEADLINE = ("precision@5", "recall@5", "f1@2", "f1@5", "f1@10", "apls", "tlts")
@@ -52,28 +50,35 @@ def set_cities(set_dir: str | Path) -> list[Path]:
     return cities
 
 
-def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[str, Any]:
-    """City-scale scores of ``model`` on one city directory (RGB cities read without warnings)."""
+def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd: bool = False, batch_size: int = 1,
+                   progress: bool = False) -> tuple[CityResult, list]:
+    """``model``'s prediction of a labelled city directory, read as ``predict`` reads it, and the
+    city's ground-truth lines. ``assume_model_gsd``: imagery without a pixel size is taken to be
+    at the model's (imported crops), and RGB is read without warnings (NIR := green is the
+    documented rule)."""
+    layout.read_meta(city_dir)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", InputWarning)  # 3-band crops: NIR := green is the documented rule
-        mosaic = model_view(Mosaic.open(layout.tiles_dir(city_dir)), model_gsd=getattr(model, "pixel_size_m", MODEL_GSD), assume_model_gsd=True).mosaic
-    with mosaic:
-        lines = list(read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs).geometry)
-        result = predict_city(mosaic, model, progress=False)
-    scores = evaluate_run(result, lines, seed)["city"]
+        if assume_model_gsd:
+            warnings.simplefilter("ignore", InputWarning)
+        mosaic, lines = open_imagery([city_dir])
+        view = model_view(mosaic, model_gsd=getattr(model, "pixel_size_m", MODEL_GSD), assume_model_gsd=assume_model_gsd)
+    with view.mosaic:
+        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress)
+    return result, lines
+
+
+def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[str, Any]:
+    """City-scale scores of ``model`` on one city of a set (see :func:`predicted_city`)."""
+    result, lines = predicted_city(city_dir, model, assume_model_gsd=True)
+    scores = evaluate_run(result, lines, seed, scales=("city",))["city"]
     scores["counts"] = {"pred_edges": int(result.graph.n_edges), "gt_lines": len(lines)}
     return scores
 
 
 def evaluate_city(city_dir: str | Path, model: PatchModel, seed: int = 0, batch_size: int = 1, progress: bool = True) -> dict[str, dict]:
     """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
-    ``model`` on a city directory with ground truth, read as ``predict`` reads it, without
-    writing the prediction."""
-    layout.read_meta(city_dir)
-    mosaic, lines = open_imagery([city_dir])
-    view = model_view(mosaic, model_gsd=getattr(model, "pixel_size_m", MODEL_GSD))
-    with view.mosaic:
-        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress)
+    ``model`` on a city directory with ground truth, without writing the prediction."""
+    result, lines = predicted_city(city_dir, model, batch_size=batch_size, progress=progress)
     scores = evaluate_run(result, lines, seed)
     for item in scores.values():
         item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}

@@ -181,16 +181,17 @@ def count_close_pairs(vertices: np.ndarray, radius: float = 1.0) -> int:
     return len(cKDTree(vertices).query_pairs(radius - 1e-12)) if len(vertices) > 1 else 0
 
 
-def evaluate_run(result: CityResult, ground_truth, seed: int = 0) -> dict[str, dict]:
-    """Scores against ``ground_truth`` (world LineStrings) at both of the paper's scales: ``patch``
-    (each patch's own graph on its core, averaged; Table I) and ``city`` (the stitched graph as a
-    whole; Table II)."""
+def evaluate_run(result: CityResult, ground_truth, seed: int = 0, scales: tuple[str, ...] = ("patch", "city")) -> dict[str, dict]:
+    """Scores against ``ground_truth`` (world LineStrings) at the paper's two scales, those in
+    ``scales``: ``patch`` (each patch's own graph on its core, averaged; Table I) and ``city``
+    (the stitched graph as a whole; Table II)."""
     from csboundary.graph import BoundaryGraph
     from csboundary.metrics import evaluate
     from csboundary.pipeline.city import patch_scale_graph
 
     gt = BoundaryGraph.from_world_lines(list(ground_truth), result.grid.transform)
-    return {
-        "patch": evaluate(patch_scale_graph(result), gt, scale="patch", grid=result.grid, seed=seed),
-        "city": evaluate(result.graph, gt, scale="city", seed=seed, extent=(0, 0, result.grid.width, result.grid.height)),
+    score = {
+        "patch": lambda: evaluate(patch_scale_graph(result), gt, scale="patch", grid=result.grid, seed=seed),
+        "city": lambda: evaluate(result.graph, gt, scale="city", seed=seed, extent=(0, 0, result.grid.width, result.grid.height)),
     }
+    return {scale: score[scale]() for scale in scales}
