@@ -167,7 +167,7 @@ def show(
         except ValueError as exc:
             raise typer.BadParameter(str(exc), param_hint="--patch")
         if labels is not None:
-            rgb, graph = render_patch_labels(mosaic, labels, row, col)
+            rgb, graph = render_patch_labels(mosaic, labels, the_patch)
             write_png(out, rgb)
             typer.echo(f"{out}: labels of patch {row},{col}: {graph.n_vertices} vertices, {graph.n_edges} edges")
             return

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from csboundary.data.grid import GridConfig, PatchGrid
+from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
 from csboundary.errors import InputError, InputWarning
@@ -36,9 +36,9 @@ def patch_of(mosaic: Mosaic, row: int, col: int, grid_config: GridConfig = GridC
     return grid.patch(row, col)
 
 
-def render_patch_labels(mosaic: Mosaic, labels_dir: str | Path, row: int, col: int) -> tuple[np.ndarray, BoundaryGraph]:
-    """(h, w, 3) picture of patch (row, col)'s expanded window with its labels, and its label graph."""
-    patch = patch_of(mosaic, row, col, labels_grid(labels_dir))
+def render_patch_labels(mosaic: Mosaic, labels_dir: str | Path, patch: Patch) -> tuple[np.ndarray, BoundaryGraph]:
+    """(h, w, 3) picture of ``patch``'s expanded window (a patch of the labels' grid, see
+    :func:`labels_grid`) with its labels, and its label graph."""
     stem = patch_stem(patch)
     folder = Path(labels_dir) / PATCH_DIR
     arrays = load_patch_arrays(folder / f"{stem}.npz")
