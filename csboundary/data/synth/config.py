@@ -96,6 +96,13 @@ class SynthConfig(Config):
     sun_reach: tuple[float, float] = (0.25, 0.6)  # shadow length per metre of height
     paved_yard_share: float = 0.0  # residential blocks whose yards are paved (plazas, courtyards)
     field_share: float = 0.0  # rural: blocks that are crop fields instead of lots and houses
+    # residential yards: what real suburbs put beside the road that is *not* a road boundary
+    bare_block_share: float = 0.0  # blocks without a sidewalk: the lawn meets the curb
+    pitched_roof_share: float = 0.0  # houses with a gable or hip roof (sunlit and shaded facets, a ridge)
+    house_driveway_share: float = 0.0  # houses with a paved driveway from the curb to the house (a car on 40 %)
+    lot_fence_share: float = 0.0  # lot lines beside houses drawn as fences or hedges
+    lawn_patch_share: float = 0.0  # lots whose lawn has its own shade (a patchwork of yards)
+    pool_share: float = 0.0  # back yards with a swimming pool
     # camera look, drawn once per city from its own random stream
     source_gsd: tuple[float, float] | None = None  # sensor pixel size (m), resampled to ``gsd``
     haze: tuple[float, float] = (0.0, 0.0)  # blend towards a bright grey-blue veil

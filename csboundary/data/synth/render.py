@@ -1,8 +1,9 @@
 """Paint one tile of a synthetic city: 4 bands (R, G, B, NIR), uint8.
 
 Layers, bottom to top: asphalt everywhere; markings and crosswalks; blocks (sidewalks, lots,
-islands, medians, driveways), which clip any paint that ran over a curb; cars; shadows of
-buildings and trees; buildings; tree crowns. Then texture scaled by each material's roughness,
+islands, medians, driveways, yards), which clip any paint that ran over a curb; cars; shadows of
+buildings and trees; buildings (flat roofs, or pitched ones as sunlit and shaded facets); tree
+crowns. Then texture scaled by each material's roughness,
 a low-frequency illumination field, a per-tile colour/brightness change and sensor noise.
 Geometry is rasterised with OpenCV in 1/8-pixel fixed point.
 """
@@ -105,12 +106,21 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
 
     _cast_shadows(canvas, scene)
     for b in scene.buildings:
-        if canvas.visible(b.footprint):
+        if canvas.visible(b.footprint) and b.facets:  # pitched: facets lit by the sun, textured shingles
+            for facet, brightness in b.facets:
+                canvas.fill(facet, _scaled(b.roof, brightness), 9)
+            if b.ridge is not None:
+                canvas.fill(b.ridge, _scaled(b.roof, 1.2), 4)
+        elif canvas.visible(b.footprint):
             canvas.fill(b.footprint, b.roof, 6)
             if b.detail is not None:
                 canvas.fill(b.detail, b.detail_colour, 6)
     _draw_trees(canvas, scene, rng)
     return _finish(canvas, rng, noise_sigma)
+
+
+def _scaled(colour, factor: float) -> tuple[int, ...]:
+    return tuple(int(np.clip(c * factor, 0, 255)) for c in colour)
 
 
 def _cast_shadows(canvas: _Canvas, scene: Scene) -> None:

@@ -31,6 +31,10 @@ PARKING: Colour = (92, 92, 95, 82)
 WHITE_PAINT: Colour = (226, 226, 220, 200)
 YELLOW_PAINT: Colour = (214, 176, 64, 165)
 GRAVEL: Colour = (140, 128, 110, 125)
+HEDGE: Colour = (46, 72, 38, 175)
+FENCES: tuple[Colour, ...] = ((150, 128, 98, 120), (122, 120, 116, 110), (62, 58, 54, 60), (205, 200, 190, 175))
+WATER: Colour = (70, 162, 192, 40)  # pools: bright cyan, dark in NIR
+DRIVEWAYS: tuple[Colour, ...] = (ASPHALT, (58, 60, 64, 54), CONCRETE, PARKING, (150, 145, 138, 132))
 # Per-city material choices (config ``road_materials`` / ``sidewalk_materials`` / ``roof_palette``).
 ROAD_MATERIALS: dict[str, Colour] = {
     "asphalt": ASPHALT,
@@ -70,6 +74,8 @@ class Building:
     roof: Colour
     detail: Polygon | None = None  # a roof structure of another shade
     detail_colour: Colour = (0, 0, 0, 0)
+    facets: list[tuple[Polygon, float]] = field(default_factory=list)  # pitched roof: facet, brightness factor
+    ridge: Polygon | None = None  # pitched roof: the ridge line as a thin strip
 
 
 @dataclass
@@ -203,6 +209,8 @@ def _edge_strips(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block
 
 def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, roadway, sidewalk_colour: Colour = CONCRETE) -> None:
     sidewalk = rng.uniform(*cfg.sidewalk_width)
+    if rng_share(rng, cfg.bare_block_share):
+        sidewalk = 0.0  # the lawn runs to the curb
     sidewalk += _edge_strips(cfg, rng, scene, block, sidewalk_colour)
     inner = block.buffer(-sidewalk)
     u = rng.random()
@@ -232,7 +240,7 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
             if kind == "park":
                 _add_trees_in(rng, scene, part, density=rng.uniform(0.004, 0.012))
             else:
-                _add_buildings(cfg, rng, scene, part, kind, driveways)
+                _add_buildings(cfg, rng, scene, part, kind, driveways, block, sidewalk)
                 if kind == "residential":
                     _add_trees_in(rng, scene, part, density=rng.uniform(0.0, 0.004))
     for driveway in driveways:
@@ -294,8 +302,75 @@ def _roof(rng: np.random.Generator, palette: str) -> Colour:
     return (*roof, int(np.clip(grey * 0.9, 0, 255)))  # type: ignore[return-value]
 
 
-def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon, kind: str, keep_clear: list[Polygon]) -> None:
-    """Row of buildings along each side of the lot, set back from the sidewalk."""
+def roof_facets(origin: np.ndarray, along: np.ndarray, across: np.ndarray, length: float, width: float, hip: bool,
+                sun: tuple[float, float]) -> tuple[list[tuple[Polygon, float]], Polygon | None]:
+    """The facets of a pitched roof over the rectangle ``origin + along*[0, length] +
+    across*[0, width]`` (unit ``along``, ``across``) and its ridge.
+
+    The ridge runs along the longer side at mid-width; a gable roof has two facets, a hip roof
+    four (45-degree hips: the ridge is inset by half the width at each end, a point on a square).
+    Each facet comes with a brightness factor 1 + 0.3 cos(angle between its outward direction and
+    the sun), the sun lying opposite the shadow offset ``sun``. The ridge is a 0.24 m strip, or
+    None where it shrinks to a point.
+    """
+    p0 = np.asarray(origin, float)
+    if width > length:  # relabel so that ``along`` is the long side (same rectangle)
+        p0, along, across, length, width = p0 + along * length, across, -along, width, length
+    p1, p3 = p0 + along * length, p0 + across * width
+    p2 = p1 + across * width
+    inset = width / 2 if hip else 0.0
+    r0 = p0 + across * width / 2 + along * inset
+    r1 = p0 + across * width / 2 + along * (length - inset)
+    faces = [([p0, p1, r1, r0], -across), ([r0, r1, p2, p3], across)]
+    if hip:
+        faces += [([p0, r0, p3], -along), ([p1, p2, r1], along)]
+    norm = math.hypot(*sun)
+    towards_sun = -np.asarray(sun, float) / norm if norm > 0 else np.zeros(2)
+    facets = [(Polygon(corners), 1.0 + 0.3 * float(np.dot(normal, towards_sun))) for corners, normal in faces]
+    ridge = LineString([r0, r1]).buffer(0.12, cap_style="flat") if length - 2 * inset > 0.2 else None
+    return facets, ridge
+
+
+def _yard(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, yard: dict[str, list], origin: np.ndarray, d: np.ndarray,
+          left: np.ndarray, width: float, gap: float, setback: float, depth: float, front: float, block: Polygon | None,
+          area: Polygon) -> None:
+    """A house's lot (residential knobs): its own lawn shade, a fence or hedge on the lot line,
+    a pool behind the house, a driveway from the curb to the house with maybe a car on it.
+    ``origin`` is the lot's front corner on the sidewalk side, ``d`` along the street, ``left``
+    into the block; ``front`` the sidewalk strip between the lot and the curb. Painted into
+    ``yard``'s lists (lawns first, then fences and pools, then paving), no ground truth."""
+    if rng_share(rng, cfg.lawn_patch_share):
+        lot = _rect(origin, d, left, width + gap, setback + depth + rng.uniform(4.0, 14.0)).intersection(area)
+        base = GRASS if rng.random() < 0.75 else (118, 124, 70, 170)  # green or dry lawn
+        yard["lawns"].append(Painted(lot, _jitter(rng, base, 0.16), 14))
+    if gap > 1.0 and rng_share(rng, cfg.lot_fence_share):
+        start = origin + d * (width + gap / 2)
+        line = LineString([start + left * setback * rng.uniform(0.0, 1.0), start + left * (setback + depth + rng.uniform(2.0, 15.0))])
+        if rng.random() < 0.4:
+            yard["things"].append(Painted(line.buffer(rng.uniform(0.5, 0.9)).intersection(area), _jitter(rng, HEDGE, 0.12), 22))
+        else:
+            fence = FENCES[int(rng.integers(len(FENCES)))]
+            yard["things"].append(Painted(line.buffer(rng.uniform(0.07, 0.15), cap_style="flat").intersection(area), _jitter(rng, fence, 0.08), 3))
+    if rng_share(rng, cfg.pool_share):
+        centre = origin + d * width * rng.uniform(0.3, 0.7) + left * (setback + depth + rng.uniform(3.5, 7.0))
+        pool = _centred_rect(centre, d, rng.uniform(5.0, 10.0), rng.uniform(3.0, 5.0))
+        if area.contains(pool.buffer(1.0)):
+            yard["things"].append(Painted(pool.buffer(0.9, join_style="mitre"), _jitter(rng, CONCRETE, 0.06), 4))
+            yard["things"].append(Painted(pool.buffer(0.4), _jitter(rng, WATER, 0.1), 3))
+    if setback > 2.0 and rng_share(rng, cfg.house_driveway_share):
+        dw = rng.uniform(2.8, 6.0)  # one or two cars wide
+        s = max(0.0, width - dw) * float(rng.random() < 0.5)  # at one end of the house (the garage)
+        paving = _rect(origin + d * s - left * (front + 0.3), d, left, dw, front + 0.3 + setback + 0.5)
+        paving = paving.intersection(block) if block is not None else paving.intersection(area)
+        yard["paved"].append(Painted(paving, _jitter(rng, DRIVEWAYS[int(rng.integers(len(DRIVEWAYS)))], 0.08), 5))
+        if setback > 5.5 and rng.random() < 0.4:
+            scene.cars.append(_car(rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left))
+
+
+def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon, kind: str, keep_clear: list[Polygon],
+                   block: Polygon | None = None, front: float = 0.0) -> None:
+    """Row of buildings along each side of the lot, set back from the sidewalk (``front`` wide,
+    between ``area`` and the curb, ``block``'s outline); with their yards where the style has them."""
     usable = area.buffer(-0.5)
     if usable.is_empty:
         return
@@ -306,6 +381,7 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
         return
     coords = np.asarray(ring.coords)
     wide = kind == "lot"
+    yard: dict[str, list] = {"lawns": [], "things": [], "paved": []}
     for a, b in zip(coords[:-1], coords[1:]):
         edge = b - a
         length = float(np.linalg.norm(edge))
@@ -318,8 +394,10 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
             w = rng.uniform(15, 40) if wide else rng.uniform(*cfg.house_width)
             depth = rng.uniform(15, 35) if wide else rng.uniform(10, 24)
             setback = rng.uniform(8, 25) if wide else rng.uniform(*cfg.house_setback)
-            footprint = _rect(a + d * t + left * setback, d, left, min(w, length - t), depth)
-            t += w + (rng.uniform(*cfg.house_gap) if rng.random() < cfg.house_gap_share else 0.1)  # mostly row houses
+            t0, fw = t, min(w, length - t)
+            footprint = _rect(a + d * t + left * setback, d, left, fw, depth)
+            gap = rng.uniform(*cfg.house_gap) if rng.random() < cfg.house_gap_share else 0.1  # mostly row houses
+            t += w + gap
             if footprint.area < 25 or not usable.contains(footprint):
                 continue
             if placed and shapely.intersects(np.array(placed, dtype=object), footprint).any():
@@ -332,11 +410,16 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
             if rng_share(rng, cfg.tower_share):
                 height = rng.uniform(*cfg.tower_height)
             building = Building(footprint, height, roof)
-            if rng.random() < 0.35:
+            if not wide and rng_share(rng, cfg.pitched_roof_share):
+                building.facets, building.ridge = roof_facets(a + d * t0 + left * setback, d, left, fw, depth, rng.random() < 0.5, scene.sun)
+            elif rng.random() < 0.35:
                 c = np.array(footprint.centroid.coords[0]) + rng.uniform(-0.2, 0.2, 2) * min(w, depth)
                 building.detail = _centred_rect(c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35))
                 building.detail_colour = _jitter(rng, roof, 0.3)  # type: ignore[arg-type]
             scene.buildings.append(building)
+            if not wide:
+                _yard(cfg, rng, scene, yard, a + d * t0, d, left, fw, gap, setback, depth, front, block, area)
+    scene.ground.extend(yard["lawns"] + yard["things"] + yard["paved"])
 
 
 def _add_markings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:
