@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular")
+STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential")
 
 
 def city_dir(style: str, cache: Path) -> Path:
