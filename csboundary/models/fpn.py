@@ -44,6 +44,8 @@ class FPNConfig(Config):
     backbone: str = "resnet"  # resnet (from scratch) | efficientnet-lite0 (ImageNet-pretrained)
     encoder_scale: float = 0.5  # efficientnet-lite0 only: the encoder sees the patch resized by this
     pretrained: bool = True  # efficientnet-lite0 only: start from the ImageNet weights (training)
+    head: str = "full"  # full | light: how the stride-2 head joins the pyramid and the stem (see add_head)
+    head_channels: int = 16  # light head only: channels at stride 2
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
@@ -83,6 +85,38 @@ def FPN(config: FPNConfig = FPNConfig()) -> nn.Module:
     raise ValueError(f"unknown FPN backbone {config.backbone!r}; expected one of {', '.join(BACKBONES)}")
 
 
+HEADS = ("full", "light")
+
+
+def add_head(module: nn.Module, c: FPNConfig) -> None:
+    """The stride-2 head's layers on ``module`` (used by :func:`head_logits`).
+
+    ``full`` (the shipped models up to issue 15): the pyramid upsampled to stride 2, concatenated
+    with the stem, a 3x3 convolution back to ``pyramid`` channels and a 1x1 to the logits; at
+    1100 px that convolution (72 -> 48 channels on 550 x 550) is most of the network's time.
+    ``light``: the pyramid and the stem are each mapped to ``head_channels`` by a 1x1
+    convolution at their own resolution and summed (the pyramid upsampled), then one 3x3
+    convolution at that width and the 1x1 logits: about a tenth of the full head's work.
+    """
+    if c.head not in HEADS:
+        raise ValueError(f"unknown FPN head {c.head!r}; expected one of {', '.join(HEADS)}")
+    if c.head == "full":
+        module.head = nn.Sequential(conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1))
+        return
+    module.reduce = nn.Conv2d(c.pyramid, c.head_channels, 1)
+    module.project = nn.Conv2d(c.stem, c.head_channels, 1)
+    module.head = nn.Sequential(conv_bn_relu(c.head_channels, c.head_channels), nn.Conv2d(c.head_channels, c.out_channels, 1))
+
+
+def head_logits(module: nn.Module, fused: torch.Tensor, stem: torch.Tensor) -> torch.Tensor:
+    """Logits at the stem's resolution (stride 2) from the fused pyramid and the stem."""
+    if module.config.head == "full":
+        half = F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False)
+        return module.head(torch.cat([half, stem], dim=1))
+    half = F.interpolate(module.reduce(fused), size=stem.shape[-2:], mode="bilinear", align_corners=False)
+    return module.head(half + module.project(stem))
+
+
 def top_down(features: list[torch.Tensor], lateral: nn.ModuleList, smooth: nn.ModuleList) -> torch.Tensor:
     """FPN top-down path: lateral 1x1 maps plus the upsampled coarser level, each smoothed, all
     summed at the finest level's resolution."""
@@ -110,7 +144,7 @@ class ResNetFPN(nn.Module):
         self.stages = nn.ModuleList(stages)
         self.lateral = nn.ModuleList(nn.Conv2d(w, c.pyramid, 1) for w in c.widths)
         self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in c.widths)
-        self.head = nn.Sequential(conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1))
+        add_head(self, c)
         self.stride = 2 ** (len(c.widths) + 1)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
@@ -125,9 +159,7 @@ class ResNetFPN(nn.Module):
             y = stage(y)
             features.append(y)
         fused = top_down(features, self.lateral, self.smooth)
-        half = F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False)
-        logits = self.head(torch.cat([half, stem], dim=1))
-        logits = F.interpolate(logits, scale_factor=2, mode="bilinear", align_corners=False)
+        logits = F.interpolate(head_logits(self, fused, stem), scale_factor=2, mode="bilinear", align_corners=False)
         return logits[..., :h, :w]
 
 
@@ -146,7 +178,7 @@ class LiteFPN(nn.Module):
         self.lateral = nn.ModuleList(nn.Conv2d(LITE0_CHANNELS[s], c.pyramid, 1) for s in levels)
         self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in levels)
         self.stem = nn.Sequential(conv_bn_relu(c.in_channels, c.stem, 2), conv_bn_relu(c.stem, c.stem))
-        self.head = nn.Sequential(conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1))
+        add_head(self, c)
         self.stride = round(32 / c.encoder_scale)
         self.freeze_encoder_bn = False  # set by training: keep the encoder's ImageNet batch statistics
 
@@ -170,7 +202,5 @@ class LiteFPN(nn.Module):
         features = self.encoder(small)[1:]  # strides 4..32 of the encoder's input
         fused = top_down(features, self.lateral, self.smooth)
         stem = self.stem((x - 0.5) / 0.25)
-        half = F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False)
-        logits = self.head(torch.cat([half, stem], dim=1))
-        logits = F.interpolate(logits, scale_factor=2, mode="bilinear", align_corners=False)
+        logits = F.interpolate(head_logits(self, fused, stem), scale_factor=2, mode="bilinear", align_corners=False)
         return logits[..., :h, :w]

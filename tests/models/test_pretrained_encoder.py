@@ -92,3 +92,39 @@ def test_frozen_encoder_batch_norm_keeps_imagenet_statistics_while_training():
     assert torch.equal(model.encoder.stem[1].running_mean, before)  # encoder statistics frozen
     assert not torch.equal(model.head[0][1].running_mean, head_before)  # the rest still learns its own
     assert model.head.training and not model.encoder.stem[1].training
+
+
+LIGHT = FPNConfig(backbone="efficientnet-lite0", head="light", stem=16, pretrained=False)
+
+
+@pytest.mark.parametrize("config", [LIGHT, FPNConfig(head="light", stem=16)], ids=["lite0", "resnet"])
+@pytest.mark.parametrize("size", [(64, 64), (97, 130)])
+def test_light_head_keeps_any_input_size(config, size):
+    with torch.no_grad():
+        out = FPN(config).eval()(torch.rand(1, 4, *size))
+    assert out.shape == (1, 2, *size) and torch.isfinite(out).all()
+
+
+def test_light_head_does_a_fraction_of_the_full_heads_work_at_stride_2():
+    """Multiply-adds of the convolutions that run at stride 2 (the stem's second and the head's)."""
+    def stride2_macs(config):
+        model, macs = FPN(config).eval(), []
+        hooks = [m.register_forward_hook(lambda m, i, o: macs.append(o.shape[-1] * o.shape[-2] * m.weight[0].numel() * o.shape[1]))
+                 for name, m in model.named_modules() if isinstance(m, torch.nn.Conv2d) and not name.startswith("encoder")]
+        with torch.no_grad():
+            model(torch.rand(1, 4, 128, 128))
+        for h in hooks:
+            h.remove()
+        return sum(v for v in macs)
+    full, light = stride2_macs(FPNConfig(backbone="efficientnet-lite0", pretrained=False)), stride2_macs(LIGHT)
+    assert light < 0.2 * full
+
+
+def test_an_unknown_head_is_refused():
+    with pytest.raises(ValueError, match="unknown FPN head 'huge'"):
+        FPN(FPNConfig(head="huge"))
+
+
+def test_full_head_keeps_the_parameter_names_of_shipped_weights():
+    names = set(FPN(FPNConfig(backbone="efficientnet-lite0", pretrained=False)).state_dict())
+    assert {"head.0.0.weight", "head.1.weight", "head.1.bias"} <= names and not any(n.startswith(("reduce.", "project.")) for n in names)
