@@ -12,6 +12,7 @@ import torch
 from tqdm import tqdm
 
 from csboundary.data.grid import PatchGrid
+from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
 from csboundary.models.fpn import FPN
@@ -55,7 +56,7 @@ def predict_mosaic_maps(model: FPN, mosaic: Mosaic, grid: PatchGrid, device: tor
     count = np.zeros((mosaic.height, mosaic.width), np.float32)
     for patch in tqdm(list(grid), desc="FPN maps", unit="patch", disable=not progress):
         read = mosaic.read(patch.expanded)
-        probs = predict_probabilities(model, read.data, device)
+        probs = predict_probabilities(model, fill_nodata(read.data, read.valid), device)  # as the city pipeline reads
         part = patch.expanded.intersection(mosaic.window)
         rows, cols = part.slices()
         lrows, lcols = part.relative_to(patch.expanded).slices()

@@ -35,6 +35,7 @@ from shapely.geometry import LineString
 from tqdm import tqdm
 
 from csboundary.data.grid import GridConfig, Patch, PatchGrid
+from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.fragments import drop_short_fragments
@@ -131,7 +132,8 @@ class CityJob:
             reads = timed("read", self.read_batch, indices)
         has_pixels = [bool(r.valid.any()) for r in reads]
         work = [k for k, ok in enumerate(has_pixels) if ok]
-        predicted = timed("fpn", self.model.patch_maps, [patches[k] for k in work], [reads[k].data for k in work]) if work else []
+        images = [fill_nodata(reads[k].data, reads[k].valid) for k in work]  # no false edge along the imagery's border
+        predicted = timed("fpn", self.model.patch_maps, [patches[k] for k in work], images) if work else []
         maps: list[np.ndarray | None] = [None] * len(patches)
         for k, m in zip(work, predicted):
             maps[k] = m * reads[k].valid[None]  # no keypoints where there is no image

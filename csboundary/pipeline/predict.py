@@ -13,6 +13,7 @@ from csboundary.data.atomic import check_output_dir, staging_folder
 from csboundary.data.grid import PatchGrid
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import ModelInput, model_view
+from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
@@ -72,7 +73,7 @@ def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: Patch
         if mosaic.width > 1100 or mosaic.height > 1100:
             raise InputError(image, f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a patch)")
         read = mosaic.read(mosaic.window)
-        maps = predictor.maps(read.data)
+        maps = predictor.maps(fill_nodata(read.data, read.valid)) * read.valid[None]  # as the city pipeline does
         graph = predictor.graph(read.data, maps)
         graph.transform, graph.crs = mosaic.transform, (mosaic.crs.to_string() if mosaic.crs else None)
     frame = gpd.GeoDataFrame(

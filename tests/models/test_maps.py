@@ -8,6 +8,7 @@ from affine import Affine
 
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.grid import GridConfig, PatchGrid
+from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.maps import predict_mosaic_maps, predict_probabilities
@@ -23,8 +24,9 @@ def test_overlaps_are_the_mean_of_the_patches_covering_them(tmp_path):
         grid = PatchGrid.for_mosaic(mosaic, GridConfig(core=64, margin=8))  # 2 x 3 patches of 80 px
         maps = predict_mosaic_maps(model, mosaic, grid, torch.device("cpu"), progress=False)
         a, b = grid.patch(0, 0), grid.patch(0, 1)
-        pa = predict_probabilities(model, mosaic.read(a.expanded).data, torch.device("cpu"))
-        pb = predict_probabilities(model, mosaic.read(b.expanded).data, torch.device("cpu"))
+        ra, rb = mosaic.read(a.expanded), mosaic.read(b.expanded)  # both reach beyond the mosaic: filled as predicted
+        pa = predict_probabilities(model, fill_nodata(ra.data, ra.valid), torch.device("cpu"))
+        pb = predict_probabilities(model, fill_nodata(rb.data, rb.valid), torch.device("cpu"))
     assert maps.shape == (2, 96, 160) and (maps >= 0).all() and (maps <= 1).all()
     # Column 60, row 20 lies in the expanded windows of (0,0) [-8, 72) and (0,1) [56, 136) only.
     assert len(grid.patches_covering(60, 20)) == 2
