@@ -111,3 +111,16 @@ def test_afanet_resumed_run_equals_uninterrupted_run(fpn_run, tmp_path):
                            resume=str(tmp_path / "half" / "afanet-last.pt"), progress=False)
     a, b = load_checkpoint(whole, ("afanet",))["afanet"], load_checkpoint(resumed, ("afanet",))["afanet"]
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_fine_tuning_starts_from_the_trained_fpn_and_its_architecture(fpn_run, tmp_path):
+    tmp, weights = fpn_run
+    start = load_checkpoint(weights, ("fpn",))
+    cfg = config(tmp, init_fpn=str(weights), steps=1, validate_every=1, lr=0.0, weight_decay=0.0, fpn={})  # fpn {} would be the default FPN
+    tuned = load_checkpoint(train_fpn(cfg, tmp_path / "tune", torch.device("cpu"), progress=False), ("fpn",))
+    architecture = lambda c: {k: v for k, v in c.items() if k != "pretrained"}  # noqa: E731 (rebuilt from weights, not ImageNet)
+    assert architecture(tuned["fpn_config"]) == architecture(start["fpn_config"])
+    # lr 0: the weights are the trained ones (batch-norm running statistics move with the batch)
+    assert all(torch.equal(start["fpn"][k], tuned["fpn"][k]) for k in start["fpn"] if "running" not in k and "num_batches" not in k)
+    first = json.loads((tmp_path / "tune" / "train.log").read_text().splitlines()[0])
+    assert len(first["init_fpn_sha256"]) == 64

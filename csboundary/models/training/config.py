@@ -38,6 +38,7 @@ class TrainConfig(Config):
     autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides
+    init_fpn: str = ""  # start from this trained FPN (fpn checkpoint or bundle; its architecture, not ``fpn``): fine-tuning
     crop: int = 256
     batch: int = 4
     pos_weight_keypoint: float = 20.0

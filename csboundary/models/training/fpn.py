@@ -10,6 +10,7 @@ import torch
 import torch.nn.functional as F
 
 from csboundary.models.augmentation import AugmentConfig
+from csboundary.models.checkpoint import file_sha256, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity
@@ -76,15 +77,21 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     log = RunLog(out_dir / "train.log")
     train_cities = training_cities(config)
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
-    model_config = model_config_with(FPNConfig, config.fpn)
-    model = FPN(model_config).to(device)
+    if config.init_fpn:  # fine-tuning: the trained network and its architecture
+        model = load_fpn(config.init_fpn, device).to(memory_format=torch.contiguous_format)
+        model_config = model.config
+    else:
+        model_config = model_config_with(FPNConfig, config.fpn)
+        model = FPN(model_config).to(device)
     optimizer = torch.optim.Adam(fpn_parameter_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_fpn_batch([valid_city], valid_rng, config, None) for _ in range(config.validation_samples)]
     augmentation = model_config_with(AugmentConfig, config.augment)
     step, history = resume_run(resume, "fpn", model, optimizer, rng)
-    log.write(event="start", model="fpn", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    init = {"init_fpn_sha256": file_sha256(config.init_fpn)} if config.init_fpn else {}
+    log.write(event="start", model="fpn", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()),
+              config=config.to_dict(), **init)
 
     def loss_at(step: int):
         image, target, valid = _fpn_batch(train_cities, rng, config, augmentation)
