@@ -20,5 +20,10 @@ def fill_nodata(data: np.ndarray, valid: np.ndarray) -> np.ndarray:
     valid = np.asarray(valid, bool)
     if valid.all() or not valid.any():
         return data
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    if valid[r0:r1, c0:c1].all():  # a window reaching beyond the mosaic: repeating the edge is the same fill, 20x cheaper
+        h, w = valid.shape
+        return np.pad(data[:, r0:r1, c0:c1], ((0, 0), (r0, h - r1), (c0, w - c1)), mode="edge")
     rows, cols = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
     return np.ascontiguousarray(data[:, rows, cols])

@@ -48,3 +48,16 @@ def test_valid_pixels_are_kept_and_every_filled_value_comes_from_a_nearest_valid
             d2 = (vr - r) ** 2 + (vc - c) ** 2
             nearest = d2 == d2.min()
             assert any(np.array_equal(out[:, r, c], data[:, a, b]) for a, b in zip(vr[nearest], vc[nearest]))
+
+
+@given(st.integers(0, 8), st.integers(1, 9), st.integers(0, 10), st.integers(1, 11), st.integers(0, 2**31 - 1))
+@settings(max_examples=60, deadline=None)
+def test_a_rectangle_of_imagery_is_filled_as_the_nearest_pixel_rule_says(r0, rows, c0, cols, seed):
+    from scipy import ndimage
+
+    valid = np.zeros((9, 11), bool)
+    valid[r0:r0 + rows, c0:c0 + cols] = True  # the fast path: a window reaching beyond the mosaic
+    data = np.random.default_rng(seed).integers(0, 255, (3, 9, 11), dtype=np.uint8)
+    r, c = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
+    expected = data if valid.all() else data[:, r, c]
+    assert np.array_equal(fill_nodata(data, valid), expected)
