@@ -87,7 +87,7 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     model_config = model_config_with(AfANetConfig, config.afanet)
     model = AfANet(model_config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    vertex_config = VertexConfig()
+    vertex_config = VertexConfig(threshold=config.vertex_threshold)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_windows = [cities["valid"].random_window(valid_rng, config.window) for _ in range(config.validation_samples)]
     valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows] for stage in ("gt", "pred")}

@@ -49,6 +49,7 @@ class TrainConfig(Config):
     window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
     gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
     vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1
+    vertex_threshold: float = 0.5  # stage 2: keypoint probability of the FPN's extracted vertices (as the bundle will infer)
     crossing_spacing_px: int = 0  # AfANet stage 2: also the FPN segmentation's grid-crossing vertices (csboundary.graph.crossings)
     max_vertices: int = 160
     max_pos_weight: float = 30.0
