@@ -92,7 +92,8 @@ class PatchPredictor:
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
-        return cls(fpn, afanet, device, edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
+        return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
+                   edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
                    support=support, crossings=crossings, pixel_size_m=float(pixel_size),
                    min_fragment_px=float(settings.get("min_fragment_px", 0.0)))
 
@@ -144,7 +145,7 @@ class PatchPredictor:
 # name -> (smallest, largest, integer) of each inference setting a bundle may carry
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
-                      "min_fragment_px": (0.0, 1e6, False)}
+                      "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False)}
 
 
 def inference_settings(settings, path: str | Path) -> dict:

@@ -59,3 +59,27 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
     assert sorted(map(tuple, np.round(predictor.extract(maps).vertices, 1))) == [(50.5, 120.5), (300.5, 120.5)]
     shipped_predictor = PatchPredictor.load(shipped_weights(), torch.device("cpu"))
     assert shipped_predictor.crossings.spacing_px == 0 and shipped_predictor.min_fragment_px == 0
+
+
+def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_path):
+    import torch
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
+    from csboundary.pipeline.patch import PatchPredictor
+
+    shipped = load_checkpoint(shipped_weights(), ("bundle",))
+    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
+    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"],
+                    train_config={"vertex_threshold": 0.35})
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "trained.pt")
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "given.pt", vertex_threshold=0.6)
+    assert PatchPredictor.load(tmp_path / "trained.pt", torch.device("cpu")).vertices.threshold == 0.35
+    assert PatchPredictor.load(tmp_path / "given.pt", torch.device("cpu")).vertices.threshold == 0.6
+    assert PatchPredictor.load(shipped_weights(), torch.device("cpu")).vertices.threshold == 0.5  # older bundles: the default
+    # a keypoint blob peaking at 0.45 is a vertex at 0.35, not at 0.6
+    maps = np.zeros((2, 200, 200), np.float32)
+    yy, xx = np.mgrid[:200, :200]
+    maps[0] = 0.45 * np.exp(-((xx - 100.5) ** 2 + (yy - 80.5) ** 2) / 18.0)
+    assert PatchPredictor.load(tmp_path / "trained.pt", torch.device("cpu")).extract(maps).n_vertices == 1
+    assert PatchPredictor.load(tmp_path / "given.pt", torch.device("cpu")).extract(maps).n_vertices == 0
