@@ -101,8 +101,7 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
     for car in scene.cars:
         if canvas.visible(car.body):
             canvas.fill(car.body, car.colour, 3)
-            cabin = tuple(int(c * 0.7) for c in car.colour)
-            canvas.fill(car.cabin, cabin, 3)
+            canvas.fill(car.cabin, _scaled(car.colour, 0.7), 3)
 
     _cast_shadows(canvas, scene)
     for b in scene.buildings:
@@ -120,6 +119,7 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
 
 
 def _scaled(colour, factor: float) -> tuple[int, ...]:
+    """A colour brightened or darkened by ``factor``, each band truncated to 0..255."""
     return tuple(int(np.clip(c * factor, 0, 255)) for c in colour)
 
 
@@ -156,7 +156,7 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             r = t.radius * (0.55 if k else 0.85) * local.uniform(0.8, 1.1)
             off = local.uniform(-0.4, 0.4, 2) * t.radius if k else np.zeros(2)
             shade = local.uniform(0.8, 1.15)
-            colour = tuple(int(min(255, c * shade)) for c in t.colour)
+            colour = _scaled(t.colour, shade)
             p = frame.to_pixels(np.array([[t.x + off[0], t.y + off[1]]]))[0]
             cv2.circle(canvas.image, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), colour, -1, lineType=cv2.LINE_AA, shift=SHIFT)
             cv2.circle(canvas.rough, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), 22, -1, shift=SHIFT)
