@@ -103,6 +103,8 @@ class SynthConfig(Config):
     lot_fence_share: float = 0.0  # lot lines beside houses drawn as fences or hedges
     lawn_patch_share: float = 0.0  # lots whose lawn has its own shade (a patchwork of yards)
     pool_share: float = 0.0  # back yards with a swimming pool
+    yard_canopy: tuple[float, float] = (0.0, 0.0)  # share of a residential yard under clumped tree crowns
+    crown_lobes: int = 5  # lobes per crown; more draws the lumpy, sunlit/shaded crowns of real canopy
     # camera look, drawn once per city from its own random stream
     source_gsd: tuple[float, float] | None = None  # sensor pixel size (m), resampled to ``gsd``
     haze: tuple[float, float] = (0.0, 0.0)  # blend towards a bright grey-blue veil

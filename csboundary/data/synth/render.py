@@ -10,6 +10,7 @@ Geometry is rasterised with OpenCV in 1/8-pixel fixed point.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -152,6 +153,9 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
         if t.x + t.radius < x0 or t.x - t.radius > x1 or t.y + t.radius < y0 or t.y - t.radius > y1:
             continue
         local = np.random.default_rng(t.shape_seed)  # crown shape depends on the tree, not the tile
+        if t.lobes != 5:
+            _draw_lobed_crown(canvas, t, local, scene.sun)
+            continue
         for k in range(5):
             r = t.radius * (0.55 if k else 0.85) * local.uniform(0.8, 1.1)
             off = local.uniform(-0.4, 0.4, 2) * t.radius if k else np.zeros(2)
@@ -160,6 +164,24 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             p = frame.to_pixels(np.array([[t.x + off[0], t.y + off[1]]]))[0]
             cv2.circle(canvas.image, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), colour, -1, lineType=cv2.LINE_AA, shift=SHIFT)
             cv2.circle(canvas.rough, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), 22, -1, shift=SHIFT)
+
+
+def _draw_lobed_crown(canvas: _Canvas, t, local: np.random.Generator, sun: tuple[float, float]) -> None:
+    """A crown of ``t.lobes`` small lobes over a dark core: lobes on the sun's side are lit, those
+    away from it shaded, and the gaps between them stay dark, as a real canopy looks from above."""
+    frame = canvas.frame
+    norm = math.hypot(*sun)
+    towards_sun = -np.asarray(sun, float) / norm if norm > 0 else np.zeros(2)
+    discs = [(np.zeros(2), t.radius * 0.95, 0.6)]
+    for _ in range(t.lobes):
+        off = local.uniform(-0.62, 0.62, 2) * t.radius
+        lit = float(np.dot(off, towards_sun)) / t.radius
+        discs.append((off, t.radius * local.uniform(0.3, 0.5), local.uniform(0.8, 1.1) + 0.35 * lit))
+    for off, r, shade in discs:
+        p = frame.to_pixels(np.array([[t.x + off[0], t.y + off[1]]]))[0]
+        centre, radius = (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE)
+        cv2.circle(canvas.image, centre, radius, _scaled(t.colour, shade), -1, lineType=cv2.LINE_AA, shift=SHIFT)
+        cv2.circle(canvas.rough, centre, radius, 26, -1, shift=SHIFT)
 
 
 def _finish(canvas: _Canvas, rng: np.random.Generator, noise_sigma: float) -> np.ndarray:

@@ -85,6 +85,7 @@ class Tree:
     radius: float
     colour: Colour
     shape_seed: int = 0
+    lobes: int = 5  # crown lobes (render: 5 = simple crown, more = lobes lit from the sun's side)
 
 
 @dataclass
@@ -171,8 +172,8 @@ def build_scene(cfg: SynthConfig, rng: np.random.Generator, network: StreetNetwo
     return scene
 
 
-def _tree(rng: np.random.Generator, x: float, y: float, radius: float) -> Tree:
-    return Tree(float(x), float(y), radius, _tree_colour(rng), int(rng.integers(2**31)))
+def _tree(rng: np.random.Generator, x: float, y: float, radius: float, lobes: int = 5) -> Tree:
+    return Tree(float(x), float(y), radius, _tree_colour(rng), int(rng.integers(2**31)), lobes)
 
 
 def _tree_colour(rng: np.random.Generator) -> Colour:
@@ -242,7 +243,9 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
             else:
                 _add_buildings(cfg, rng, scene, part, kind, driveways, block, sidewalk)
                 if kind == "residential":
-                    _add_trees_in(rng, scene, part, density=rng.uniform(0.0, 0.004))
+                    _add_trees_in(rng, scene, part, density=rng.uniform(0.0, 0.004), lobes=cfg.crown_lobes)
+                    if cfg.yard_canopy[1] > 0:
+                        _add_canopy(rng, scene, part, rng.uniform(*cfg.yard_canopy), cfg.crown_lobes)
     for driveway in driveways:
         if not driveway.is_empty:
             scene.ground.append(Painted(driveway, _jitter(rng, CONCRETE if rng.random() < 0.6 else ASPHALT, 0.08), 5))
@@ -253,7 +256,7 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
         for p, d, left in _frontage(ring, lambda: rng.uniform(*cfg.street_tree_spacing)):
             if rng.random() < density:
                 c = p + left * max(sidewalk, 2.0) * rng.uniform(*cfg.street_tree_setback)
-                scene.trees.append(_tree(rng, c[0], c[1], rng.uniform(*cfg.street_tree_radius)))
+                scene.trees.append(_tree(rng, c[0], c[1], rng.uniform(*cfg.street_tree_radius), cfg.crown_lobes))
 
     # Parked cars along the curb, on the road side.
     occupancy = rng.uniform(*cfg.parked_car_occupancy)
@@ -274,7 +277,7 @@ def _car(rng: np.random.Generator, centre: np.ndarray, direction: np.ndarray) ->
     return Car(_centred_rect(centre, direction, length, width), colour, _centred_rect(cabin_colour_centre, direction, length * 0.5, width * 0.8))
 
 
-def _add_trees_in(rng: np.random.Generator, scene: Scene, area: Polygon, density: float) -> None:
+def _add_trees_in(rng: np.random.Generator, scene: Scene, area: Polygon, density: float, lobes: int = 5) -> None:
     n = rng.poisson(area.area * density)
     if n == 0:
         return
@@ -282,7 +285,28 @@ def _add_trees_in(rng: np.random.Generator, scene: Scene, area: Polygon, density
     xs, ys = rng.uniform(minx, maxx, n), rng.uniform(miny, maxy, n)
     inside = shapely.contains_xy(area, xs, ys)
     for x, y in zip(xs[inside], ys[inside]):
-        scene.trees.append(_tree(rng, x, y, rng.uniform(2.0, 6.0)))
+        scene.trees.append(_tree(rng, x, y, rng.uniform(2.0, 6.0), lobes))
+
+
+def _add_canopy(rng: np.random.Generator, scene: Scene, area: Polygon, cover: float, lobes: int) -> None:
+    """Clumps of big, touching crowns until their summed crown area reaches ``cover`` of ``area``.
+
+    Real suburbs hide much of each yard (and often the curb) under a continuous canopy whose
+    outline against the lawn is as sharp as a road edge; isolated round crowns never teach that.
+    """
+    minx, miny, maxx, maxy = area.bounds
+    goal, crowns = cover * area.area, 0.0
+    for _ in range(200):  # clumps; bounded so a thin yard cannot loop for ever
+        if crowns >= goal:
+            return
+        centre = rng.uniform((minx, miny), (maxx, maxy))
+        if not area.contains(shapely.Point(centre)):
+            continue
+        for _ in range(int(rng.integers(2, 9))):
+            x, y = centre + rng.normal(0.0, 4.5, 2)
+            radius = rng.uniform(3.0, 7.0)
+            scene.trees.append(_tree(rng, x, y, radius, lobes))
+            crowns += math.pi * radius**2
 
 
 def _roof(rng: np.random.Generator, palette: str) -> Colour:
