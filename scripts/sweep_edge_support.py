@@ -1,6 +1,6 @@
 """Scores of one weights bundle on validation sets for a grid of edge-support settings.
 
-    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--vertex-threshold 0.5]
+    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.5]
 
 Each SET is a folder of cities (``csboundary import-masks``) scored with ``evaluate-set``'s mean,
 or one city directory scored at city scale. Prints one row per setting (F1@5, APLS, TLTS per
@@ -26,25 +26,29 @@ def main() -> None:
     parser.add_argument("sets", nargs="+")
     parser.add_argument("--support", default="0,0.2,0.3,0.4")
     parser.add_argument("--length", default="0,300")
-    parser.add_argument("--vertex-threshold", default="0.5", help="keypoint probability of vertex extraction")
+    parser.add_argument("--gap", default="0", help="longest stretch below the gap level, px (0 = no check)")
+    parser.add_argument("--gap-level", type=float, default=0.3, help="boundary probability below which a sample is a gap")
+    parser.add_argument("--vertex-threshold", default="", help="keypoint probability of vertex extraction (default: the bundle's)")
     parser.add_argument("--edge-threshold", default="", help="AfANet edge probability (default: the bundle's)")
     parser.add_argument("--crossings", type=int, default=0, help="grid-crossing vertices every N px (0 = off)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
-    print("edge vthr support length " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    print("edge vthr support length gap " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
     edges = [float(e) for e in args.edge_threshold.split(",")] if args.edge_threshold else [predictor.edge_threshold]
-    grid = [(e, float(t), float(s), float(n)) for e in edges for t in args.vertex_threshold.split(",") for s in args.support.split(",")
-            for n in args.length.split(",")]
-    for edge, vthr, support, length in grid:
+    vthrs = args.vertex_threshold.split(",") if args.vertex_threshold else [predictor.vertices.threshold]
+    grid = [(e, float(t), float(s), float(n), float(g)) for e in edges for t in vthrs for s in args.support.split(",")
+            for n in args.length.split(",") for g in args.gap.split(",")]
+    for edge, vthr, support, length, gap in grid:
         predictor.edge_threshold = edge
         predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
-        predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length)
+        predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length,
+                                                max_gap_px=gap, gap_level=args.gap_level)
         row = []
         for s in args.sets:
             m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
             row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
-        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ def synth(
     tile_size: int = typer.Option(5000, min=64, help="Tile side in pixels."),
     gsd: float = typer.Option(0.152, callback=finite, min=0.01, help="Ground sampling distance, metres per pixel."),
     split: str = typer.Option("train", help="train | valid | test."),
-    style: str = typer.Option("classic", help="City style: classic, grid, downtown, suburb, rural, irregular, or mix (one drawn from the seed); see docs/styles.md."),
+    style: str = typer.Option("classic", help="City style: classic, grid, downtown, suburb, rural, irregular, residential, leafy, or mix (one drawn from the seed); see docs/styles.md."),
     quiet: QuietOption = False,
 ) -> None:
     """Synthesize an aerial city with exact vector road-boundary ground truth."""

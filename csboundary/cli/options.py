@@ -13,6 +13,7 @@ from csboundary.errors import InputError
 
 SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check; default: the weights')."
 LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit; default: the weights')."
+GAP_HELP = "Longest stretch of an AfANet edge, in pixels, where the boundary map is below the gap level (0 = no check; default: the weights')."
 FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all; default: the weights')."
 THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
 ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
@@ -33,6 +34,7 @@ WeightsOption = Annotated[Optional[Path], typer.Option(help=WEIGHTS_HELP)]
 EdgeThresholdOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP)]
 EdgeSupportOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP)]
 EdgeLengthOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, help=LENGTH_HELP)]
+EdgeGapOption = Annotated[Optional[float], typer.Option("--max-edge-gap", callback=finite, min=0.0, help=GAP_HELP)]
 FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
 EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
 DeviceOption = Annotated[str, typer.Option(help=DEVICE_HELP)]

@@ -24,10 +24,12 @@ class EdgeSupportConfig:
     min_support: float = 0.0  # mean boundary probability along an edge; 0 = no check
     max_length_px: float = 0.0  # longest edge kept; 0 = no limit
     radius_px: int = 2  # max-filter radius of the boundary map before sampling
+    max_gap_px: float = 0.0  # longest stretch of an edge below ``gap_level``; 0 = no check
+    gap_level: float = 0.3  # boundary probability below which a sample is a gap
 
     @property
     def active(self) -> bool:
-        return self.min_support > 0 or self.max_length_px > 0
+        return self.min_support > 0 or self.max_length_px > 0 or self.max_gap_px > 0
 
 
 def widened(boundary: np.ndarray, radius_px: int) -> np.ndarray:
@@ -38,6 +40,22 @@ def widened(boundary: np.ndarray, radius_px: int) -> np.ndarray:
     return cv2.dilate(np.asarray(boundary, np.float32), kernel)
 
 
+def _sample_segments(support: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+    """``support`` sampled every pixel along each segment: (values, first sample of each segment,
+    samples per segment). Samples outside the map are 0; a zero-length segment samples its point twice."""
+    h, w = support.shape
+    counts = np.maximum(2, np.ceil(np.linalg.norm(ends - starts, axis=1)).astype(int) + 1)
+    segment = np.repeat(np.arange(len(starts)), counts)
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    t = (np.arange(len(segment)) - first[segment]) / (counts - 1)[segment]
+    points = starts[segment] + (ends - starts)[segment] * t[:, None]
+    cols, rows = np.floor(points[:, 0]).astype(int), np.floor(points[:, 1]).astype(int)
+    inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+    values = np.zeros(len(points))
+    values[inside] = support[rows[inside], cols[inside]]
+    return values, first, counts
+
+
 def segment_support(support: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Mean of ``support`` (h, w) sampled every pixel along each segment (K, 2) -> (K,).
 
@@ -46,17 +64,24 @@ def segment_support(support: np.ndarray, starts: np.ndarray, ends: np.ndarray) -
     starts, ends = np.asarray(starts, float).reshape(-1, 2), np.asarray(ends, float).reshape(-1, 2)
     if len(starts) == 0:
         return np.zeros(0)
-    h, w = support.shape
-    counts = np.maximum(2, np.ceil(np.linalg.norm(ends - starts, axis=1)).astype(int) + 1)
-    segment = np.repeat(np.arange(len(starts)), counts)
-    offsets = np.concatenate([np.arange(c) for c in counts])
-    t = offsets / np.repeat(counts - 1, counts)
-    points = starts[segment] + (ends - starts)[segment] * t[:, None]
-    cols, rows = np.floor(points[:, 0]).astype(int), np.floor(points[:, 1]).astype(int)
-    inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
-    values = np.zeros(len(points))
-    values[inside] = support[rows[inside], cols[inside]]
-    return np.bincount(segment, weights=values, minlength=len(starts)) / counts
+    values, first, counts = _sample_segments(support, starts, ends)
+    return np.add.reduceat(values, first) / counts
+
+
+def longest_gap(support: np.ndarray, starts: np.ndarray, ends: np.ndarray, level: float) -> np.ndarray:
+    """Longest run of consecutive samples below ``level`` along each segment (K, 2) -> (K,), in
+    samples (about pixels). A boundary occluded by a car or a crown has short gaps; a chord across
+    a block has one long one, even where a roof outline lifts its mean."""
+    starts, ends = np.asarray(starts, float).reshape(-1, 2), np.asarray(ends, float).reshape(-1, 2)
+    if len(starts) == 0:
+        return np.zeros(0, np.int64)
+    values, first, _ = _sample_segments(support, starts, ends)
+    low = values < level
+    index = np.arange(len(values))
+    last_break = np.where(low, -1, index)  # the last sample at or before i that is not low
+    last_break[first] = np.maximum(last_break[first], first - 1)  # runs restart at each segment
+    run = np.where(low, index - np.maximum.accumulate(last_break), 0)
+    return np.maximum.reduceat(run, first)
 
 
 def unsupported_pairs(vertices: np.ndarray, probs: np.ndarray, boundary: np.ndarray, threshold: float,
@@ -70,6 +95,10 @@ def unsupported_pairs(vertices: np.ndarray, probs: np.ndarray, boundary: np.ndar
     bad = np.zeros(len(candidates), bool)
     if config.max_length_px > 0:
         bad |= np.linalg.norm(ends - starts, axis=1) > config.max_length_px
-    if config.min_support > 0:
-        bad |= segment_support(widened(boundary, config.radius_px), starts, ends) < config.min_support
+    if config.min_support > 0 or config.max_gap_px > 0:
+        support = widened(boundary, config.radius_px)
+        if config.min_support > 0:
+            bad |= segment_support(support, starts, ends) < config.min_support
+        if config.max_gap_px > 0:
+            bad |= longest_gap(support, starts, ends, config.gap_level) > config.max_gap_px
     return candidates[bad]

@@ -87,7 +87,7 @@ class PatchPredictor:
             fpn = load_fpn(source, device)
         afanet = restore_model(path, "afanet", payload, lambda c: AfANet(AfANetConfig.from_dict(c))).to(device).eval()
         settings = inference_settings(payload.get("inference", {}), path)
-        support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px") if k in settings})
+        support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
@@ -145,7 +145,8 @@ class PatchPredictor:
 # name -> (smallest, largest, integer) of each inference setting a bundle may carry
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
-                      "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False)}
+                      "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
+                      "gap_level": (0.0, 1.0, False)}
 
 
 def inference_settings(settings, path: str | Path) -> dict:
@@ -167,7 +168,8 @@ def inference_settings(settings, path: str | Path) -> dict:
 
 
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
-                   min_edge_support: float | None = None, max_edge_length: float | None = None, max_degree: int | None = None,
+                   min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
+                   max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
     inference settings (None keeps the bundle's; ``max_degree`` 0 means no cap), on the chosen
@@ -183,6 +185,8 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.support = dataclasses.replace(predictor.support, min_support=min_edge_support)
     if max_edge_length is not None:
         predictor.support = dataclasses.replace(predictor.support, max_length_px=max_edge_length)
+    if max_edge_gap is not None:
+        predictor.support = dataclasses.replace(predictor.support, max_gap_px=max_edge_gap)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
     if min_fragment_length is not None:

@@ -47,6 +47,7 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
         torch.set_num_threads(threads)
     settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
                 "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
+                "max_gap": [predictor.support.max_gap_px, predictor.support.gap_level],
                 "min_fragment_px": predictor.min_fragment_px,
                 "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
                 "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from csboundary.graph.edge_support import EdgeSupportConfig, segment_support, unsupported_pairs, widened
+from csboundary.graph.edge_support import EdgeSupportConfig, longest_gap, segment_support, unsupported_pairs, widened
 
 
 def line_map() -> np.ndarray:
@@ -44,6 +44,43 @@ def test_support_is_the_map_value_on_a_constant_map(x0, y0, x1, y1, value):
     assert segment_support(m, [[x0, y0]], [[x1, y1]])[0] == pytest.approx(value, abs=1e-6)
 
 
+def test_longest_gap_counts_the_longest_run_below_the_level():
+    m = line_map()
+    m[10, 20:27] = 0.0  # a 7 px hole in the line (a parked car)
+    m[10, 40:43] = 0.1  # and a 3 px dim stretch
+    # along row 10 from x = 0.5 to 59.5: 60 samples, one per column
+    assert longest_gap(m, [[0.5, 10.5]], [[59.5, 10.5]], 0.3)[0] == 7
+    assert longest_gap(m, [[0.5, 10.5]], [[59.5, 10.5]], 0.05)[0] == 7  # the 0.1 stretch is above 0.05
+    assert longest_gap(m, [[30.5, 10.5]], [[59.5, 10.5]], 0.3)[0] == 3
+    # across the line (x = 5.5, y 0.5 -> 40.5): 10 samples above it, 30 below
+    assert longest_gap(m, [[5.5, 0.5]], [[5.5, 40.5]], 0.3)[0] == 30
+
+
+def test_gaps_do_not_run_on_from_one_segment_into_the_next():
+    m = line_map()
+    starts = [[50.5, 30.5], [0.5, 10.5], [0.5, 30.5]]
+    ends = [[59.5, 30.5], [59.5, 10.5], [4.5, 30.5]]  # off the line (10 samples), on it, off it (5)
+    assert longest_gap(m, starts, ends, 0.5).tolist() == [10, 0, 5]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0, 49), st.floats(0, 49), st.floats(0, 49), st.floats(0, 49), st.floats(0.01, 1))
+def test_on_a_constant_map_the_gap_is_all_or_nothing(x0, y0, x1, y1, value):
+    m = np.full((50, 50), value, np.float32)
+    samples = max(2, int(np.ceil(np.hypot(x1 - x0, y1 - y0))) + 1)
+    assert longest_gap(m, [[x0, y0]], [[x1, y1]], 0.5)[0] == (samples if value < 0.5 else 0)
+
+
+def test_unsupported_pairs_drops_gapped_edges_whose_mean_passes():
+    m = line_map()
+    m[10, 15:45] = 0.0  # a 30 px gap in the middle of a 60 px line: mean 0.5
+    vertices = np.array([[0.5, 10.5], [59.5, 10.5]])
+    probs = np.array([[0.0, 0.9], [0.9, 0.0]])
+    assert len(unsupported_pairs(vertices, probs, m, 0.5, EdgeSupportConfig(min_support=0.4, radius_px=0))) == 0
+    gap = EdgeSupportConfig(min_support=0.4, radius_px=0, max_gap_px=20)
+    assert unsupported_pairs(vertices, probs, m, 0.5, gap).tolist() == [[0, 1]]
+
+
 def test_unsupported_pairs_drops_long_and_unbacked_edges_only():
     vertices = np.array([[5.5, 10.5], [25.5, 10.5], [25.5, 40.5], [58.5, 10.5]])
     probs = np.zeros((4, 4))
@@ -76,3 +113,20 @@ def test_predictor_applies_the_check(tmp_path):
     normal = [(u, v) for (u, v), kind in zip(graph.edges, graph.edge_kinds) if kind == "normal"]
     assert normal  # the row on the boundary keeps its edges
     assert all(graph.vertices[u][1] < 50 and graph.vertices[v][1] < 50 for u, v in normal)
+
+
+def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_path):
+    import torch
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+
+    shipped = load_checkpoint(shipped_weights(), ("bundle",))
+    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
+    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4)
+    support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).support
+    assert (support.min_support, support.max_gap_px, support.gap_level) == (0.2, 50, 0.4)
+    assert load_predictor(tmp_path / "b.pt", "cpu", max_edge_gap=0, engine="torch").support.max_gap_px == 0
+    assert PatchPredictor.load(shipped_weights(), torch.device("cpu")).support.max_gap_px == 0  # older bundles: off
