@@ -129,4 +129,9 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
     support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).support
     assert (support.min_support, support.max_gap_px, support.gap_level) == (0.2, 50, 0.4)
     assert load_predictor(tmp_path / "b.pt", "cpu", max_edge_gap=0, engine="torch").support.max_gap_px == 0
-    assert PatchPredictor.load(shipped_weights(), torch.device("cpu")).support.max_gap_px == 0  # older bundles: off
+    # a bundle from before the check (no such settings) loads with the check off
+    payload = load_checkpoint(tmp_path / "b.pt", ("bundle",))
+    older = {k: v for k, v in payload["inference"].items() if k not in ("max_gap_px", "gap_level")}
+    content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
+    save_checkpoint(tmp_path / "older.pt", "bundle", inference=older, **content)
+    assert PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).support.max_gap_px == 0
