@@ -61,27 +61,28 @@ def segment_support(support: np.ndarray, starts: np.ndarray, ends: np.ndarray) -
 
     Samples outside the map count as 0 (no evidence); a zero-length segment samples its point.
     """
-    starts, ends = np.asarray(starts, float).reshape(-1, 2), np.asarray(ends, float).reshape(-1, 2)
-    if len(starts) == 0:
-        return np.zeros(0)
-    values, first, counts = _sample_segments(support, starts, ends)
-    return np.add.reduceat(values, first) / counts
+    return segment_stats(support, starts, ends)[0]
 
 
 def longest_gap(support: np.ndarray, starts: np.ndarray, ends: np.ndarray, level: float) -> np.ndarray:
     """Longest run of consecutive samples below ``level`` along each segment (K, 2) -> (K,), in
     samples (about pixels). A boundary occluded by a car or a crown has short gaps; a chord across
     a block has one long one, even where a roof outline lifts its mean."""
+    return segment_stats(support, starts, ends, level)[1]
+
+
+def segment_stats(support: np.ndarray, starts: np.ndarray, ends: np.ndarray, level: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, longest gap below ``level``) of ``support`` along each segment, from one sampling."""
     starts, ends = np.asarray(starts, float).reshape(-1, 2), np.asarray(ends, float).reshape(-1, 2)
     if len(starts) == 0:
-        return np.zeros(0, np.int64)
-    values, first, _ = _sample_segments(support, starts, ends)
+        return np.zeros(0), np.zeros(0, np.int64)
+    values, first, counts = _sample_segments(support, starts, ends)
     low = values < level
     index = np.arange(len(values))
     last_break = np.where(low, -1, index)  # the last sample at or before i that is not low
     last_break[first] = np.maximum(last_break[first], first - 1)  # runs restart at each segment
     run = np.where(low, index - np.maximum.accumulate(last_break), 0)
-    return np.maximum.reduceat(run, first)
+    return np.add.reduceat(values, first) / counts, np.maximum.reduceat(run, first)
 
 
 def unsupported_pairs(vertices: np.ndarray, probs: np.ndarray, boundary: np.ndarray, threshold: float,
@@ -96,9 +97,12 @@ def unsupported_pairs(vertices: np.ndarray, probs: np.ndarray, boundary: np.ndar
     if config.max_length_px > 0:
         bad |= np.linalg.norm(ends - starts, axis=1) > config.max_length_px
     if config.min_support > 0 or config.max_gap_px > 0:
-        support = widened(boundary, config.radius_px)
+        check = ~bad  # too long already: no need to sample it
+        mean, gap = segment_stats(widened(boundary, config.radius_px), starts[check], ends[check], config.gap_level)
+        failed = np.zeros(len(mean), bool)
         if config.min_support > 0:
-            bad |= segment_support(support, starts, ends) < config.min_support
+            failed |= mean < config.min_support
         if config.max_gap_px > 0:
-            bad |= longest_gap(support, starts, ends, config.gap_level) > config.max_gap_px
+            failed |= gap > config.max_gap_px
+        bad[check] = failed
     return candidates[bad]

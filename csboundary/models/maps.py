@@ -35,6 +35,17 @@ def unit_bands(data: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(data, dtype=np.float32) / 255.0
 
 
+def bands_and_maps(data: np.ndarray, maps: np.ndarray) -> np.ndarray:
+    """(4, h, w) uint8 bands and (2, h, w) maps -> AfANet's (6, h, w) float32 input, written in
+    place (no concatenation copy); the bands scaled exactly as :func:`unit_bands` does."""
+    if data.dtype != np.uint8:
+        unit_bands(data)  # the same refusal
+    out = np.empty((data.shape[0] + maps.shape[0], *data.shape[1:]), np.float32)
+    np.divide(data, np.float32(255.0), out=out[: data.shape[0]], dtype=np.float32)
+    out[data.shape[0]:] = maps
+    return out
+
+
 @torch.no_grad()
 def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device) -> np.ndarray:
     """(4, h, w) uint8 -> (2, h, w) float32 probabilities (keypoint, segmentation); a batch

@@ -25,7 +25,7 @@ from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_mode
 from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN
 from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
-from csboundary.models.maps import image_tensor, predict_probabilities, unit_bands
+from csboundary.models.maps import bands_and_maps, predict_probabilities, unit_bands
 
 
 @dataclass
@@ -125,7 +125,7 @@ class PatchPredictor:
         m = found.n_vertices
         if m < 2:
             return graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree)
-        tensor = torch.cat([image_tensor(image, self.device), torch.from_numpy(np.ascontiguousarray(maps, np.float32)).to(self.device)], dim=0)
+        tensor = torch.from_numpy(bands_and_maps(image, maps)).to(self.device)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
         if self.onnx is not None and tensor.shape[-2:] == (WINDOW, WINDOW):
             probs = adjacency_from_logits(torch.from_numpy(self.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 from affine import Affine
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.grid import GridConfig, PatchGrid
@@ -34,3 +37,24 @@ def test_overlaps_are_the_mean_of_the_patches_covering_them(tmp_path):
     assert np.allclose(maps[:, 20, 60], expected, atol=1e-6)
     # Column 30, row 20 is covered by patch (0,0) alone.
     assert np.allclose(maps[:, 20, 30], pa[:, 28, 38], atol=1e-6)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.integers(0, 2**31))
+def test_afanet_input_is_bands_over_255_then_maps_bit_for_bit(h, w, seed):
+    """The in-place AfANet input equals the concatenation it replaces, to the last bit."""
+    from csboundary.models.maps import bands_and_maps, unit_bands
+
+    rng = np.random.default_rng(seed)
+    bands = rng.integers(0, 256, (4, h, w), dtype=np.uint8)
+    maps = rng.random((2, h, w), dtype=np.float32)
+    expected = torch.cat([torch.from_numpy(unit_bands(bands)), torch.from_numpy(maps)]).numpy()
+    assert np.array_equal(bands_and_maps(bands, maps), expected)
+
+
+def test_afanet_input_refuses_other_than_8_bit_bands():
+    from csboundary.errors import InputError
+    from csboundary.models.maps import bands_and_maps
+
+    with pytest.raises(InputError, match="8-bit"):
+        bands_and_maps(np.zeros((4, 8, 8), np.uint16), np.zeros((2, 8, 8), np.float32))
