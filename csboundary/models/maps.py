@@ -32,7 +32,7 @@ def unit_bands(data: np.ndarray) -> np.ndarray:
     """
     if data.dtype != np.uint8:
         raise InputError("<imagery>", f"the networks take 8-bit imagery; got {data.dtype} (rescale to 0-255 first)")
-    return np.ascontiguousarray(data, dtype=np.float32) / 255.0
+    return np.divide(data, np.float32(255.0), dtype=np.float32)  # one pass; the same values as casting, then dividing
 
 
 def bands_and_maps(data: np.ndarray, maps: np.ndarray) -> np.ndarray:
