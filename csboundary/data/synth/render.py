@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from csboundary.data.synth.scene import ASPHALT, Scene
+from csboundary.data.synth.scene import ASPHALT, Scene, Tree
 
 SHIFT = 3  # fixed-point bits for cv2 polygon vertices
 SCALE = 1 << SHIFT
@@ -166,7 +166,7 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             cv2.circle(canvas.rough, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), 22, -1, shift=SHIFT)
 
 
-def _draw_lobed_crown(canvas: _Canvas, t, local: np.random.Generator, sun: tuple[float, float]) -> None:
+def _draw_lobed_crown(canvas: _Canvas, t: Tree, local: np.random.Generator, sun: tuple[float, float]) -> None:
     """A crown of ``t.lobes`` small lobes over a dark core: lobes on the sun's side are lit, those
     away from it shaded, and the gaps between them stay dark, as a real canopy looks from above."""
     frame = canvas.frame
