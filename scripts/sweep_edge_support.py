@@ -1,10 +1,14 @@
 """Scores of one weights bundle on validation sets for a grid of edge-support settings.
 
-    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.5]
+    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.35,0.5]
+
+Every setting not given is the bundle's own, so ``--vertex-threshold 0.4`` alone scores the
+bundle as shipped but for its vertex threshold.
 
 Each SET is a folder of cities (``csboundary import-masks``) scored with ``evaluate-set``'s mean,
 or one city directory scored at city scale. Prints one row per setting (F1@5, APLS, TLTS per
-set): the measurement behind the shipped ``min_support`` / ``max_length_px`` (docs/real-imagery.md).
+set): the measurement behind the shipped ``min_support`` / ``max_length_px`` / ``max_gap_px`` and
+the vertex-threshold probes of the model card (docs/real-imagery.md, csboundary/weights/README.md).
 """
 
 from __future__ import annotations
@@ -24,26 +28,32 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights")
     parser.add_argument("sets", nargs="+")
-    parser.add_argument("--support", default="0,0.2,0.3,0.4")
-    parser.add_argument("--length", default="0,300")
-    parser.add_argument("--gap", default="0", help="longest stretch below the gap level, px (0 = no check)")
-    parser.add_argument("--gap-level", type=float, default=0.3, help="boundary probability below which a sample is a gap")
+    parser.add_argument("--support", default="", help="mean boundary probability along an edge (default: the bundle's)")
+    parser.add_argument("--length", default="", help="longest edge, px, 0 = no limit (default: the bundle's)")
+    parser.add_argument("--gap", default="", help="longest stretch below the gap level, px, 0 = no check (default: the bundle's)")
+    parser.add_argument("--gap-level", type=float, default=None, help="boundary probability below which a sample is a gap (default: the bundle's)")
     parser.add_argument("--vertex-threshold", default="", help="keypoint probability of vertex extraction (default: the bundle's)")
     parser.add_argument("--edge-threshold", default="", help="AfANet edge probability (default: the bundle's)")
     parser.add_argument("--crossings", type=int, default=0, help="grid-crossing vertices every N px (0 = off)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
+    gap_level = predictor.support.gap_level if args.gap_level is None else args.gap_level
     print("edge vthr support length gap " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
-    edges = [float(e) for e in args.edge_threshold.split(",")] if args.edge_threshold else [predictor.edge_threshold]
-    vthrs = args.vertex_threshold.split(",") if args.vertex_threshold else [predictor.vertices.threshold]
-    grid = [(e, float(t), float(s), float(n), float(g)) for e in edges for t in vthrs for s in args.support.split(",")
-            for n in args.length.split(",") for g in args.gap.split(",")]
+
+    def values(arg: str, bundle_value: float) -> list[float]:
+        """A comma-separated list from the command line, or the bundle's own setting."""
+        return [float(v) for v in arg.split(",")] if arg else [float(bundle_value)]
+
+    support = predictor.support
+    grid = [(e, t, s, n, g) for e in values(args.edge_threshold, predictor.edge_threshold)
+            for t in values(args.vertex_threshold, predictor.vertices.threshold) for s in values(args.support, support.min_support)
+            for n in values(args.length, support.max_length_px) for g in values(args.gap, support.max_gap_px)]
     for edge, vthr, support, length, gap in grid:
         predictor.edge_threshold = edge
         predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
         predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length,
-                                                max_gap_px=gap, gap_level=args.gap_level)
+                                                max_gap_px=gap, gap_level=gap_level)
         row = []
         for s in args.sets:
             m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
