@@ -14,6 +14,7 @@ from csboundary.errors import InputError
 SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check; default: the weights')."
 LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit; default: the weights')."
 GAP_HELP = "Longest stretch of an AfANet edge, in pixels, where the boundary map is below the gap level (0 = no check; default: the weights')."
+FILL_HELP = "Fill in segmentation-skeleton stretches at least this long that no edge covers, in pixels (0 = off; default: the weights')."
 FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all; default: the weights')."
 THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
 ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
@@ -35,6 +36,7 @@ EdgeThresholdOption = Annotated[Optional[float], typer.Option(callback=finite, m
 EdgeSupportOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP)]
 EdgeLengthOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, help=LENGTH_HELP)]
 EdgeGapOption = Annotated[Optional[float], typer.Option("--max-edge-gap", callback=finite, min=0.0, help=GAP_HELP)]
+FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callback=finite, min=0.0, help=FILL_HELP)]
 FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
 EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
 DeviceOption = Annotated[str, typer.Option(help=DEVICE_HELP)]

@@ -16,12 +16,14 @@ from csboundary.models.training.config import training_pixel_size
 
 def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, edge_threshold: float = 0.5, max_degree: int = 2,
                 min_support: float = 0.0, max_length_px: float = 0.0, crossing_spacing_px: int = 0, min_fragment_px: float = 0.0,
-                vertex_threshold: float | None = None, max_gap_px: float = 0.0, gap_level: float = 0.3) -> Path:
+                vertex_threshold: float | None = None, max_gap_px: float = 0.0, gap_level: float = 0.3,
+                fill_min_length_px: float = 0.0) -> Path:
     """One weights file: both models, their provenance and the inference settings (vertex
     threshold: by default the one AfANet's training extracted its vertices at; edge threshold,
-    degree cap, edge-support check (mean, length, longest gap), grid-crossing vertices, shortest fragment of the city graph;
+    degree cap, edge-support check (mean, length, longest gap), grid-crossing vertices, shortest fragment of the city graph,
+    shortest skeleton stretch filled in;
     see :mod:`csboundary.graph.edge_support`, :mod:`csboundary.graph.crossings` and
-    :mod:`csboundary.graph.fragments`), and the pixel size the FPN was trained at (imagery is
+    :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`), and the pixel size the FPN was trained at (imagery is
     resampled to it)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet",))
@@ -42,6 +44,6 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
         afanet_config=afanet["afanet_config"],
         inference={"edge_threshold": edge_threshold, "max_degree": max_degree, "min_support": min_support, "max_length_px": max_length_px,
                    "crossing_spacing_px": crossing_spacing_px, "min_fragment_px": min_fragment_px, "vertex_threshold": vertex_threshold,
-                   "max_gap_px": max_gap_px, "gap_level": gap_level},
+                   "max_gap_px": max_gap_px, "gap_level": gap_level, "fill_min_length_px": fill_min_length_px},
         provenance=provenance,
     )

@@ -17,6 +17,7 @@ import torch
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
+from csboundary.graph.skeleton_fill import FillConfig, fill_from_skeleton
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
 from csboundary.data.units import MODEL_GSD
@@ -38,6 +39,7 @@ class PatchPredictor:
     max_degree: int | None = 2
     support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
     crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
+    fill: FillConfig = field(default_factory=FillConfig)  # boundary the graph missed, from the segmentation skeleton (off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
     min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
@@ -89,12 +91,13 @@ class PatchPredictor:
         settings = inference_settings(payload.get("inference", {}), path)
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
+        fill = FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0)))
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
                    edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support, crossings=crossings, pixel_size_m=float(pixel_size),
+                   support=support, crossings=crossings, fill=fill, pixel_size_m=float(pixel_size),
                    min_fragment_px=float(settings.get("min_fragment_px", 0.0)))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
@@ -124,7 +127,7 @@ class PatchPredictor:
         """The patch graph: ``found``'s vertices joined by its corner edges and AfANet's edges."""
         m = found.n_vertices
         if m < 2:
-            return graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree)
+            return self.filled(patch, maps, graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree))
         tensor = torch.from_numpy(bands_and_maps(image, maps)).to(self.device)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
         if self.onnx is not None and tensor.shape[-2:] == (WINDOW, WINDOW):
@@ -133,7 +136,19 @@ class PatchPredictor:
             probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
         for i, j in unsupported_pairs(found.vertices, probs, maps[1], self.edge_threshold, self.support):
             probs[i, j] = probs[j, i] = 0.0
-        return graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree)
+        return self.filled(patch, maps, graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree))
+
+    def filled(self, patch, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
+        """``graph`` with the boundary it missed filled in from the segmentation skeleton
+        (``fill``; off by default), in a city only inside the window's core and one pixel beyond,
+        where the neighbouring window cuts the same skeleton (graph/skeleton_fill.py)."""
+        if not self.fill.active:
+            return graph
+        region = None
+        if patch is not None:
+            core = patch.core_local
+            region = (core.row_off, core.row_end + 1, core.col_off, core.col_end + 1)
+        return fill_from_skeleton(graph, maps[1], self.fill, region)
 
     def graph(self, image: np.ndarray, maps: np.ndarray | None = None) -> BoundaryGraph:
         """Graph of one patch (pixel coordinates of ``image``); ``maps`` when already stitched."""
@@ -146,7 +161,7 @@ class PatchPredictor:
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
-                      "gap_level": (0.0, 1.0, False)}
+                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False)}
 
 
 def inference_settings(settings, path: str | Path) -> dict:
@@ -169,6 +184,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
+                   fill_min_length: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
@@ -187,6 +203,8 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.support = dataclasses.replace(predictor.support, max_length_px=max_edge_length)
     if max_edge_gap is not None:
         predictor.support = dataclasses.replace(predictor.support, max_gap_px=max_edge_gap)
+    if fill_min_length is not None:
+        predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill_min_length)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
     if min_fragment_length is not None:

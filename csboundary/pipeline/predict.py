@@ -48,7 +48,7 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
     settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
                 "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
                 "max_gap": [predictor.support.max_gap_px, predictor.support.gap_level],
-                "min_fragment_px": predictor.min_fragment_px,
+                "min_fragment_px": predictor.min_fragment_px, "fill_min_length_px": predictor.fill.min_length_px,
                 "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
                 "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
                 "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}

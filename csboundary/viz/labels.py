@@ -13,8 +13,9 @@ KIND_COLOURS = {
     "isolated": (255, 230, 0),  # yellow: sharp corners and gradual curves
     "intersection": (60, 140, 255),  # blue: patch edges and auxiliary lines
     "end": (255, 255, 255),
+    "skeleton": (255, 0, 255),  # magenta: ends of stretches filled in from the segmentation skeleton
 }
-EDGE_COLOURS = {"normal": (255, 150, 0), "corner": (0, 255, 255)}
+EDGE_COLOURS = {"normal": (255, 150, 0), "corner": (0, 255, 255), "skeleton": (255, 0, 255)}
 
 
 def draw_patch_labels(rgb: np.ndarray, arrays: dict[str, np.ndarray], graph: BoundaryGraph, core=None) -> np.ndarray:

@@ -1,0 +1,153 @@
+"""Boundary the graph missed, filled in from the segmentation's skeleton (an inference option).
+
+AfANet can only join the vertices that vertex extraction found, and vertex extraction only finds
+what the keypoint map lights up. On imagery unlike the training worlds the keypoint heat is weak
+along straight real road edges while the segmentation still follows them, so whole boundaries
+come out with no vertex and no edge. Here the skeleton of the thresholded boundary map is
+compared with the patch graph: skeleton pixels farther than ``cover_px`` from every graph edge
+are uncovered, connected uncovered stretches at least ``min_length_px`` long become edges of kind
+``skeleton`` (their polylines through the pixel centres, simplified), and a free end of such an
+edge within ``snap_px`` of a graph vertex is joined to it, so a stretch that bridges two pieces
+of the graph connects them.
+
+In a city the fill is restricted to the window's core plus one pixel row and column on its far
+sides: the neighbouring window, which sees the same stitched maps, cuts the same skeleton at the
+same pixel, so the two halves share that end vertex and stitch (graph/stitching.py keeps each
+half from the core that holds it).
+
+Coordinates are continuous (x, y) pixels of the map, pixel [r, c] centred at (c + 0.5, r + 0.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+from skimage.morphology import skeletonize
+
+from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
+
+SKELETON = "skeleton"  # the kind of a filled edge
+_EIGHT = np.ones((3, 3), dtype=bool)
+
+
+@dataclass(frozen=True)
+class FillConfig:
+    min_length_px: float = 0.0  # shortest uncovered skeleton stretch filled in, px; 0 = off
+    threshold: float = 0.5  # boundary probability of the skeletonised mask
+    cover_px: float = 6.0  # a skeleton pixel this close to a graph edge is already covered
+    snap_px: float = 12.0  # a filled edge's free end this close to a graph vertex is joined to it
+    simplify_px: float = 1.0  # Douglas-Peucker tolerance of the filled polylines
+
+    @property
+    def active(self) -> bool:
+        return self.min_length_px > 0
+
+    def __post_init__(self) -> None:
+        if not (self.min_length_px >= 0 and 0 < self.threshold <= 1 and self.cover_px >= 0 and self.snap_px >= 0 and self.simplify_px >= 0):
+            raise ValueError(f"need min_length_px, cover_px, snap_px, simplify_px >= 0 and 0 < threshold <= 1; got {self}")
+
+
+def uncovered_skeleton(boundary: np.ndarray, graph: BoundaryGraph, config: FillConfig) -> np.ndarray:
+    """(h, w) bool: pixels of the skeleton of ``boundary >= threshold`` farther than ``cover_px``
+    from every edge of ``graph`` (edges drawn along their polylines)."""
+    skeleton = skeletonize(np.asarray(boundary) >= config.threshold)
+    if not skeleton.any() or graph.n_edges == 0:
+        return skeleton
+    drawn = np.full(skeleton.shape, 255, np.uint8)  # distanceTransform measures to the zero pixels
+    lines = [np.round(graph.edge_polyline(k) - 0.5).astype(np.int32) for k in range(graph.n_edges)]
+    cv2.polylines(drawn, lines, isClosed=False, color=0, thickness=1)
+    distance = cv2.distanceTransform(drawn, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return skeleton & (distance > config.cover_px)
+
+
+def long_stretches(mask: np.ndarray, min_length_px: float) -> np.ndarray:
+    """``mask`` without its 8-connected pieces of fewer than ``min_length_px`` pixels (a
+    one-pixel-wide stretch has about one pixel per pixel of length)."""
+    labels, n = ndimage.label(mask, structure=_EIGHT)
+    if n == 0:
+        return np.zeros_like(mask, dtype=bool)
+    size = np.bincount(labels.ravel(), minlength=n + 1)
+    keep = size >= min_length_px
+    keep[0] = False
+    return keep[labels]
+
+
+def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillConfig,
+                       region: tuple[int, int, int, int] | None = None) -> BoundaryGraph:
+    """``graph`` plus the uncovered skeleton stretches of ``boundary`` as ``skeleton`` edges (see
+    the module docstring). ``region`` (row0, row1, col0, col1) limits the filled pixels to that
+    block (a window's core and one pixel beyond). Returns ``graph`` itself when nothing is filled."""
+    if not config.active:
+        return graph
+    mask = long_stretches(uncovered_skeleton(boundary, graph, config), config.min_length_px)
+    if region is not None:
+        r0, r1, c0, c1 = region
+        inside = np.zeros_like(mask)
+        inside[max(r0, 0):r1, max(c0, 0):c1] = True
+        mask &= inside
+    if not mask.any():
+        return graph
+    found = skeleton_graph(mask.astype(np.float32), SkeletonConfig(threshold=0.5, simplify_px=config.simplify_px, spur_px=0.0, min_length_px=0.0))
+    if found.n_edges == 0:
+        return graph
+    target = _snap_targets(found, graph, config.snap_px)
+    return _merged(graph, found, target, boundary)
+
+
+def _snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) -> np.ndarray:
+    """(n,) for each vertex of the filled graph: the graph vertex its free end joins, or -1."""
+    target = np.full(found.n_vertices, -1)
+    degree = np.bincount(found.edges.ravel(), minlength=found.n_vertices)
+    free = np.flatnonzero(degree == 1)
+    if graph.n_vertices == 0 or not len(free) or snap_px <= 0:
+        return target
+    distance, nearest = cKDTree(graph.vertices).query(found.vertices[free], distance_upper_bound=snap_px)
+    hit = np.isfinite(distance)
+    target[free[hit]] = nearest[hit]
+    return target
+
+
+def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boundary: np.ndarray) -> BoundaryGraph:
+    """One graph: ``graph``'s vertices and edges, then the filled ones (free ends joined to their
+    targets, the polyline extended to the target vertex)."""
+    n = graph.n_vertices
+    new = np.flatnonzero(target < 0)
+    index = np.where(target >= 0, target, 0)
+    index[new] = n + np.arange(len(new))
+    vertices = np.concatenate([graph.vertices, found.vertices[new]])
+    edges, lines, scores = [], [], []
+    for k, (a, b) in enumerate(found.edges):
+        u, v = int(index[a]), int(index[b])
+        if u == v:
+            continue  # a stretch both of whose ends join the same vertex: a stub, not a boundary
+        line = np.asarray(found.edge_polyline(k), float)
+        line = np.concatenate([vertices[[u]], line, vertices[[v]]])
+        line = line[np.r_[True, np.any(line[1:] != line[:-1], axis=1)]]  # a new end vertex is the line's own end
+        edges.append((u, v))
+        lines.append(line)
+        scores.append(_mean_along(boundary, line))
+    if not edges:
+        return graph
+    n_old = graph.n_edges
+    return BoundaryGraph(
+        vertices,
+        np.concatenate([graph.edges, np.array(edges, np.int64)]),
+        vertex_kinds=list(graph.vertex_kinds or ["isolated"] * n) + [SKELETON] * len(new),
+        edge_kinds=list(graph.edge_kinds or ["normal"] * n_old) + [SKELETON] * len(edges),
+        edge_polylines=list(graph.edge_polylines or [None] * n_old) + lines,
+        edge_scores=np.concatenate([graph.edge_scores if graph.edge_scores is not None else np.ones(n_old), scores]),
+        transform=graph.transform, crs=graph.crs,
+    )
+
+
+def _mean_along(boundary: np.ndarray, line: np.ndarray) -> float:
+    """Mean boundary probability at the polyline's points (its score)."""
+    h, w = boundary.shape
+    cols = np.clip(np.floor(line[:, 0]).astype(int), 0, w - 1)
+    rows = np.clip(np.floor(line[:, 1]).astype(int), 0, h - 1)
+    return float(np.mean(boundary[rows, cols]))

@@ -1,0 +1,113 @@
+"""Boundary the graph missed, filled in from the segmentation skeleton: hand-built maps and graphs."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.skeleton_fill import SKELETON, FillConfig, fill_from_skeleton, long_stretches, uncovered_skeleton
+
+ON = FillConfig(min_length_px=30)
+
+
+def row_map(x0: int = 20, x1: int = 220, row: int = 50, size: int = 120) -> np.ndarray:
+    """A 3 px wide boundary along ``row`` from column x0 to x1 - 1 (a (size, 240) map)."""
+    m = np.zeros((size, 240), np.float32)
+    m[row - 1:row + 2, x0:x1] = 1.0
+    return m
+
+
+def graph(vertices, edges) -> BoundaryGraph:
+    edges = np.array(edges, np.int64).reshape(-1, 2)
+    return BoundaryGraph(np.array(vertices, float).reshape(-1, 2), edges, vertex_kinds=["isolated"] * len(vertices),
+                         edge_kinds=["normal"] * len(edges), edge_polylines=[None] * len(edges), edge_scores=np.ones(len(edges)))
+
+
+def test_off_returns_the_graph_itself():
+    g = graph([[0.5, 0.5], [9.5, 0.5]], [[0, 1]])
+    assert fill_from_skeleton(g, row_map(), FillConfig()) is g
+
+
+def test_a_boundary_with_no_vertex_becomes_one_skeleton_edge_along_it():
+    out = fill_from_skeleton(graph([], []), row_map(), ON)
+    assert out.n_edges == 1 and out.edge_kinds == [SKELETON]
+    line = out.edge_polyline(0)
+    assert np.abs(line[:, 1] - 50.5).max() <= 1.0  # the middle row (thinning may bend the very end)
+    # skeletonize shortens a 3 px wide bar by about a pixel at each end: 200 px drawn
+    assert 195 <= out.edge_lengths()[0] <= 200
+    assert out.edge_scores[0] == pytest.approx(1.0)
+
+
+def test_a_covered_boundary_adds_nothing():
+    g = graph([[20.5, 50.5], [219.5, 52.5]], [[0, 1]])  # a chord at most 2 px off the line
+    out = fill_from_skeleton(g, row_map(), ON)
+    assert out is g
+
+
+def test_the_filled_stretch_joins_the_vertex_where_the_graph_stops():
+    # the graph covers the line up to x = 100; the rest (about 110 px) is filled and attached there
+    g = graph([[20.5, 50.5], [100.5, 50.5]], [[0, 1]])
+    out = fill_from_skeleton(g, row_map(), ON)
+    assert out.n_edges == 2 and out.n_vertices == 3
+    u, v = out.edges[1]
+    assert 1 in (u, v)  # joined to the graph's end vertex, not a new vertex 6 px away
+    far = out.vertices[v if u == 1 else u]
+    assert far[0] == pytest.approx(218.5, abs=1.5)
+    line = out.edge_polyline(1)
+    assert np.allclose(line[0], out.vertices[u]) and np.allclose(line[-1], out.vertices[v])
+
+
+def test_short_uncovered_stretches_are_left_alone():
+    assert fill_from_skeleton(graph([], []), row_map(20, 45), ON).n_edges == 0  # ~24 px < 30
+    assert fill_from_skeleton(graph([], []), row_map(20, 60), ON).n_edges == 1  # ~39 px
+
+
+def test_long_stretches_counts_pixels_of_eight_connected_pieces():
+    mask = np.zeros((10, 10), bool)
+    mask[np.arange(6), np.arange(6)] = True  # a diagonal of 6 pixels: one piece
+    mask[9, 0:3] = True  # 3 pixels
+    kept = long_stretches(mask, 4)
+    assert kept[np.arange(6), np.arange(6)].all() and not kept[9].any()
+
+
+def test_neighbouring_regions_cut_the_skeleton_at_one_shared_pixel():
+    # two windows' cores meet at column 120; each fills its core plus one column beyond
+    boundary = row_map()
+    left = fill_from_skeleton(graph([], []), boundary, ON, region=(0, 120, 0, 121))
+    right = fill_from_skeleton(graph([], []), boundary, ON, region=(0, 120, 120, 240))
+    ends_left = {tuple(p) for p in left.vertices}
+    ends_right = {tuple(p) for p in right.vertices}
+    assert ends_left & ends_right == {(120.5, 50.5)}
+
+
+def test_uncovered_skeleton_measures_distance_to_the_edge_polylines():
+    # an L-shaped polyline edge covers the line where it runs along it
+    poly = np.array([[20.5, 50.5], [120.5, 50.5], [120.5, 110.5]])
+    g = BoundaryGraph(poly[[0, 2]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[poly], edge_scores=np.ones(1))
+    unc = uncovered_skeleton(row_map(), g, ON)
+    cols = np.flatnonzero(unc.any(axis=0))
+    assert cols.min() == 127 and cols.max() >= 217  # more than 6 px beyond the polyline's corner
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(0, np.pi), st.integers(60, 150), st.floats(-10, 10), st.floats(-10, 10))
+def test_a_drawn_straight_boundary_is_filled_on_its_own_line(angle, length, dx, dy):
+    m = np.zeros((200, 200), np.uint8)
+    c = np.array([100 + dx, 100 + dy])
+    d = np.array([np.cos(angle), np.sin(angle)]) * length / 2
+    a, b = np.round(c - d).astype(int), np.round(c + d).astype(int)
+    cv2.line(m, tuple(int(v) for v in a), tuple(int(v) for v in b), 1, thickness=3)
+    out = fill_from_skeleton(graph([], []), m.astype(np.float32), ON)
+    assert out.n_edges >= 1
+    total = out.edge_lengths().sum()
+    assert 0.85 * length <= total <= 1.1 * length + 4
+    # every filled point lies on the drawn line (pixel centres, so within ~2 px of its axis)
+    points = np.concatenate([out.edge_polyline(k) for k in range(out.n_edges)]) - 0.5
+    axis = (b - a) / np.linalg.norm(b - a)
+    offset = points - a
+    across = np.abs(offset[:, 0] * axis[1] - offset[:, 1] * axis[0])
+    assert across.max() <= 2.5
