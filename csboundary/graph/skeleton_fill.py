@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.polyline import arc_lengths
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 
 SKELETON = "skeleton"  # the kind of a filled edge
@@ -42,14 +43,15 @@ class FillConfig:
     cover_px: float = 6.0  # a skeleton pixel this close to a graph edge is already covered
     snap_px: float = 12.0  # a filled edge's free end this close to a graph vertex is joined to it
     simplify_px: float = 1.0  # Douglas-Peucker tolerance of the filled polylines
+    split_px: float = 200.0  # filled stretches are cut into edges about this long (see pieces())
 
     @property
     def active(self) -> bool:
         return self.min_length_px > 0
 
     def __post_init__(self) -> None:
-        if not (self.min_length_px >= 0 and 0 < self.threshold <= 1 and self.cover_px >= 0 and self.snap_px >= 0 and self.simplify_px >= 0):
-            raise ValueError(f"need min_length_px, cover_px, snap_px, simplify_px >= 0 and 0 < threshold <= 1; got {self}")
+        if not (self.min_length_px >= 0 and 0 < self.threshold <= 1 and self.cover_px >= 0 and self.snap_px >= 0 and self.simplify_px >= 0 and self.split_px >= 0):
+            raise ValueError(f"need min_length_px, cover_px, snap_px, simplify_px, split_px >= 0 and 0 < threshold <= 1; got {self}")
 
 
 def uncovered_skeleton(boundary: np.ndarray, graph: BoundaryGraph, config: FillConfig) -> np.ndarray:
@@ -96,7 +98,7 @@ def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillC
     if found.n_edges == 0:
         return graph
     target = _snap_targets(found, graph, config.snap_px)
-    return _merged(graph, found, target, boundary)
+    return _merged(graph, found, target, boundary, config.split_px)
 
 
 def _snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) -> np.ndarray:
@@ -112,37 +114,66 @@ def _snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) ->
     return target
 
 
-def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boundary: np.ndarray) -> BoundaryGraph:
+def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boundary: np.ndarray, split_px: float) -> BoundaryGraph:
     """One graph: ``graph``'s vertices and edges, then the filled ones (free ends joined to their
-    targets, the polyline extended to the target vertex)."""
+    targets, the polyline extended to the target vertex), each cut into pieces (see :func:`pieces`)."""
     n = graph.n_vertices
     new = np.flatnonzero(target < 0)
     index = np.where(target >= 0, target, 0)
     index[new] = n + np.arange(len(new))
-    vertices = np.concatenate([graph.vertices, found.vertices[new]])
+    vertices = list(graph.vertices) + list(found.vertices[new])
+    kinds = list(graph.vertex_kinds or ["isolated"] * n) + [SKELETON] * len(new)
     edges, lines, scores = [], [], []
     for k, (a, b) in enumerate(found.edges):
         u, v = int(index[a]), int(index[b])
-        if u == v:
-            continue  # a stretch both of whose ends join the same vertex: a stub, not a boundary
-        line = np.asarray(found.edge_polyline(k), float)
-        line = np.concatenate([vertices[[u]], line, vertices[[v]]])
+        line = np.concatenate([[vertices[u]], found.edge_polyline(k), [vertices[v]]])
         line = line[np.r_[True, np.any(line[1:] != line[:-1], axis=1)]]  # a new end vertex is the line's own end
-        edges.append((u, v))
-        lines.append(line)
-        scores.append(_mean_along(boundary, line))
+        parts = pieces(line, split_px, closed=u == v)
+        ids = [u] + list(range(len(vertices), len(vertices) + len(parts) - 1)) + [v]
+        for part in parts[:-1]:
+            vertices.append(part[-1])
+            kinds.append(SKELETON)
+        for i, j, part in zip(ids[:-1], ids[1:], parts):
+            edges.append((i, j))
+            lines.append(part)
+            scores.append(_mean_along(boundary, part))
     if not edges:
         return graph
     n_old = graph.n_edges
     return BoundaryGraph(
-        vertices,
+        np.array(vertices, float).reshape(-1, 2),
         np.concatenate([graph.edges, np.array(edges, np.int64)]),
-        vertex_kinds=list(graph.vertex_kinds or ["isolated"] * n) + [SKELETON] * len(new),
+        vertex_kinds=kinds,
         edge_kinds=list(graph.edge_kinds or ["normal"] * n_old) + [SKELETON] * len(edges),
         edge_polylines=list(graph.edge_polylines or [None] * n_old) + lines,
         edge_scores=np.concatenate([graph.edge_scores if graph.edge_scores is not None else np.ones(n_old), scores]),
         transform=graph.transform, crs=graph.crs,
     )
+
+
+def pieces(line: np.ndarray, split_px: float, closed: bool = False) -> list[np.ndarray]:
+    """A polyline cut into pieces about ``split_px`` long (equal arc lengths; the cut points
+    interpolated on it), at least three for a closed line (its two ends one vertex), so no two
+    of its edges join the same pair of vertices. Why cut at all: the city's stitching keeps one
+    edge per pair of end vertices, and two windows can fill the two halves of a loop between the
+    same two cut ends; edges with inner vertices of their own never collide."""
+    along = arc_lengths(line)
+    count = max(1, int(np.ceil(along[-1] / split_px)) if split_px > 0 else 1)
+    if closed:
+        count = max(count, 3)
+    if count == 1 or along[-1] == 0:
+        return [line]
+    marks = along[-1] * np.arange(1, count) / count
+    cut = np.stack([np.interp(marks, along, line[:, 0]), np.interp(marks, along, line[:, 1])], axis=1)
+    ends = [line[0], *cut, line[-1]]
+    bounds = [-np.inf, *marks, np.inf]
+    out = []
+    for k in range(count):
+        inner = line[(along > bounds[k]) & (along < bounds[k + 1])] if 0 < k < count - 1 else \
+            line[(along >= bounds[k]) & (along < bounds[k + 1])] if k == 0 else line[(along > bounds[k]) & (along <= bounds[k + 1])]
+        part = np.concatenate([[ends[k]], inner, [ends[k + 1]]])
+        out.append(part[np.r_[True, np.any(part[1:] != part[:-1], axis=1)]])
+    return out
 
 
 def _mean_along(boundary: np.ndarray, line: np.ndarray) -> float:

@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.graph.skeleton_fill import SKELETON, FillConfig, fill_from_skeleton, long_stretches, uncovered_skeleton
+from csboundary.graph.polyline import polyline_length
+from csboundary.graph.skeleton_fill import SKELETON, FillConfig, fill_from_skeleton, long_stretches, pieces, uncovered_skeleton
 
 ON = FillConfig(min_length_px=30)
 
@@ -111,3 +112,44 @@ def test_a_drawn_straight_boundary_is_filled_on_its_own_line(angle, length, dx, 
     offset = points - a
     across = np.abs(offset[:, 0] * axis[1] - offset[:, 1] * axis[0])
     assert across.max() <= 2.5
+
+
+def test_a_closed_boundary_is_filled_as_a_ring_of_three_edges():
+    m = np.zeros((120, 120), np.uint8)
+    cv2.circle(m, (60, 60), 30, 1, thickness=3)  # a traffic island's curb, no vertex on it
+    out = fill_from_skeleton(graph([], []), m.astype(np.float32), ON)
+    assert out.n_edges == 3 and out.n_vertices == 3
+    assert np.bincount(out.edges.ravel()).tolist() == [2, 2, 2]
+    assert out.edge_lengths().sum() == pytest.approx(2 * np.pi * 30, rel=0.05)
+
+
+def test_pieces_cut_a_line_at_equal_arc_lengths():
+    line = np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 300.0]])  # an L, 600 px
+    parts = pieces(line, 200.0)
+    assert [p.tolist() for p in parts] == [[[0, 0], [200, 0]], [[200, 0], [300, 0], [300, 100]], [[300, 100], [300, 300]]]
+    assert len(pieces(line, 0.0)) == 1 and pieces(line, 0.0)[0] is line
+    ring = pieces(np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0], [0.0, 30.0], [0.0, 0.0]]), 200.0, closed=True)  # 120 px
+    assert [p.tolist() for p in ring] == [[[0, 0], [30, 0], [30, 10]], [[30, 10], [30, 30], [10, 30]], [[10, 30], [0, 30], [0, 0]]]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 500), st.floats(0, 500)), min_size=2, max_size=12), st.floats(5, 400), st.booleans())
+def test_pieces_join_up_into_the_line(points, split_px, closed):
+    line = np.array(points)
+    parts = pieces(line, split_px, closed)
+    total = sum(polyline_length(p) for p in parts)
+    assert total == pytest.approx(polyline_length(line), abs=1e-6)
+    assert np.allclose(parts[0][0], line[0]) and np.allclose(parts[-1][-1], line[-1])
+    for a, b in zip(parts[:-1], parts[1:]):
+        assert np.array_equal(a[-1], b[0])
+    if polyline_length(line) > 0:
+        assert len(parts) >= (3 if closed else 1)
+        assert max(polyline_length(p) for p in parts) <= max(split_px, polyline_length(line) / 3) + 1e-6
+
+
+def test_a_long_filled_stretch_is_cut_into_edges_chained_end_to_end():
+    out = fill_from_skeleton(graph([], []), row_map(), FillConfig(min_length_px=30, split_px=50))
+    assert out.n_edges == 4
+    degree = np.bincount(out.edges.ravel())
+    assert sorted(degree.tolist()) == [1, 1, 2, 2, 2]
+    assert 195 <= out.edge_lengths().sum() <= 200
