@@ -153,3 +153,40 @@ def test_a_long_filled_stretch_is_cut_into_edges_chained_end_to_end():
     degree = np.bincount(out.edges.ravel())
     assert sorted(degree.tolist()) == [1, 1, 2, 2, 2]
     assert 195 <= out.edge_lengths().sum() <= 200
+
+
+def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path):
+    import torch
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+
+    shipped = load_checkpoint(shipped_weights(), ("bundle",))
+    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
+    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", fill_min_length_px=55)
+    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).fill.min_length_px == 55
+    assert not load_predictor(tmp_path / "b.pt", "cpu", fill_min_length=0, engine="torch").fill.active
+    payload = load_checkpoint(tmp_path / "b.pt", ("bundle",))
+    older = {k: v for k, v in payload["inference"].items() if k != "fill_min_length_px"}  # a bundle from before the fill
+    content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
+    save_checkpoint(tmp_path / "older.pt", "bundle", inference=older, **content)
+    assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).fill.active
+
+
+def test_the_predictor_fills_a_window_only_inside_its_core_and_one_pixel_beyond():
+    from types import SimpleNamespace
+
+    from csboundary.data.windows import PixelWindow
+    from csboundary.pipeline.patch import PatchPredictor
+
+    maps = np.zeros((2, 120, 240), np.float32)
+    maps[1] = row_map()
+    host = SimpleNamespace(fill=ON)
+    core = SimpleNamespace(core_local=PixelWindow(col_off=10, row_off=10, width=100, height=100))
+    out = PatchPredictor.filled(host, core, maps, graph([], []))
+    xs = np.concatenate([out.edge_polyline(k)[:, 0] for k in range(out.n_edges)])
+    assert xs.min() == pytest.approx(20.5) and xs.max() == pytest.approx(110.5)  # columns 20..110: the core's 10..109 and 110
+    whole = PatchPredictor.filled(host, None, maps, graph([], []))  # a single patch: no core
+    assert whole.edge_lengths().sum() > out.edge_lengths().sum() + 100
