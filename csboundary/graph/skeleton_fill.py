@@ -101,7 +101,7 @@ def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillC
 
 def _stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
     """The graph of the stretches (:func:`skeleton_graph`, nothing pruned), worked out on the
-    stretches' bounding box only: they are a few percent of a window."""
+    stretches' bounding box, not the whole window."""
     rows, cols = np.nonzero(mask)
     r0, c0 = rows.min(), cols.min()
     box = mask[r0:rows.max() + 1, c0:cols.max() + 1]
@@ -139,6 +139,8 @@ def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boun
         line = np.concatenate([[vertices[u]], found.edge_polyline(k), [vertices[v]]])
         line = line[np.r_[True, np.any(line[1:] != line[:-1], axis=1)]]  # a new end vertex is the line's own end
         parts = pieces(line, split_px, closed=u == v)
+        if not parts:
+            continue  # both ends joined to one vertex with nothing between: no boundary
         ids = [u] + list(range(len(vertices), len(vertices) + len(parts) - 1)) + [v]
         for part in parts[:-1]:
             vertices.append(part[-1])
@@ -166,22 +168,23 @@ def pieces(line: np.ndarray, split_px: float, closed: bool = False) -> list[np.n
     interpolated on it), at least three for a closed line (its two ends one vertex), so no two
     of its edges join the same pair of vertices. Why cut at all: the city's stitching keeps one
     edge per pair of end vertices, and two windows can fill the two halves of a loop between the
-    same two cut ends; edges with inner vertices of their own never collide."""
+    same two cut ends; edges with inner vertices of their own never collide. A line of length 0
+gives no piece."""
     along = arc_lengths(line)
+    if along[-1] == 0:
+        return []
     count = max(1, int(np.ceil(along[-1] / split_px)) if split_px > 0 else 1)
     if closed:
         count = max(count, 3)
-    if count == 1 or along[-1] == 0:
+    if count == 1:
         return [line]
     marks = along[-1] * np.arange(1, count) / count
     cut = np.stack([np.interp(marks, along, line[:, 0]), np.interp(marks, along, line[:, 1])], axis=1)
     ends = [line[0], *cut, line[-1]]
     bounds = [-np.inf, *marks, np.inf]
     out = []
-    for k in range(count):
-        inner = line[(along > bounds[k]) & (along < bounds[k + 1])] if 0 < k < count - 1 else \
-            line[(along >= bounds[k]) & (along < bounds[k + 1])] if k == 0 else line[(along > bounds[k]) & (along <= bounds[k + 1])]
-        part = np.concatenate([[ends[k]], inner, [ends[k + 1]]])
+    for k in range(count):  # the points strictly between two cuts (the line's own ends fall in the outer bounds)
+        part = np.concatenate([[ends[k]], line[(along > bounds[k]) & (along < bounds[k + 1])], [ends[k + 1]]])
         out.append(part[np.r_[True, np.any(part[1:] != part[:-1], axis=1)]])
     return out
 

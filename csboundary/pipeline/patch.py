@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from csboundary.data.grid import Patch
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
@@ -138,7 +139,7 @@ class PatchPredictor:
             probs[i, j] = probs[j, i] = 0.0
         return self.filled(patch, maps, graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree))
 
-    def filled(self, patch, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
+    def filled(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
         """``graph`` with the boundary it missed filled in from the segmentation skeleton
         (``fill``; off by default), in a city only inside the window's core and one pixel beyond,
         where the neighbouring window cuts the same skeleton (graph/skeleton_fill.py)."""

@@ -128,6 +128,7 @@ def test_pieces_cut_a_line_at_equal_arc_lengths():
     parts = pieces(line, 200.0)
     assert [p.tolist() for p in parts] == [[[0, 0], [200, 0]], [[200, 0], [300, 0], [300, 100]], [[300, 100], [300, 300]]]
     assert len(pieces(line, 0.0)) == 1 and pieces(line, 0.0)[0] is line
+    assert pieces(np.array([[5.0, 5.0], [5.0, 5.0]]), 200.0, closed=True) == []  # nothing between the ends
     ring = pieces(np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0], [0.0, 30.0], [0.0, 0.0]]), 200.0, closed=True)  # 120 px
     assert [p.tolist() for p in ring] == [[[0, 0], [30, 0], [30, 10]], [[30, 10], [30, 30], [10, 30]], [[10, 30], [0, 30], [0, 0]]]
 
@@ -137,14 +138,17 @@ def test_pieces_cut_a_line_at_equal_arc_lengths():
 def test_pieces_join_up_into_the_line(points, split_px, closed):
     line = np.array(points)
     parts = pieces(line, split_px, closed)
+    if polyline_length(line) == 0:
+        assert parts == []
+        return
     total = sum(polyline_length(p) for p in parts)
     assert total == pytest.approx(polyline_length(line), abs=1e-6)
     assert np.allclose(parts[0][0], line[0]) and np.allclose(parts[-1][-1], line[-1])
     for a, b in zip(parts[:-1], parts[1:]):
         assert np.array_equal(a[-1], b[0])
-    if polyline_length(line) > 0:
-        assert len(parts) >= (3 if closed else 1)
-        assert max(polyline_length(p) for p in parts) <= max(split_px, polyline_length(line) / 3) + 1e-6
+    length = polyline_length(line)
+    assert len(parts) == max(int(np.ceil(length / split_px)), 3 if closed else 1)
+    assert [polyline_length(p) for p in parts] == pytest.approx([length / len(parts)] * len(parts), abs=1e-6)
 
 
 def test_a_long_filled_stretch_is_cut_into_edges_chained_end_to_end():
