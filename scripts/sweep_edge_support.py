@@ -37,11 +37,12 @@ def main() -> None:
     parser.add_argument("--crossings", type=int, default=0, help="grid-crossing vertices every N px (0 = off)")
     parser.add_argument("--fill-cover", type=float, default=None, help="distance at which an edge covers the skeleton, px (default: FillConfig's)")
     parser.add_argument("--fill-snap", type=float, default=None, help="distance at which a filled end joins a vertex, px (default: FillConfig's)")
+    parser.add_argument("--fill-threshold", type=float, default=None, help="boundary probability of the filled skeleton (default: FillConfig's)")
     parser.add_argument("--fill", default="", help="shortest uncovered skeleton stretch filled in, px, 0 = off (default: the bundle's)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
-    for name, value in (("cover_px", args.fill_cover), ("snap_px", args.fill_snap)):
+    for name, value in (("cover_px", args.fill_cover), ("snap_px", args.fill_snap), ("threshold", args.fill_threshold)):
         if value is not None:
             predictor.fill = dataclasses.replace(predictor.fill, **{name: value})
     gap_level = predictor.support.gap_level if args.gap_level is None else args.gap_level
