@@ -71,12 +71,14 @@ def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tupl
     edge_lines = [world(edge_line(graph, k)) for k in range(n)]
     length = np.array([units.line_length_m(line) for line in edge_lines], dtype=float)
     score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, dtype=float).reshape(n)
-    corner = np.array([kind == "corner" for kind in graph.edge_kinds or [""] * n], dtype=bool)
+    kinds = np.array(graph.edge_kinds if graph.edge_kinds is not None else ["normal"] * n, dtype=object).reshape(n)
+    corner = kinds == "corner"
+    filled = kinds == "skeleton"  # added from the segmentation skeleton (graph/skeleton_fill.py)
     patch = np.full((n, 2), -1, dtype=np.int64) if graph.edge_patches is None else graph.edge_patches
     patch = np.where((patch >= 0).all(axis=1, keepdims=True), patch, -1)
     boundary_of_edge = np.full(n, -1, dtype=np.int64)
 
-    rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges", "patches")}
+    rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges", "skeleton_edges", "patches")}
     geometry = []
     for c, chain in enumerate(merge_chains(graph)):
         k = chain.edges
@@ -90,6 +92,7 @@ def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tupl
         rows["confidence_mean"].append(_weighted_mean(score[k][known], length[k][known]))
         rows["confidence_min"].append(float(score[k][known].min()) if known.any() else np.nan)
         rows["corner_edges"].append(int(corner[k].sum()))
+        rows["skeleton_edges"].append(int(filled[k].sum()))
         rows["patches"].append(";".join(f"{r},{col}" for r, col in distinct))
 
     boundaries = gpd.GeoDataFrame(
@@ -100,6 +103,7 @@ def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tupl
             "confidence_mean": np.array(rows["confidence_mean"], dtype=float),
             "confidence_min": np.array(rows["confidence_min"], dtype=float),
             "corner_edges": np.array(rows["corner_edges"], dtype=np.int64),
+            "skeleton_edges": np.array(rows["skeleton_edges"], dtype=np.int64),
             "patches": np.array(rows["patches"], dtype=object),
         },
         geometry=gpd.GeoSeries(geometry, crs=graph.crs),
@@ -113,6 +117,7 @@ def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tupl
             "v": graph.edges[:, 1].copy(),
             "confidence": score,
             "corner": corner,
+            "kind": kinds.astype(str),
             "patch_row": patch[:, 0].copy(),
             "patch_col": patch[:, 1].copy(),
             "length_m": length,

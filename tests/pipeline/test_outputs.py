@@ -146,7 +146,7 @@ SKEWED = Affine(0.5, 0.1, 583000.0, 0.05, -0.5, 4507200.0)  # rotation/shear: ca
 def scored_graph(transform=SKEWED, crs=CRS) -> BoundaryGraph:
     arc = np.array([[10, 0], [14, 2], [16, 6], [16, 10]], dtype=float)
     return graph([[0, 0], [10, 0], [16, 10], [30, 10], [16, 30]], [[0, 1], [1, 2], [2, 3], [4, 2]],
-                 edge_polylines=[None, arc, None, None], edge_kinds=["normal", "corner", "normal", "normal"],
+                 edge_polylines=[None, arc, None, None], edge_kinds=["normal", "corner", "normal", "skeleton"],
                  edge_scores=np.array([0.9, np.nan, 0.4, 0.7]), edge_patches=[[0, 0], [0, 1], [0, 1], [-1, -1]],
                  transform=transform, crs=crs)
 
@@ -167,7 +167,8 @@ def test_geopackage_reads_back_in_the_graphs_crs_and_world_coordinates(tmp_path)
         assert row.length_m == pytest.approx(row.geometry.length)
     first = boundaries.iloc[0]  # edges 0 (0.9) and 1 (unscored corner): NaN ignored
     assert first.confidence_mean == pytest.approx(0.9) and first.confidence_min == pytest.approx(0.9)
-    assert first.corner_edges == 1 and first.n_edges == 2 and first.patches == "0,0;0,1"
+    assert first.corner_edges == 1 and first.skeleton_edges == 0 and first.n_edges == 2 and first.patches == "0,0;0,1"
+    assert boundaries["skeleton_edges"].tolist() == [0, 0, 1]  # edge 3 (4-2) was filled in from the skeleton
     assert boundaries.iloc[2].patches == ""  # edge 3's patch is unknown
 
     edges = gpd.read_file(paths["gpkg"], layer="edges")
@@ -176,6 +177,7 @@ def test_geopackage_reads_back_in_the_graphs_crs_and_world_coordinates(tmp_path)
         np.testing.assert_allclose(np.asarray(row.geometry.coords), world(SKEWED, g.edge_polyline(k)), rtol=0, atol=1e-6)
     assert edges["u"].tolist() == [0, 1, 2, 4] and edges["v"].tolist() == [1, 2, 3, 2]
     assert edges["corner"].tolist() == [False, True, False, False]
+    assert edges["kind"].tolist() == ["normal", "corner", "normal", "skeleton"]
     assert edges["patch_row"].tolist() == [0, 0, 0, -1] and edges["patch_col"].tolist() == [0, 1, 1, -1]
     np.testing.assert_allclose(edges["confidence"], [0.9, np.nan, 0.4, 0.7])
     assert edges["length_m"].sum() == pytest.approx(boundaries["length_m"].sum())
@@ -197,10 +199,10 @@ def test_empty_graph_writes_empty_files_with_the_schema(tmp_path):
     assert paths["gpkg"].name == "city.gpkg" and paths["geojson"].name == "city.geojson"
     info = pyogrio.read_info(paths["gpkg"], layer="road_boundaries")
     assert info["features"] == 0 and info["geometry_type"] == "LineString" and info["crs"] == CRS
-    assert list(info["fields"]) == ["boundary_id", "length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges", "patches"]
+    assert list(info["fields"]) == ["boundary_id", "length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges", "skeleton_edges", "patches"]
     info = pyogrio.read_info(paths["gpkg"], layer="edges")
     assert info["features"] == 0
-    assert list(info["fields"]) == ["edge_id", "boundary_id", "u", "v", "confidence", "corner", "patch_row", "patch_col", "length_m"]
+    assert list(info["fields"]) == ["edge_id", "boundary_id", "u", "v", "confidence", "corner", "kind", "patch_row", "patch_col", "length_m"]
     assert json.loads(paths["geojson"].read_text())["features"] == []
     assert BoundaryGraph.read_json(paths["graph_json"]).n_edges == 0
 
