@@ -82,7 +82,9 @@ def predict_patch(
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
                                max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine)
     graph = predict_patch_to_folder(image, out, predictor, gsd)
-    typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({sum(k == 'corner' for k in graph.edge_kinds or [])} corner)")
+    kinds = graph.edge_kinds or []
+    typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({kinds.count('corner')} corner, "
+               f"{kinds.count('skeleton')} filled in from the segmentation)")
 
 
 def export_lanelet2(
