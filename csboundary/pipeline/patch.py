@@ -1,10 +1,10 @@
 """One patch, end to end: FPN maps -> vertices -> AfANet adjacency -> graph (paper Alg. 1 body).
 
 The returned graph has the extracted vertices; its edges are the corner edges of gathered runs
-(kind ``corner``, with the skeleton polyline, score 1), the AfANet edges (kind ``normal``,
-score = symmetric adjacency probability) and, when the fill is on, the boundary both missed,
-from the segmentation skeleton (kind ``skeleton``, score = mean boundary probability along it;
-graph/skeleton_fill.py).
+(kind ``corner``, with the skeleton polyline, score = mean keypoint probability along it), the
+AfANet edges (kind ``normal``, score = symmetric adjacency probability) and, when the fill is on,
+the boundary both missed, from the segmentation skeleton (kind ``skeleton``, score = mean
+boundary probability along it; graph/skeleton_fill.py).
 """
 
 from __future__ import annotations
