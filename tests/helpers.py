@@ -22,3 +22,26 @@ north_up = st.builds(
     st.floats(-1e6, 1e6),
     st.floats(-1e7, 1e7),
 )
+
+
+def shipped_parts(folder: Path, **afanet_extra) -> tuple[Path, Path]:
+    """The shipped bundle's FPN and AfANet written as the two checkpoints ``bundle-weights``
+    takes (``folder/fpn.pt``, ``folder/afanet.pt``; ``afanet_extra`` adds fields such as a
+    ``train_config``), for tests that make bundles with other inference settings."""
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
+
+    shipped = load_checkpoint(shipped_weights(), ("bundle",))
+    save_checkpoint(folder / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
+    save_checkpoint(folder / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"], **afanet_extra)
+    return folder / "fpn.pt", folder / "afanet.pt"
+
+
+def bundle_without(bundle: Path, out: Path, settings: tuple[str, ...]) -> Path:
+    """A copy of ``bundle`` whose inference settings lack ``settings``: a bundle made before
+    those settings existed."""
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+
+    payload = load_checkpoint(bundle, ("bundle",))
+    older = {k: v for k, v in payload["inference"].items() if k not in settings}
+    content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
+    return save_checkpoint(out, "bundle", inference=older, **content)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers import shipped_parts
+
 from csboundary.graph.crossings import CrossingConfig, crossing_points, run_centres
 
 
@@ -43,13 +45,10 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
     import torch
 
     from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
     from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.patch import PatchPredictor
 
-    shipped = load_checkpoint(shipped_weights(), ("bundle",))
-    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
-    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
+    shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", 0.3, min_support=0.2, crossing_spacing_px=250,
                 min_fragment_px=160)
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
@@ -65,13 +64,10 @@ def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_pat
     import torch
 
     from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
+    from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.patch import PatchPredictor
 
-    shipped = load_checkpoint(shipped_weights(), ("bundle",))
-    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
-    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"],
-                    train_config={"vertex_threshold": 0.35})
+    shipped_parts(tmp_path, train_config={"vertex_threshold": 0.35})
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "trained.pt")
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "given.pt", vertex_threshold=0.6)
     assert PatchPredictor.load(tmp_path / "trained.pt", torch.device("cpu")).vertices.threshold == 0.35

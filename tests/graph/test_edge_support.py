@@ -7,6 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers import bundle_without, shipped_parts
+
 from csboundary.graph.edge_support import EdgeSupportConfig, longest_gap, segment_support, unsupported_pairs, widened
 
 
@@ -119,19 +121,13 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
     import torch
 
     from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
     from csboundary.pipeline.patch import PatchPredictor, load_predictor
 
-    shipped = load_checkpoint(shipped_weights(), ("bundle",))
-    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
-    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
+    shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4)
     support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).support
     assert (support.min_support, support.max_gap_px, support.gap_level) == (0.2, 50, 0.4)
     assert load_predictor(tmp_path / "b.pt", "cpu", max_edge_gap=0, engine="torch").support.max_gap_px == 0
     # a bundle from before the check (no such settings) loads with the check off
-    payload = load_checkpoint(tmp_path / "b.pt", ("bundle",))
-    older = {k: v for k, v in payload["inference"].items() if k not in ("max_gap_px", "gap_level")}
-    content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
-    save_checkpoint(tmp_path / "older.pt", "bundle", inference=older, **content)
+    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("max_gap_px", "gap_level"))
     assert PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).support.max_gap_px == 0

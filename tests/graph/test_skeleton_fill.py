@@ -8,6 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers import bundle_without, shipped_parts
+
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.polyline import polyline_length
 from csboundary.graph.skeleton_fill import SKELETON, FillConfig, fill_from_skeleton, long_stretches, pieces, uncovered_skeleton
@@ -163,19 +165,13 @@ def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path)
     import torch
 
     from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
     from csboundary.pipeline.patch import PatchPredictor, load_predictor
 
-    shipped = load_checkpoint(shipped_weights(), ("bundle",))
-    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
-    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"])
+    shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", fill_min_length_px=55)
     assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).fill.min_length_px == 55
     assert not load_predictor(tmp_path / "b.pt", "cpu", fill_min_length=0, engine="torch").fill.active
-    payload = load_checkpoint(tmp_path / "b.pt", ("bundle",))
-    older = {k: v for k, v in payload["inference"].items() if k != "fill_min_length_px"}  # a bundle from before the fill
-    content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
-    save_checkpoint(tmp_path / "older.pt", "bundle", inference=older, **content)
+    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("fill_min_length_px",))  # a bundle from before the fill
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).fill.active
 
 
