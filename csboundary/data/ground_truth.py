@@ -16,6 +16,7 @@ from csboundary.data.atomic import atomic_path
 from csboundary.errors import InputError
 
 LAYER = "road_boundaries"
+SURFACE_LAYER = "road_surface"  # optional: the roadway as polygons (synthetic cities), the FPN's surface target
 
 
 def as_linestrings(geometry) -> list[LineString]:
@@ -34,11 +35,28 @@ def as_linestrings(geometry) -> list[LineString]:
     return []
 
 
-def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame) -> Path:
-    """Write a GeoDataFrame of boundary LineStrings to a GeoPackage layer, atomically."""
+def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame, surface: gpd.GeoDataFrame | None = None) -> Path:
+    """Write a GeoDataFrame of boundary LineStrings to a GeoPackage layer, atomically; with
+    ``surface``, the roadway polygons as a second layer (``road_surface``)."""
     with atomic_path(path) as tmp:
         frame.to_file(tmp, layer=LAYER, driver="GPKG", engine="pyogrio")
+        if surface is not None:
+            surface.to_file(tmp, layer=SURFACE_LAYER, driver="GPKG", engine="pyogrio")
     return Path(path)
+
+
+def read_road_surface(path: str | Path, crs=None) -> list | None:
+    """The roadway polygons of a ground-truth GeoPackage (reprojected to ``crs``), or None when
+    it has no ``road_surface`` layer (imported and user cities: only boundaries are known)."""
+    try:
+        if SURFACE_LAYER not in [name for name, _ in pyogrio.list_layers(path)]:
+            return None
+        frame = gpd.read_file(path, layer=SURFACE_LAYER, engine="pyogrio")
+    except Exception as exc:  # pyogrio raises several unrelated types for unreadable files
+        raise InputError(path, f"not a readable vector file ({type(exc).__name__}: {exc})".splitlines()[0]) from exc
+    if crs is not None and frame.crs is not None and frame.crs != crs:
+        frame = frame.to_crs(crs)
+    return [g for g in frame.geometry if g is not None and not g.is_empty]
 
 
 def read_ground_truth(path: str | Path, crs=None) -> gpd.GeoDataFrame:

@@ -30,7 +30,7 @@ from torch import nn
 
 from csboundary.config import Config
 
-KEYPOINT, SEGMENTATION = 0, 1
+KEYPOINT, SEGMENTATION, SURFACE = 0, 1, 2
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,7 @@ class FPNConfig(Config):
     pretrained: bool = True  # efficientnet-lite0 only: start from the ImageNet weights (training)
     head: str = "full"  # full | light: how the stride-2 head joins the pyramid and the stem (see add_head)
     head_channels: int = 16  # light head only: channels at stride 2
+    surface: bool = False  # a third output: road-surface logits from the pyramid (see add_surface_head)
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
@@ -108,6 +109,28 @@ def add_head(module: nn.Module, c: FPNConfig) -> None:
     module.head = nn.Sequential(conv_bn_relu(c.head_channels, c.head_channels), nn.Conv2d(c.head_channels, c.out_channels, 1))
 
 
+def add_surface_head(module: nn.Module, c: FPNConfig, width: int = 32) -> None:
+    """The road-surface head on ``module`` when ``c.surface``: two 3x3 convolutions and a 1x1 on
+    the fused pyramid (stride 4 of the encoder's input), the logits upsampled to the patch.
+
+    Why: the boundary map fires on every outline of the scene (roofs, yards, canopy); a road
+    boundary is the one with roadway beside it. The roadway is a wide, textured region that the
+    pyramid's context resolves better than a 3 px line, and it lets a patch graph keep only the
+    edges that border it (:mod:`csboundary.graph.surface_check`). Cheap: it runs at 1/8 (or 1/4)
+    of the patch's resolution."""
+    if c.surface:
+        module.surface_head = nn.Sequential(conv_bn_relu(c.pyramid, width), conv_bn_relu(width, width), nn.Conv2d(width, 1, 1))
+
+
+def with_surface(module: nn.Module, logits: torch.Tensor, fused: torch.Tensor) -> torch.Tensor:
+    """``logits`` (B, out, H, W) with the surface logits appended as a last channel when the
+    module has a surface head."""
+    if not module.config.surface:
+        return logits
+    road = F.interpolate(module.surface_head(fused), size=logits.shape[-2:], mode="bilinear", align_corners=False)
+    return torch.cat([logits, road], dim=1)
+
+
 def head_logits(module: nn.Module, fused: torch.Tensor, stem: torch.Tensor) -> torch.Tensor:
     """Logits at the stem's resolution (stride 2) from the fused pyramid and the stem."""
     if module.config.head == "full":
@@ -145,10 +168,11 @@ class ResNetFPN(nn.Module):
         self.lateral = nn.ModuleList(nn.Conv2d(w, c.pyramid, 1) for w in c.widths)
         self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in c.widths)
         add_head(self, c)
+        add_surface_head(self, c)
         self.stride = 2 ** (len(c.widths) + 1)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        """(B, in_channels, H, W) in [0, 1] -> (B, out_channels, H, W) logits."""
+        """(B, in_channels, H, W) in [0, 1] -> (B, out_channels (+1 surface), H, W) logits."""
         h, w = image.shape[-2:]
         pad_h, pad_w = (-h) % self.stride, (-w) % self.stride
         x = F.pad(image, (0, pad_w, 0, pad_h)) if pad_h or pad_w else image
@@ -160,7 +184,7 @@ class ResNetFPN(nn.Module):
             features.append(y)
         fused = top_down(features, self.lateral, self.smooth)
         logits = F.interpolate(head_logits(self, fused, stem), scale_factor=2, mode="bilinear", align_corners=False)
-        return logits[..., :h, :w]
+        return with_surface(self, logits, fused)[..., :h, :w]
 
 
 class LiteFPN(nn.Module):
@@ -179,6 +203,7 @@ class LiteFPN(nn.Module):
         self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in levels)
         self.stem = nn.Sequential(conv_bn_relu(c.in_channels, c.stem, 2), conv_bn_relu(c.stem, c.stem))
         add_head(self, c)
+        add_surface_head(self, c)
         self.stride = round(32 / c.encoder_scale)
         self.freeze_encoder_bn = False  # set by training: keep the encoder's ImageNet batch statistics
 
@@ -193,7 +218,7 @@ class LiteFPN(nn.Module):
         return self
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        """(B, in_channels, H, W) in [0, 1] -> (B, out_channels, H, W) logits."""
+        """(B, in_channels, H, W) in [0, 1] -> (B, out_channels (+1 surface), H, W) logits."""
         h, w = image.shape[-2:]
         pad_h, pad_w = (-h) % self.stride, (-w) % self.stride
         x = F.pad(image, (0, pad_w, 0, pad_h), mode="replicate") if pad_h or pad_w else image
@@ -203,4 +228,4 @@ class LiteFPN(nn.Module):
         fused = top_down(features, self.lateral, self.smooth)
         stem = self.stem((x - 0.5) / 0.25)
         logits = F.interpolate(head_logits(self, fused, stem), scale_factor=2, mode="bilinear", align_corners=False)
-        return logits[..., :h, :w]
+        return with_surface(self, logits, fused)[..., :h, :w]

@@ -36,8 +36,10 @@ def unit_bands(data: np.ndarray) -> np.ndarray:
 
 
 def bands_and_maps(data: np.ndarray, maps: np.ndarray) -> np.ndarray:
-    """(4, h, w) uint8 bands and (2, h, w) maps -> AfANet's (6, h, w) float32 input, written in
-    place (no concatenation copy); the bands scaled exactly as :func:`unit_bands` does."""
+    """(4, h, w) uint8 bands and the (2+, h, w) maps -> AfANet's (6, h, w) float32 input (keypoint
+    and boundary maps; a surface channel is not AfANet's), written in place (no concatenation
+    copy); the bands scaled exactly as :func:`unit_bands` does."""
+    maps = maps[:2]
     if data.dtype != np.uint8:
         unit_bands(data)  # the same refusal
     out = np.empty((data.shape[0] + maps.shape[0], *data.shape[1:]), np.float32)
@@ -48,8 +50,8 @@ def bands_and_maps(data: np.ndarray, maps: np.ndarray) -> np.ndarray:
 
 @torch.no_grad()
 def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device) -> np.ndarray:
-    """(4, h, w) uint8 -> (2, h, w) float32 probabilities (keypoint, segmentation); a batch
-    (B, 4, h, w) -> (B, 2, h, w)."""
+    """(4, h, w) uint8 -> (C, h, w) float32 probabilities (keypoint, segmentation, and the road
+    surface when the FPN has that head); a batch (B, 4, h, w) -> (B, C, h, w)."""
     model.eval()
     batch = image_tensor(image, device)
     # channels-last: 1.3-2.3x faster convolutions on CPU (benchmarks/fpn_speed.py), same values
@@ -59,11 +61,12 @@ def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device) -
 
 
 def predict_mosaic_maps(model: FPN, mosaic: Mosaic, grid: PatchGrid, device: torch.device, progress: bool = True) -> np.ndarray:
-    """(2, H, W) float32 probability maps of the whole mosaic, overlaps averaged.
+    """(C, H, W) float32 probability maps of the whole mosaic, overlaps averaged (C = 2, or 3
+    with a surface head).
 
     Holds the whole mosaic in memory: fine for training cities; city-scale inference streams.
     """
-    total = np.zeros((2, mosaic.height, mosaic.width), np.float32)
+    total = np.zeros((3 if model.config.surface else 2, mosaic.height, mosaic.width), np.float32)
     count = np.zeros((mosaic.height, mosaic.width), np.float32)
     for patch in tqdm(list(grid), desc="FPN maps", unit="patch", disable=not progress):
         read = mosaic.read(patch.expanded)

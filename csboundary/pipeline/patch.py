@@ -4,7 +4,9 @@ The returned graph has the extracted vertices; its edges are the corner edges of
 (kind ``corner``, with the skeleton polyline, score = mean keypoint probability along it), the
 AfANet edges (kind ``normal``, score = symmetric adjacency probability) and, when the fill is on,
 the boundary both missed, from the segmentation skeleton (kind ``skeleton``, score = mean
-boundary probability along it; graph/skeleton_fill.py).
+boundary probability along it; graph/skeleton_fill.py); with an FPN that maps the road surface
+and the surface check on, edges with no roadway beside them are then dropped
+(graph/surface_check.py).
 """
 
 from __future__ import annotations
@@ -21,13 +23,14 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.skeleton_fill import FillConfig, fill_from_skeleton
+from csboundary.graph.surface_check import SurfaceCheckConfig, surface_checked
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
 from csboundary.data.units import MODEL_GSD
 from csboundary.errors import InputError
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model, shipped_weights
 from csboundary.models.decoding import graph_from_adjacency
-from csboundary.models.fpn import FPN
+from csboundary.models.fpn import FPN, SURFACE
 from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
 from csboundary.models.maps import bands_and_maps, predict_probabilities, unit_bands
 
@@ -43,6 +46,7 @@ class PatchPredictor:
     support: EdgeSupportConfig = field(default_factory=EdgeSupportConfig)  # AfANet edges the boundary map must back
     crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
     fill: FillConfig = field(default_factory=FillConfig)  # boundary the graph missed, from the segmentation skeleton (off by default)
+    surface: SurfaceCheckConfig = field(default_factory=SurfaceCheckConfig)  # edges need roadway beside them (FPNs with a surface head; off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
     min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
@@ -95,12 +99,15 @@ class PatchPredictor:
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
         fill = FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0)))
+        surface = SurfaceCheckConfig(**{field: float(settings[key]) for key, field in SURFACE_SETTINGS.items() if key in settings})
+        if surface.active and not fpn.config.surface:
+            raise InputError(path, "damaged weights file: a surface check is set but the FPN has no surface head")
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
                    edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support, crossings=crossings, fill=fill, pixel_size_m=float(pixel_size),
+                   support=support, crossings=crossings, fill=fill, surface=surface, pixel_size_m=float(pixel_size),
                    min_fragment_px=float(settings.get("min_fragment_px", 0.0)))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
@@ -130,7 +137,7 @@ class PatchPredictor:
         """The patch graph: ``found``'s vertices joined by its corner edges and AfANet's edges."""
         m = found.n_vertices
         if m < 2:
-            return self.filled(patch, maps, graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree))
+            return self.finished(patch, maps, graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree))
         tensor = torch.from_numpy(bands_and_maps(image, maps)).to(self.device)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
         if self.onnx is not None and tensor.shape[-2:] == (WINDOW, WINDOW):
@@ -139,7 +146,15 @@ class PatchPredictor:
             probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
         for i, j in unsupported_pairs(found.vertices, probs, maps[1], self.edge_threshold, self.support):
             probs[i, j] = probs[j, i] = 0.0
-        return self.filled(patch, maps, graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree))
+        return self.finished(patch, maps, graph_from_adjacency(found, probs, self.edge_threshold, self.max_degree))
+
+    def finished(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
+        """``graph`` filled in from the skeleton (``fill``), then without the edges no roadway
+        borders (``surface``, when the maps carry the FPN's surface channel)."""
+        graph = self.filled(patch, maps, graph)
+        if self.surface.active and maps.shape[0] > SURFACE:
+            graph = surface_checked(graph, maps[SURFACE], self.surface)
+        return graph
 
     def filled(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
         """``graph`` with the boundary it missed filled in from the segmentation skeleton
@@ -164,7 +179,9 @@ class PatchPredictor:
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
-                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False)}
+                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False),
+                      "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False)}
+SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px"}  # bundle key -> SurfaceCheckConfig field
 
 
 def inference_settings(settings, path: str | Path) -> dict:
@@ -187,7 +204,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
-                   fill_min_length: float | None = None,
+                   fill_min_length: float | None = None, surface_check: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
@@ -208,6 +225,10 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.support = dataclasses.replace(predictor.support, max_gap_px=max_edge_gap)
     if fill_min_length is not None:
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill_min_length)
+    if surface_check is not None:
+        if surface_check > 0 and not predictor.fpn.config.surface:
+            raise InputError("--surface-check", "the FPN of these weights has no road-surface head")
+        predictor.surface = dataclasses.replace(predictor.surface, strong=surface_check)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
     if min_fragment_length is not None:

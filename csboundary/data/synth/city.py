@@ -62,6 +62,15 @@ class SyntheticCity:
             {"kind": kinds, "closed": [bool(line.is_closed) for line in lines]}, geometry=lines, crs=self.config.crs
         )
 
+    def road_surface(self) -> gpd.GeoDataFrame:
+        """The roadway (islands and medians cut out) clipped to the city, in world coordinates:
+        the FPN's road-surface target."""
+        shift = (self.config.origin_x, self.config.origin_y)
+        width, height = self.size_m
+        roadway = shapely.clip_by_rect(self.scene.network.roadway, 0.0, 0.0, width, height)
+        parts = [p for p in getattr(roadway, "geoms", [roadway]) if p.geom_type == "Polygon" and not p.is_empty]
+        return gpd.GeoDataFrame(geometry=[shapely.transform(p, lambda xy: xy + np.asarray(shift)) for p in parts], crs=self.config.crs)
+
     def render(self, row: int, col: int) -> np.ndarray:
         rng = city_rng(self.split, self.seed, 1, row, col)
         frame = self.frame(row, col)
@@ -122,7 +131,7 @@ def synthesize_city(
                       tags={"generator": f"csboundary {__version__} synth", "split": split, "seed": str(seed), "tile_row": str(row), "tile_col": str(col)})
         records.append({"path": f"{layout.TILES_DIR}/{name}", "row": row, "col": col})
     gt = city.ground_truth()
-    write_ground_truth(layout.ground_truth_path(out_dir), gt)
+    write_ground_truth(layout.ground_truth_path(out_dir), gt, city.road_surface())
     meta = {
         "source": "synthetic",
         "generator": f"csboundary {__version__}",

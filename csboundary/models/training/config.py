@@ -39,6 +39,9 @@ class TrainConfig(Config):
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides
     init_fpn: str = ""  # start from this trained FPN (fpn checkpoint or bundle; its architecture, not ``fpn``): fine-tuning
+    surface: bool = False  # add (or keep) the road-surface head; with init_fpn, a network without one gains a new head
+    surface_only: bool = False  # train the surface head alone: every other weight frozen, so the keypoint and boundary maps stay as they were
+    surface_weight: float = 1.0  # the surface loss's weight beside the keypoint and boundary losses
     crop: int = 256
     batch: int = 4
     pos_weight_keypoint: float = 20.0

@@ -13,7 +13,7 @@ import numpy as np
 
 from csboundary.config import Config
 from csboundary.data import city as layout
-from csboundary.data.ground_truth import read_ground_truth
+from csboundary.data.ground_truth import read_ground_truth, read_road_surface
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
 from csboundary.labels.adjacency import adjacency_label
@@ -75,6 +75,17 @@ class WorldsConfig(Config):
                 for seed in range(self.first_seed, self.first_seed + self.cities)]
 
 
+def _surface_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
+    """The whole city's road surface (H, W) uint8 from its roadway polygons (None: unknown)."""
+    if polygons is None:
+        return None
+    from rasterio.features import rasterize
+
+    if not polygons:
+        return np.zeros((mosaic.height, mosaic.width), np.uint8)
+    return rasterize(polygons, out_shape=(mosaic.height, mosaic.width), transform=mosaic.transform, fill=0, default_value=1, dtype="uint8")
+
+
 class TrainingCity:
     """A city's imagery and global label geometry, with samplers for both networks."""
 
@@ -83,6 +94,7 @@ class TrainingCity:
         self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
         gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
+        self.surface = _surface_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
         self.config = config
         self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
 
@@ -101,20 +113,39 @@ class TrainingCity:
         row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
         return PixelWindow(col, row, size, size)
 
-    def fpn_sample(self, window: PixelWindow) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Image (4, s, s) float32 in [0, 1]; targets (2, s, s): keypoint heat, segmentation; valid (s, s)."""
+    def fpn_sample(self, window: PixelWindow, surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Image (4, s, s) float32 in [0, 1]; targets (2, s, s): keypoint heat, segmentation, with
+        ``surface`` a third channel, the road surface (1 roadway, 0 not, -1 unknown); valid (s, s)."""
         read = self.mosaic.read(window)
-        return unit_bands(read.data), self.labels.network_targets(window), read.valid
+        targets = self.labels.network_targets(window)
+        if surface:
+            targets = np.concatenate([targets, self.surface_target(window)[None]])
+        return unit_bands(read.data), targets, read.valid
 
-    def augmented_fpn_sample(self, rng: np.random.Generator, crop: int, config: AugmentConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def surface_target(self, window: PixelWindow) -> np.ndarray:
+        """(s, s) float32 road surface of a window: 1 roadway, 0 not, -1 where unknown (a city
+        without a ``road_surface`` layer, or outside the city)."""
+        out = np.full((window.height, window.width), -1.0, np.float32)
+        part = window.intersection(self.mosaic.window)
+        if self.surface is not None and part is not None:
+            rows, cols = part.slices()
+            lrows, lcols = part.relative_to(window).slices()
+            out[lrows, lcols] = self.surface[rows, cols]
+        return out
+
+    def augmented_fpn_sample(self, rng: np.random.Generator, crop: int, config: AugmentConfig,
+                             surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``fpn_sample`` of a random ``crop`` window, rotated by any angle, scaled, flipped and
         re-lit (see :mod:`csboundary.models.augmentation`): the source window is read large
         enough that the rotated crop holds imagery wherever the city does."""
         angle, scale = draw_geometry(rng, config)
         side = source_side(crop, angle, scale) if (angle or scale != 1) else crop
-        image, target, valid = self.fpn_sample(self.random_window(rng, side))
+        image, target, valid = self.fpn_sample(self.random_window(rng, side), surface)
         if side != crop:
+            road = warp(target[2:3] + 1, angle, scale, crop, nearest=True)[0] - 1 if surface else None
             image, target = warp(image, angle, scale, crop), warp(target, angle, scale, crop)
+            if surface:  # nearest: an unknown (-1) surface must not blend into a known one
+                target[2] = road
             valid = warp(valid.astype(np.uint8), angle, scale, crop, nearest=True).astype(bool)
         image, target, valid = augment(rng, image, target, valid)
         return photometric(rng, image, config), target, valid
@@ -134,7 +165,7 @@ class TrainingCity:
         if part is not None:
             rows, cols = part.slices()
             lrows, lcols = part.relative_to(window).slices()
-            maps[:, lrows, lcols] = self.maps[:, rows, cols]
+            maps[:, lrows, lcols] = self.maps[:2, rows, cols]  # AfANet reads keypoints and boundary, not the surface
         return np.concatenate([unit_bands(read.data), maps])
 
     def adjacency(self, vertices: np.ndarray, window: PixelWindow) -> np.ndarray:

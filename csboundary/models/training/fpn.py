@@ -30,13 +30,53 @@ def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
 
 
 def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, config: TrainConfig) -> torch.Tensor:
+    """Weighted BCE of the keypoint and boundary maps on valid pixels; with a surface channel
+    (logits and target (B, 3, ...)), plus ``surface_weight`` x the surface BCE on valid pixels
+    whose surface is known (target >= 0); with ``surface_only``, the surface term alone."""
     weights = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
-    loss = F.binary_cross_entropy_with_logits(logits, target, pos_weight=weights, reduction="none")
-    mask = valid[:, None].to(loss.dtype)
-    return (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
+    mask = valid[:, None].to(logits.dtype)
+    total = logits.new_zeros(())
+    if not config.surface_only:
+        loss = F.binary_cross_entropy_with_logits(logits[:, :2], target[:, :2], pos_weight=weights, reduction="none")
+        total = (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
+    if logits.shape[1] > 2 and target.shape[1] > 2:
+        known = mask[:, 0] * (target[:, 2] >= 0).to(logits.dtype)
+        road = F.binary_cross_entropy_with_logits(logits[:, 2], target[:, 2].clamp(min=0), reduction="none")
+        total = total + config.surface_weight * (road * known).sum() / known.sum().clamp(min=1)
+    return total
 
 
-def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None):
+def fpn_with_surface(config: TrainConfig, device: torch.device):
+    """The network a run starts from: ``init_fpn`` (its architecture), given a new surface head
+    when ``config.surface`` asks for one it lacks; else a new FPN of ``config.fpn``. With
+    ``surface_only``, every weight but the surface head's is frozen (and kept in eval mode by
+    :func:`freeze_all_but_surface`)."""
+    import dataclasses
+
+    if config.init_fpn:
+        trained = load_fpn(config.init_fpn, device).to(memory_format=torch.contiguous_format)
+        model_config = trained.config
+        if config.surface and not model_config.surface:
+            model_config = dataclasses.replace(model_config, surface=True, pretrained=False)
+            model = FPN(model_config).to(device)
+            missing, unexpected = model.load_state_dict(trained.state_dict(), strict=False)
+            if unexpected or any(not k.startswith("surface_head.") for k in missing):
+                raise ValueError(f"{config.init_fpn}: weights do not fit the FPN with a surface head")
+        else:
+            model = trained
+    else:
+        model_config = model_config_with(FPNConfig, {**config.fpn, "surface": config.surface or config.fpn.get("surface", False)})
+        model = FPN(model_config).to(device)
+    if config.surface_only:
+        if not model_config.surface:
+            raise ValueError("surface_only needs a surface head: set surface true")
+        for name, parameter in model.named_parameters():
+            parameter.requires_grad_(name.startswith("surface_head."))
+    return model, model_config
+
+
+
+def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None, surface: bool = False):
     """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
     (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
     otherwise (validation)."""
@@ -45,9 +85,9 @@ def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: Tra
     for _ in range(config.batch):
         city = cities[int(rng.choice(len(cities), p=areas / areas.sum()))] if len(cities) > 1 else cities[0]
         if augmentation is not None:
-            image, target, valid = city.augmented_fpn_sample(rng, config.crop, augmentation)
+            image, target, valid = city.augmented_fpn_sample(rng, config.crop, augmentation, surface)
         else:
-            image, target, valid = city.fpn_sample(city.random_window(rng, config.crop))
+            image, target, valid = city.fpn_sample(city.random_window(rng, config.crop), surface)
         images.append(image)
         targets.append(target)
         valids.append(valid)
@@ -58,9 +98,14 @@ def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: Tra
 def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, float]:
     model.eval()
     losses, tp, fp, fn = [], 0, 0, 0
+    road = np.zeros(3)  # surface: intersection, union, pixels known
     for image, target, valid in batches:
         logits = model(image.to(device))
         losses.append(float(fpn_loss(logits, target.to(device), valid.to(device), config)))
+        if logits.shape[1] > 2 and target.shape[1] > 2:
+            known = valid & (target[:, 2] >= 0)
+            pred, truth = (logits[:, 2] > 0).cpu() & known, (target[:, 2] > 0.5) & known
+            road += [int((pred & truth).sum()), int((pred | truth).sum()), int(known.sum())]
         pred = (torch.sigmoid(logits[:, 1]) > 0.5).cpu() & valid
         truth = (target[:, 1] > 0.5) & valid
         tp += int((pred & truth).sum())
@@ -68,8 +113,11 @@ def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, 
         fn += int((~pred & truth).sum())
     model.train()
     precision, recall = tp / max(tp + fp, 1), tp / max(tp + fn, 1)
-    return {"val_loss": float(np.mean(losses)), "val_seg_precision": precision, "val_seg_recall": recall,
-            "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+    scores = {"val_loss": float(np.mean(losses)), "val_seg_precision": precision, "val_seg_recall": recall,
+              "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+    if road[2]:
+        scores["val_surface_iou"] = road[0] / max(road[1], 1)
+    return scores
 
 
 def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
@@ -77,16 +125,15 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     log = RunLog(out_dir / "train.log")
     train_cities = training_cities(config)
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
-    if config.init_fpn:  # fine-tuning: the trained network and its architecture
-        model = load_fpn(config.init_fpn, device).to(memory_format=torch.contiguous_format)
-        model_config = model.config
-    else:
-        model_config = model_config_with(FPNConfig, config.fpn)
-        model = FPN(model_config).to(device)
-    optimizer = torch.optim.Adam(fpn_parameter_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
+    model, model_config = fpn_with_surface(config, device)
+    groups = [{"params": [p for p in model.parameters() if p.requires_grad], "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
+    optimizer = torch.optim.Adam(groups, lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
-    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None) for _ in range(config.validation_samples)]
+    with_surface = bool(model_config.surface)
+    if with_surface and all(city.surface is None for city in train_cities):
+        raise ValueError("the surface head needs cities with a road_surface layer (synthetic cities built by this version)")
+    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None, with_surface) for _ in range(config.validation_samples)]
     augmentation = model_config_with(AugmentConfig, config.augment)
     step, history = resume_run(resume, "fpn", model, optimizer, rng)
     init = {"init_fpn_sha256": file_sha256(config.init_fpn)} if config.init_fpn else {}
@@ -94,7 +141,11 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
               config=config.to_dict(), **init)
 
     def loss_at(step: int):
-        image, target, valid = _fpn_batch(train_cities, rng, config, augmentation)
+        if config.surface_only:  # frozen layers keep their batch statistics: the maps stay the trained FPN's
+            for name, module in model.named_modules():
+                if isinstance(module, torch.nn.BatchNorm2d) and not name.startswith("surface_head."):
+                    module.eval()
+        image, target, valid = _fpn_batch(train_cities, rng, config, augmentation, with_surface)
         with autocast(config, device):
             logits = model(image.to(device))
         return fpn_loss(logits.float(), target.to(device), valid.to(device), config), {}
