@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import rasterio.features
-import shapely
 import torch
 import torch.nn.functional as F
 from affine import Affine

@@ -163,3 +163,49 @@ def test_interrupted_rewrite_leaves_no_finished_city(tmp_path, monkeypatch):
         synthesize_city(out, seed=2, split="train", tiles=(1, 1), config=SMALL, progress=False)
     assert not layout.is_city_dir(out)  # the old city.json is gone: nothing claims to be complete
     assert not [p for p in out.rglob("*") if "partial" in p.name]
+
+
+def test_written_road_surface_lies_between_the_boundaries(tmp_path):
+    """The road_surface layer is the roadway: on one side of every ground-truth boundary and not
+    the other, so the TrainingCity's surface target changes across each boundary."""
+    from csboundary.data.ground_truth import read_road_surface
+    from csboundary.models.training.data import TrainingCity
+
+    synthesize_city(tmp_path / "c", seed=1, split="valid", tiles=(1, 2), config=SMALL, progress=False)
+    polygons = read_road_surface(layout.ground_truth_path(tmp_path / "c"))
+    assert polygons and all(p.geom_type == "Polygon" for p in polygons)
+    city = TrainingCity(tmp_path / "c")
+    try:
+        surface = city.surface_target(city.mosaic.window)
+        assert 0.05 < (surface == 1).mean() < 0.6 and (surface >= 0).all()
+        gt = read_ground_truth(layout.ground_truth_path(tmp_path / "c"))
+        differs, total = 0, 0
+        for line in gt.geometry:
+            for t in np.arange(2.0, line.length - 2.0, 5.0):  # metres along the boundary
+                p, q = np.array(line.interpolate(t).coords[0]), np.array(line.interpolate(t + 0.5).coords[0])
+                normal = np.array([-(q - p)[1], (q - p)[0]]) / np.linalg.norm(q - p)
+                sides = []
+                for sign in (1, -1):
+                    x, y = p + sign * 1.5 * normal  # 3 px of 0.5 m either side
+                    col, row = city.mosaic.world_to_pixel(x, y)
+                    if 0 <= int(row) < surface.shape[0] and 0 <= int(col) < surface.shape[1]:
+                        sides.append(surface[int(row), int(col)])
+                if len(sides) == 2:
+                    total += 1
+                    differs += sides[0] != sides[1]
+        assert total > 100 and differs / total > 0.95
+        outside = city.surface_target(city.mosaic.window.__class__(-10, -10, 20, 20))
+        assert (outside[:10, :] == -1).all() and (outside[10:, 10:] >= 0).all()  # beyond the city: unknown
+    finally:
+        city.close()
+
+
+def test_a_city_without_a_road_surface_layer_has_an_unknown_surface(tmp_path):
+    from csboundary.data.ground_truth import read_ground_truth as read, write_ground_truth
+    from csboundary.models.training.data import TrainingCity
+
+    synthesize_city(tmp_path / "c", seed=1, split="valid", tiles=(1, 1), config=SMALL, progress=False)
+    path = layout.ground_truth_path(tmp_path / "c")
+    write_ground_truth(path, read(path))  # boundaries only, as an imported city has
+    with TrainingCity(tmp_path / "c") as city:
+        assert city.surface is None and (city.surface_target(city.mosaic.window) == -1).all()

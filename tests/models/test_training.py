@@ -124,3 +124,42 @@ def test_fine_tuning_starts_from_the_trained_fpn_and_its_architecture(fpn_run, t
     assert all(torch.equal(start["fpn"][k], tuned["fpn"][k]) for k in start["fpn"] if "running" not in k and "num_batches" not in k)
     first = json.loads((tmp_path / "tune" / "train.log").read_text().splitlines()[0])
     assert len(first["init_fpn_sha256"]) == 64
+
+
+def test_a_surface_head_trained_alone_leaves_every_other_weight_and_statistic_as_it_was(fpn_run, tmp_path):
+    tmp, weights = fpn_run
+    start = load_checkpoint(weights, ("fpn",))
+    cfg = config(tmp, init_fpn=str(weights), surface=True, surface_only=True, steps=3, validate_every=3, lr=0.01)
+    tuned = load_checkpoint(train_fpn(cfg, tmp_path / "surface", torch.device("cpu"), progress=False), ("fpn",))
+    assert tuned["fpn_config"]["surface"] is True
+    assert all(torch.equal(start["fpn"][k], tuned["fpn"][k]) for k in start["fpn"])  # running statistics included
+    head = [k for k in tuned["fpn"] if k.startswith("surface_head.")]
+    assert head and set(tuned["fpn"]) == set(start["fpn"]) | set(head)
+    validation = json.loads((tmp_path / "surface" / "train.log").read_text().splitlines()[-2])
+    assert 0.0 <= validation["val_surface_iou"] <= 1.0
+
+    from csboundary.models.checkpoint import load_fpn
+
+    model = load_fpn(tmp_path / "surface" / "fpn.pt")
+    assert model(torch.rand(1, 4, 64, 64)).shape == (1, 3, 64, 64)
+
+
+def test_surface_only_without_a_surface_head_is_an_error(fpn_run, tmp_path):
+    tmp, weights = fpn_run
+    with pytest.raises(ValueError, match="surface head"):
+        train_fpn(config(tmp, init_fpn=str(weights), surface_only=True), tmp_path / "x", torch.device("cpu"), progress=False)
+
+
+def test_the_surface_loss_ignores_pixels_whose_surface_is_unknown():
+    from csboundary.models.training.fpn import fpn_loss
+
+    torch.manual_seed(0)
+    logits, target = torch.randn(2, 3, 16, 16), torch.rand(2, 3, 16, 16)
+    valid = torch.ones(2, 16, 16, dtype=torch.bool)
+    cfg = TrainConfig()
+    unknown = target.clone()
+    unknown[:, 2] = -1
+    assert fpn_loss(logits, unknown, valid, cfg).item() == pytest.approx(fpn_loss(logits[:, :2], target[:, :2], valid, cfg).item())
+    only = TrainConfig.from_dict({"surface_only": True})
+    expected = torch.nn.functional.binary_cross_entropy_with_logits(logits[:, 2], target[:, 2]).item()
+    assert fpn_loss(logits, target, valid, only).item() == pytest.approx(expected, rel=1e-5)

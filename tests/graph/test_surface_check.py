@@ -1,0 +1,116 @@
+"""The road-surface check: an edge's roadway-beside-it score, and the hysteresis that keeps a
+curb's weak stretches with its sure ones."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.surface_check import SurfaceCheckConfig, kept_by_hysteresis, side_surface, surface_checked
+
+
+def graph(vertices, edges) -> BoundaryGraph:
+    return BoundaryGraph(np.asarray(vertices, float).reshape(-1, 2), np.asarray(edges, np.int64).reshape(-1, 2))
+
+
+def test_an_edge_along_the_roadway_scores_one_and_an_edge_in_a_lawn_scores_zero():
+    surface = np.zeros((100, 100), np.float32)
+    surface[:15] = 1.0  # roadway above row 15
+    g = graph([[10, 20], [50, 20], [10, 80], [50, 80]], [[0, 1], [2, 3]])
+    # the first edge's points at y = 20: 8 px above (row 12) is roadway, below (row 28) is not
+    assert side_surface(g, surface, 8.0).tolist() == [1.0, 0.0]
+    # read 4 px away instead, neither side of the first edge reaches the roadway
+    assert side_surface(g, surface, 4.0).tolist() == [0.0, 0.0]
+
+
+def test_the_score_is_the_mean_over_the_points_of_the_edge():
+    surface = np.zeros((100, 100), np.float32)
+    surface[:15, :30] = 1.0  # roadway beside the first 20 of the edge's 41 points (x = 10 .. 29.x)
+    g = graph([[10, 20], [50, 20]], [[0, 1]])
+    assert side_surface(g, surface, 8.0)[0] == pytest.approx(20 / 41)
+
+
+def test_hysteresis_keeps_weak_edges_connected_to_a_sure_one_and_drops_the_rest():
+    # a chain 0-1-2-3 (scores 0.9, 0.3, 0.1) and a separate pair 4-5-6 (0.3, 0.3)
+    edges = np.array([[0, 1], [1, 2], [2, 3], [4, 5], [5, 6]])
+    scores = np.array([0.9, 0.3, 0.1, 0.3, 0.3])
+    kept = kept_by_hysteresis(edges, 7, scores, strong=0.5, weak=0.2)
+    assert kept.tolist() == [True, True, False, False, False]
+    # the weak edge below the floor does not carry the connection on: 3-7 hangs off it
+    edges2 = np.vstack([edges, [[3, 7]]])
+    kept2 = kept_by_hysteresis(edges2, 8, np.append(scores, 0.4), strong=0.5, weak=0.2)
+    assert kept2.tolist() == [True, True, False, False, False, False]
+
+
+def test_the_check_is_off_by_default_and_drops_unbordered_edges_when_on():
+    surface = np.zeros((100, 100), np.float32)
+    surface[:15] = 1.0
+    g = graph([[10, 20], [50, 20], [10, 80], [50, 80]], [[0, 1], [2, 3]])
+    assert surface_checked(g, surface, SurfaceCheckConfig()) is g
+    out = surface_checked(g, surface, SurfaceCheckConfig(strong=0.5))
+    assert out.n_edges == 1 and np.allclose(out.vertices[out.edges[0]], [[10, 20], [50, 20]])
+
+
+@settings(max_examples=40, deadline=None)
+@given(angle=st.floats(0, 2 * math.pi), length=st.floats(20, 80), side=st.sampled_from([1.0, -1.0]))
+def test_a_straight_edge_beside_a_half_plane_of_roadway_scores_one_either_way_round(angle, length, side):
+    centre = np.array([100.0, 100.0])
+    d = np.array([math.cos(angle), math.sin(angle)])
+    normal = np.array([-d[1], d[0]])
+    rows, cols = np.mgrid[0:200, 0:200]
+    signed = (cols + 0.5 - centre[0]) * normal[0] + (rows + 0.5 - centre[1]) * normal[1]
+    surface = (side * signed > 2).astype(np.float32)  # roadway on one side, from 2 px beyond the line
+    a, b = centre - d * length / 2, centre + d * length / 2
+    forward, backward = graph([a, b], [[0, 1]]), graph([b, a], [[0, 1]])
+    assert side_surface(forward, surface, 8.0)[0] == pytest.approx(1.0)
+    assert side_surface(backward, surface, 8.0)[0] == pytest.approx(1.0)
+    assert side_surface(forward, np.zeros_like(surface), 8.0)[0] == 0.0
+
+
+def test_the_predictor_checks_only_maps_that_carry_a_surface_channel():
+    from csboundary.pipeline.patch import PatchPredictor
+
+    g = graph([[10, 20], [50, 20], [10, 80], [50, 80]], [[0, 1], [2, 3]])
+    host = SimpleNamespace(fill=SimpleNamespace(active=False), surface=SurfaceCheckConfig(strong=0.5))
+    host.filled = lambda patch, maps, graph: graph
+    two = np.zeros((2, 100, 100), np.float32)
+    assert PatchPredictor.finished(host, None, two, g).n_edges == 2  # an FPN without the surface head
+    three = np.zeros((3, 100, 100), np.float32)
+    three[2, :15] = 1.0
+    assert PatchPredictor.finished(host, None, three, g).n_edges == 1
+
+
+def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp_path):
+    import torch
+
+    from csboundary.errors import InputError
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+    from csboundary.models.fpn import FPNConfig, fpn_for_weights
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from helpers import bundle_without, shipped_parts
+
+    fpn_path, afanet_path = shipped_parts(tmp_path)
+    with pytest.raises(InputError, match="surface head"):
+        make_bundle(fpn_path, afanet_path, tmp_path / "no.pt", surface_strong=0.5)
+    with pytest.raises(InputError, match="surface head"):
+        load_predictor(None, "cpu", surface_check=0.5, engine="torch")
+    plain = load_checkpoint(fpn_path, ("fpn",))
+    config = {**plain["fpn_config"], "surface": True}
+    model = fpn_for_weights(config)
+    missing, _ = model.load_state_dict(plain["fpn"], strict=False)
+    assert missing and all(k.startswith("surface_head.") for k in missing)
+    save_checkpoint(tmp_path / "fpn-surface.pt", "fpn", fpn=model.state_dict(), fpn_config=FPNConfig.from_dict(config).to_dict())
+    make_bundle(tmp_path / "fpn-surface.pt", afanet_path, tmp_path / "b.pt", surface_strong=0.6, surface_weak=0.25)
+    predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
+    assert (predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px) == (0.6, 0.25, 8.0)
+    assert predictor.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
+    assert not load_predictor(tmp_path / "b.pt", "cpu", surface_check=0, engine="torch").surface.active
+    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_strong", "surface_weak", "surface_offset_px"))
+    assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).surface.active
