@@ -1,6 +1,6 @@
 """Scores of one weights bundle on validation sets for a grid of edge-support settings.
 
-    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.35,0.5] [--fill 0,40]
+    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.35,0.5] [--fill 0,40] [--surface 0,0.5 --surface-weak 0.2]
 
 Every setting not given is the bundle's own, so ``--vertex-threshold 0.4`` alone scores the
 bundle as shipped but for its vertex threshold.
@@ -39,6 +39,9 @@ def main() -> None:
     parser.add_argument("--fill-snap", type=float, default=None, help="distance at which a filled end joins a vertex, px (default: FillConfig's)")
     parser.add_argument("--fill-threshold", type=float, default=None, help="boundary probability of the filled skeleton (default: FillConfig's)")
     parser.add_argument("--fill", default="", help="shortest uncovered skeleton stretch filled in, px, 0 = off (default: the bundle's)")
+    parser.add_argument("--surface", default="", help="surface check: sure level of roadway beside an edge, 0 = off (default: the bundle's)")
+    parser.add_argument("--surface-weak", default="", help="surface check: floor below which an edge goes (default: the bundle's)")
+    parser.add_argument("--surface-offset", type=float, default=None, help="surface check: distance beside an edge, px (default: the bundle's)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
@@ -46,18 +49,22 @@ def main() -> None:
         if value is not None:
             predictor.fill = dataclasses.replace(predictor.fill, **{name: value})
     gap_level = predictor.support.gap_level if args.gap_level is None else args.gap_level
-    print("edge vthr support length gap fill " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    if args.surface_offset is not None:
+        predictor.surface = dataclasses.replace(predictor.surface, offset_px=args.surface_offset)
+    print("edge vthr support length gap fill surface weak " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
 
     def values(arg: str, bundle_value: float) -> list[float]:
         """A comma-separated list from the command line, or the bundle's own setting."""
         return [float(v) for v in arg.split(",")] if arg else [float(bundle_value)]
 
     support = predictor.support
-    grid = [(e, t, s, n, g, f) for e in values(args.edge_threshold, predictor.edge_threshold)
+    grid = [(e, t, s, n, g, f, r, w) for e in values(args.edge_threshold, predictor.edge_threshold)
             for t in values(args.vertex_threshold, predictor.vertices.threshold) for s in values(args.support, support.min_support)
             for n in values(args.length, support.max_length_px) for g in values(args.gap, support.max_gap_px)
-            for f in values(args.fill, predictor.fill.min_length_px)]
-    for edge, vthr, support, length, gap, fill in grid:
+            for f in values(args.fill, predictor.fill.min_length_px)
+            for r in values(args.surface, predictor.surface.strong) for w in values(args.surface_weak, predictor.surface.weak)]
+    for edge, vthr, support, length, gap, fill, strong, weak in grid:
+        predictor.surface = dataclasses.replace(predictor.surface, strong=strong, weak=weak)
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill)
         predictor.edge_threshold = edge
         predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
@@ -67,7 +74,7 @@ def main() -> None:
         for s in args.sets:
             m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
             row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
-        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 
 if __name__ == "__main__":

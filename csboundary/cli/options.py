@@ -36,6 +36,9 @@ EdgeThresholdOption = Annotated[Optional[float], typer.Option(callback=finite, m
 EdgeSupportOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP)]
 EdgeLengthOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, help=LENGTH_HELP)]
 EdgeGapOption = Annotated[Optional[float], typer.Option("--max-edge-gap", callback=finite, min=0.0, help=GAP_HELP)]
+SURFACE_HELP = ("Road-surface check: an edge needs this mean road-surface probability beside it, or a connected edge that has it "
+                "(0 = off; default: the weights'; the FPN needs a surface head).")
+SurfaceOption = Annotated[Optional[float], typer.Option("--surface-check", callback=finite, min=0.0, max=1.0, help=SURFACE_HELP)]
 FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callback=finite, min=0.0, help=FILL_HELP)]
 FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
 EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
