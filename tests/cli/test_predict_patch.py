@@ -131,6 +131,36 @@ def test_predict_writes_georeferenced_outputs_and_a_summary(bundle, four_patch_c
         assert np.isclose(maps.transform.c, x0) and np.isclose(maps.transform.f, y1)
 
 
+def test_an_fpn_with_a_surface_head_writes_a_third_map_band_and_its_check_drops_edges_beside_no_roadway(bundle, four_patch_city, tmp_path):
+    import rasterio
+
+    payload = torch.load(bundle, weights_only=True)
+    config = FPNConfig.from_dict({**payload["fpn_config"], "surface": True})
+    torch.manual_seed(0)
+    fpn = FPN(config)
+    fpn.load_state_dict(payload["fpn"], strict=False)
+
+    def predicted(road_bias: float, name: str) -> dict:
+        with torch.no_grad():
+            fpn.head[-1].bias[1] = 5.0  # boundary everywhere: its skeleton is filled in as edges
+            fpn.surface_head[-1].bias.fill_(road_bias)
+        weights = tmp_path / f"{name}.pt"
+        content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
+        save_checkpoint(weights, "bundle", **{**content, "fpn": fpn.state_dict(), "fpn_config": config.to_dict(),
+                                              "inference": {"edge_threshold": 0.5, "max_degree": 2, "fill_min_length_px": 40}})
+        out = tmp_path / name
+        result = run("predict", str(four_patch_city / "tiles"), "--out", str(out), "--weights", str(weights), "--write-maps", "--quiet",
+                     "--device", "cpu", "--surface-check", "0.5")
+        assert result.returncode == 0, result.stderr
+        return json.loads((out / "summary.json").read_text())
+
+    assert predicted(10.0, "road")["counts"]["edges"] > 0  # roadway everywhere: every filled edge has it beside it
+    assert predicted(-10.0, "lawn")["counts"]["edges"] == 0  # roadway nowhere: the check drops them all
+    with rasterio.open(tmp_path / "lawn" / "maps.tif") as maps:
+        assert maps.count == 3 and maps.descriptions[2] == "road_surface_probability"
+        assert maps.read(3).max() == 0  # sigmoid(-10) rounds to 0 of 255
+
+
 def test_an_interrupted_predict_leaves_no_final_file(bundle, four_patch_city, tmp_path, monkeypatch):
     from csboundary.data.raster import Mosaic
     from csboundary.pipeline import map_stitching, run as job
