@@ -116,7 +116,7 @@ def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, 
     scores = {"val_loss": float(np.mean(losses)), "val_seg_precision": precision, "val_seg_recall": recall,
               "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
     if road[2]:
-        scores["val_surface_iou"] = road[0] / max(road[1], 1)
+        scores["val_surface_iou"] = float(road[0] / max(road[1], 1))
     return scores
 
 
