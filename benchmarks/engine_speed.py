@@ -1,6 +1,6 @@
 """FPN alone against the whole pipeline, for the torch and onnx engines, in one run (issue 15).
 
-    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1]
+    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE]
 
 CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synthesized if
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
@@ -42,6 +42,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("city", nargs="?", type=Path, default=Path("data/cities/test-s7-2x2-2000"))
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--weights", default=None, help="weights bundle (default: the shipped one)")
     args = parser.parse_args()
     if not (args.city / "city.json").exists():
         subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "7", "--split", "test", "--tiles", "2x2",
@@ -51,8 +52,8 @@ def main() -> None:
         grid = PatchGrid.for_mosaic(mosaic)
         images = [mosaic.read(p.expanded).data for p in grid]
         for engine in ("torch", "onnx"):
-            predictor = PatchPredictor.load(None, torch.device("cpu"))
-            predictor.use_engine(engine)
+            predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
+            predictor.use_engine(engine, args.weights)
             fpn = fpn_only(predictor, images, args.repeat)
             out = Path(tmp) / engine
             _, summary = run_prediction(mosaic, predictor, out, progress=False, settings={"engine": engine})

@@ -114,12 +114,16 @@ class PatchPredictor:
         return self.patch_maps([None], [image])[0]
 
     def patch_maps(self, patches: list, images: list[np.ndarray]) -> list[np.ndarray]:
-        """FPN maps of several patches in one batch (the city pipeline's ``PatchModel`` step)."""
+        """FPN maps of several patches in one batch (the city pipeline's ``PatchModel`` step):
+        keypoint and boundary, plus the road surface when the surface check is on."""
         batch = np.stack(images)
         if self.onnx is not None and batch.shape[-2:] == (WINDOW, WINDOW):
-            logits = torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch)))
-            return list(torch.sigmoid(logits).numpy())
-        return list(predict_probabilities(self.fpn, batch, self.device))
+            probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch)))).numpy()
+        else:
+            probs = predict_probabilities(self.fpn, batch, self.device)
+        if not self.surface.active:  # the surface channel is carried (stitched, stored, written) only when the check reads it
+            probs = probs[:, :SURFACE]
+        return list(probs)
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         """Vertices (and corner edges) of a patch's keypoint map, plus, when ``crossings`` is on,

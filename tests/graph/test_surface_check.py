@@ -111,6 +111,7 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
     assert (predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px) == (0.6, 0.25, 8.0)
     assert predictor.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
-    assert not load_predictor(tmp_path / "b.pt", "cpu", surface_check=0, engine="torch").surface.active
+    off = load_predictor(tmp_path / "b.pt", "cpu", surface_check=0, engine="torch")
+    assert not off.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)  # nothing reads the surface
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_strong", "surface_weak", "surface_offset_px"))
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).surface.active
