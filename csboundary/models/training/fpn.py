@@ -10,7 +10,7 @@ import torch
 import torch.nn.functional as F
 
 from csboundary.models.augmentation import AugmentConfig
-from csboundary.models.checkpoint import file_sha256, load_fpn
+from csboundary.models.checkpoint import file_sha256, load_checkpoint, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity
@@ -55,10 +55,11 @@ def fpn_with_surface(config: TrainConfig, device: torch.device):
 
     if config.init_fpn:
         trained = load_fpn(config.init_fpn, device).to(memory_format=torch.contiguous_format)
-        model_config = trained.config
+        recorded = load_checkpoint(config.init_fpn, ("fpn", "bundle"))["fpn_config"]
+        model_config = dataclasses.replace(trained.config, pretrained=bool(recorded.get("pretrained", True)))  # how it began, as recorded
         if config.surface and not model_config.surface:
-            model_config = dataclasses.replace(model_config, surface=True, pretrained=False)
-            model = FPN(model_config).to(device)
+            model_config = dataclasses.replace(model_config, surface=True)  # records how the trained FPN began (pretrained or not)
+            model = FPN(dataclasses.replace(model_config, pretrained=False)).to(device)  # its weights come from init_fpn
             missing, unexpected = model.load_state_dict(trained.state_dict(), strict=False)
             if unexpected or any(not k.startswith("surface_head.") for k in missing):
                 raise ValueError(f"{config.init_fpn}: weights do not fit the FPN with a surface head")
