@@ -17,10 +17,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from csboundary.data import city as layout
-from csboundary.graph.surface_check import kept_by_hysteresis, side_surface
-from csboundary.pipeline.evaluate_set import evaluate_city_dir, evaluate_set
-from csboundary.pipeline.patch import PatchPredictor
+import sys
+
+sys.path.insert(0, str(Path(__file__).parent))
+from sweep_edge_support import score_row  # noqa: E402
+
+from csboundary.graph.surface_check import kept_by_hysteresis, side_surface  # noqa: E402
+from csboundary.pipeline.patch import PatchPredictor  # noqa: E402
 
 RULE = {"value": None}
 
@@ -60,10 +63,7 @@ def main() -> None:
     PatchPredictor.finished = finished
     for rule in args.rules.split(","):
         RULE["value"] = None if rule == "off" else rule
-        row = []
-        for s in args.sets:
-            m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
-            row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
+        row = score_row(args.sets, predictor)
         print(f"{rule:24s} " + " ".join(f"{r:>20s}" for r in row), flush=True)
 
 

@@ -24,6 +24,15 @@ from csboundary.pipeline.evaluate_set import evaluate_city_dir, evaluate_set
 from csboundary.pipeline.patch import PatchPredictor
 
 
+def score_row(sets: list[str], predictor: PatchPredictor) -> list[str]:
+    """"F1@5/APLS/TLTS" of ``predictor`` on each set (a set's mean) or city (city scale)."""
+    row = []
+    for s in sets:
+        m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
+        row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
+    return row
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights")
@@ -70,10 +79,7 @@ def main() -> None:
         predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
         predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length,
                                                 max_gap_px=gap, gap_level=gap_level)
-        row = []
-        for s in args.sets:
-            m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else evaluate_set(s, predictor, progress=False)["mean"]
-            row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
+        row = score_row(args.sets, predictor)
         print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 

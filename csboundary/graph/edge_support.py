@@ -40,15 +40,21 @@ def widened(boundary: np.ndarray, radius_px: int) -> np.ndarray:
     return cv2.dilate(np.asarray(boundary, np.float32), kernel)
 
 
-def _sample_segments(support: np.ndarray, starts: np.ndarray, ends: np.ndarray):
-    """``support`` sampled every pixel along each segment: (values, first sample of each segment,
-    samples per segment). Samples outside the map are 0; a zero-length segment samples its point twice."""
-    h, w = support.shape
+def points_along(starts: np.ndarray, ends: np.ndarray):
+    """Points every pixel (at least both ends) along each segment (K, 2) -> (K, 2): (points (N, 2),
+    the segment of each point (N,), each segment's first point (K,), points per segment (K,))."""
     counts = np.maximum(2, np.ceil(np.linalg.norm(ends - starts, axis=1)).astype(int) + 1)
     segment = np.repeat(np.arange(len(starts)), counts)
     first = np.concatenate([[0], np.cumsum(counts)[:-1]])
     t = (np.arange(len(segment)) - first[segment]) / (counts - 1)[segment]
-    points = starts[segment] + (ends - starts)[segment] * t[:, None]
+    return starts[segment] + (ends - starts)[segment] * t[:, None], segment, first, counts
+
+
+def _sample_segments(support: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+    """``support`` sampled every pixel along each segment: (values, first sample of each segment,
+    samples per segment). Samples outside the map are 0; a zero-length segment samples its point twice."""
+    h, w = support.shape
+    points, segment, first, counts = points_along(starts, ends)
     cols, rows = np.floor(points[:, 0]).astype(int), np.floor(points[:, 1]).astype(int)
     inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
     values = np.zeros(len(points))

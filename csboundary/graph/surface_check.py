@@ -24,6 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.edge_support import points_along
 
 
 @dataclass(frozen=True)
@@ -51,11 +52,7 @@ def side_surface(graph: BoundaryGraph, surface: np.ndarray, offset_px: float) ->
         if not keep.any():
             continue
         starts, steps, lengths = line[:-1][keep], steps[keep], lengths[keep]
-        counts = np.ceil(lengths).astype(int) + 1
-        segment = np.repeat(np.arange(len(starts)), counts)
-        first = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        t = (np.arange(len(segment)) - first[segment]) / (counts - 1)[segment]
-        points = starts[segment] + steps[segment] * t[:, None]
+        points, segment, _, _ = points_along(starts, starts + steps)
         normals = np.stack([-steps[:, 1], steps[:, 0]], axis=1)[segment] / lengths[segment, None]
         sides = []
         for sign in (1.0, -1.0):

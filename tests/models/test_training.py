@@ -166,14 +166,14 @@ def test_the_surface_loss_ignores_pixels_whose_surface_is_unknown():
 
 
 def test_a_surface_head_added_to_a_trained_fpn_keeps_its_recorded_architecture(tmp_path):
-    from csboundary.models.training.fpn import fpn_with_surface
-
-    source = TrainConfig.from_dict({"fpn": {**TINY_FPN}})
     from csboundary.models.checkpoint import save_checkpoint
     from csboundary.models.fpn import FPN, FPNConfig
+    from csboundary.models.training.fpn import starting_fpn
+
+    source = TrainConfig.from_dict({"fpn": {**TINY_FPN}})
 
     trained = FPNConfig.from_dict({**TINY_FPN, "pretrained": True})
     save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=FPN(trained).state_dict(), fpn_config=trained.to_dict(), train_config=source.to_dict())
-    model, config = fpn_with_surface(TrainConfig.from_dict({"init_fpn": str(tmp_path / "fpn.pt"), "surface": True}), torch.device("cpu"))
+    model, config = starting_fpn(TrainConfig.from_dict({"init_fpn": str(tmp_path / "fpn.pt"), "surface": True}), torch.device("cpu"))
     assert config.surface and config.pretrained  # as the trained FPN was recorded, plus the head
     assert hasattr(model, "surface_head")

@@ -46,11 +46,11 @@ def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, co
     return total
 
 
-def fpn_with_surface(config: TrainConfig, device: torch.device):
-    """The network a run starts from: ``init_fpn`` (its architecture), given a new surface head
-    when ``config.surface`` asks for one it lacks; else a new FPN of ``config.fpn``. With
-    ``surface_only``, every weight but the surface head's is frozen (and kept in eval mode by
-    :func:`freeze_all_but_surface`)."""
+def starting_fpn(config: TrainConfig, device: torch.device):
+    """The network a run starts from and its config: ``init_fpn`` (its recorded architecture),
+    given a new surface head when ``config.surface`` asks for one it lacks; else a new FPN of
+    ``config.fpn``. With ``surface_only``, every weight but the surface head's is frozen (the
+    training step also keeps the frozen batch norms in eval mode)."""
     import dataclasses
 
     if config.init_fpn:
@@ -58,7 +58,7 @@ def fpn_with_surface(config: TrainConfig, device: torch.device):
         recorded = load_checkpoint(config.init_fpn, ("fpn", "bundle"))["fpn_config"]
         model_config = dataclasses.replace(trained.config, pretrained=bool(recorded.get("pretrained", True)))  # how it began, as recorded
         if config.surface and not model_config.surface:
-            model_config = dataclasses.replace(model_config, surface=True)  # records how the trained FPN began (pretrained or not)
+            model_config = dataclasses.replace(model_config, surface=True)
             model = FPN(dataclasses.replace(model_config, pretrained=False)).to(device)  # its weights come from init_fpn
             missing, unexpected = model.load_state_dict(trained.state_dict(), strict=False)
             if unexpected or any(not k.startswith("surface_head.") for k in missing):
@@ -74,7 +74,6 @@ def fpn_with_surface(config: TrainConfig, device: torch.device):
         for name, parameter in model.named_parameters():
             parameter.requires_grad_(name.startswith("surface_head."))
     return model, model_config
-
 
 
 def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None, surface: bool = False):
@@ -126,7 +125,7 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     log = RunLog(out_dir / "train.log")
     train_cities = training_cities(config)
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
-    model, model_config = fpn_with_surface(config, device)
+    model, model_config = starting_fpn(config, device)
     groups = [{"params": [p for p in model.parameters() if p.requires_grad], "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
     optimizer = torch.optim.Adam(groups, lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
