@@ -96,15 +96,21 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     from csboundary.pipeline.patch import PatchPredictor, load_predictor
     from helpers import bundle_without, shipped_parts
 
-    fpn_path, afanet_path = shipped_parts(tmp_path)
+    fpn_path, afanet_path = shipped_parts(tmp_path)  # the shipped FPN has the head
+    shipped = load_checkpoint(fpn_path, ("fpn",))
+    assert shipped["fpn_config"]["surface"]
+    assert load_predictor(None, "cpu", surface_check=0.5, engine="torch").surface.strong == 0.5  # the option works on the shipped weights
+    assert not load_predictor(None, "cpu", engine="torch").surface.active  # and is off by default
+    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}  # an FPN from before the head
+    save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
     with pytest.raises(InputError, match="surface head"):
-        make_bundle(fpn_path, afanet_path, tmp_path / "no.pt", surface_strong=0.5)
+        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_strong=0.5)
+    make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "plain-bundle.pt")
     with pytest.raises(InputError, match="surface head"):
-        load_predictor(None, "cpu", surface_check=0.5, engine="torch")
-    plain = load_checkpoint(fpn_path, ("fpn",))
-    config = {**plain["fpn_config"], "surface": True}
+        load_predictor(tmp_path / "plain-bundle.pt", "cpu", surface_check=0.5, engine="torch")
+    config = {**shipped["fpn_config"], "surface": True}
     model = fpn_for_weights(config)
-    missing, _ = model.load_state_dict(plain["fpn"], strict=False)
+    missing, _ = model.load_state_dict(plain, strict=False)
     assert missing and all(k.startswith("surface_head.") for k in missing)
     save_checkpoint(tmp_path / "fpn-surface.pt", "fpn", fpn=model.state_dict(), fpn_config=FPNConfig.from_dict(config).to_dict())
     make_bundle(tmp_path / "fpn-surface.pt", afanet_path, tmp_path / "b.pt", surface_strong=0.6, surface_weak=0.25)
