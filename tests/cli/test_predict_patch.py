@@ -131,7 +131,7 @@ def test_predict_writes_georeferenced_outputs_and_a_summary(bundle, four_patch_c
         assert np.isclose(maps.transform.c, x0) and np.isclose(maps.transform.f, y1)
 
 
-def test_an_fpn_with_a_surface_head_writes_a_third_map_band_and_its_check_drops_edges_beside_no_roadway(bundle, small_city, tmp_path):
+def test_an_fpn_with_a_surface_head_writes_a_third_map_band_and_its_check_drops_edges_beside_no_roadway(bundle, four_patch_city, tmp_path):
     import rasterio
 
     payload = torch.load(bundle, weights_only=True)
@@ -149,7 +149,7 @@ def test_an_fpn_with_a_surface_head_writes_a_third_map_band_and_its_check_drops_
         save_checkpoint(weights, "bundle", **{**content, "fpn": fpn.state_dict(), "fpn_config": config.to_dict(),
                                               "inference": {"edge_threshold": 0.5, "max_degree": 2, "fill_min_length_px": 40}})
         out = tmp_path / name
-        result = run("predict", str(small_city / "tiles"), "--out", str(out), "--weights", str(weights), "--write-maps", "--quiet",
+        result = run("predict", str(four_patch_city / "tiles"), "--out", str(out), "--weights", str(weights), "--write-maps", "--quiet",
                      "--device", "cpu", "--surface-check", "0.5")
         assert result.returncode == 0, result.stderr
         return json.loads((out / "summary.json").read_text())
