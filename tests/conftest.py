@@ -10,6 +10,7 @@ tests can compare any window read from the mosaic against a plain numpy slice.
 
 from __future__ import annotations
 
+import os
 import sys
 import warnings
 from dataclasses import dataclass
@@ -22,6 +23,11 @@ from affine import Affine
 from rasterio.errors import NotGeoreferencedWarning
 
 sys.path.insert(0, str(Path(__file__).parent))
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # the suite runs on one worker per core (pytest-xdist): one thread each, in the tests and in
+    # the commands they start, so two workers do not fight over the cores
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 CRS = "EPSG:32618"
 GSD = 0.5

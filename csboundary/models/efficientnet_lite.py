@@ -29,6 +29,9 @@ LITE0_STAGES = ((1, 3, 1, 1, 16), (2, 3, 2, 6, 24), (2, 5, 2, 6, 40), (3, 3, 2, 
 # The stage whose output is taken at each pyramid level (strides 2, 4, 8, 16, 32).
 LITE0_TAPS = {2: 0, 4: 1, 8: 2, 16: 4, 32: 6}
 LITE0_CHANNELS = {2: 16, 4: 24, 8: 40, 16: 112, 32: 320}
+# Training-only style mixing (csboundary.models.style_mixing) acts on the stem and these stages:
+# the early layers, whose feature statistics carry the imagery's look rather than its layout.
+STYLE_MIX_STAGES = (0, 1, 2)
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 NIR_MEAN, NIR_STD = 0.45, 0.225  # NIR has no ImageNet statistics; a mid-range band of the same spread
@@ -71,13 +74,18 @@ class EfficientNetLite0(nn.Module):
         std = list(IMAGENET_STD) + [NIR_STD] * (in_channels - 3)
         self.register_buffer("mean", torch.tensor(mean[:in_channels]).view(1, -1, 1, 1), persistent=False)
         self.register_buffer("std", torch.tensor(std[:in_channels]).view(1, -1, 1, 1), persistent=False)
+        self.style_mix: nn.Module | None = None  # set by training (add_style_mixing); stateless
 
     def forward(self, image: torch.Tensor) -> list[torch.Tensor]:
         """(B, in_channels, H, W) in [0, 1] -> features at strides 2, 4, 8, 16, 32."""
         x = self.stem((image - self.mean) / self.std)
+        if self.style_mix is not None:
+            x = self.style_mix(x)
         taps, out = set(LITE0_TAPS.values()), []
         for index, stage in enumerate(self.stages):
             x = stage(x)
+            if self.style_mix is not None and index in STYLE_MIX_STAGES:
+                x = self.style_mix(x)
             if index in taps:
                 out.append(x)
         return out

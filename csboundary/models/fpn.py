@@ -227,5 +227,7 @@ class LiteFPN(nn.Module):
         features = self.encoder(small)[1:]  # strides 4..32 of the encoder's input
         fused = top_down(features, self.lateral, self.smooth)
         stem = self.stem((x - 0.5) / 0.25)
+        if self.encoder.style_mix is not None:  # training only: the full-resolution stem sees the look too
+            stem = self.encoder.style_mix(stem)
         logits = F.interpolate(head_logits(self, fused, stem), scale_factor=2, mode="bilinear", align_corners=False)
         return with_surface(self, logits, fused)[..., :h, :w]

@@ -77,9 +77,10 @@ def test_pretrained_fpn_trains_with_augmentation_on_an_extra_city(tmp_path):
 
     extra = CitySpec(split="valid", seed=3, tiles=(1, 1), tile_size=300).ensure(tmp_path / "cities")
     cfg = config(tmp_path, fpn={"backbone": "efficientnet-lite0"}, augment={}, extra_train_cities=[str(extra)], steps=2, crop=64,
-                 encoder_lr_scale=0.1, freeze_encoder_bn=True)
+                 encoder_lr_scale=0.1, freeze_encoder_bn=True, style_mix=1.0)
     weights = train_fpn(cfg, tmp_path / "run", torch.device("cpu"), progress=False)
     payload = load_checkpoint(weights, ("fpn",))
+    assert payload["train_config"]["style_mix"] == 1.0 and not any("style" in k for k in payload["fpn"])  # stateless: nothing saved
     assert payload["fpn_config"]["backbone"] == "efficientnet-lite0"
     assert payload["train_config"]["extra_train_cities"] == [str(extra)]
     assert payload["code_version_at_start"]

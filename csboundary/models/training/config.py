@@ -35,6 +35,8 @@ class TrainConfig(Config):
     snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
     encoder_lr_scale: float = 1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
     freeze_encoder_bn: bool = False  # pretrained FPN encoder: keep its batch-norm statistics (ImageNet's, not the synthetic cities')
+    style_mix: float = 0.0  # pretrained FPN encoder: probability per batch of mixing early feature statistics between samples (MixStyle); 0 = off
+    style_mix_alpha: float = 0.1  # Beta(alpha, alpha) of the mixing weight
     autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides

@@ -12,6 +12,7 @@ import torch.nn.functional as F
 from csboundary.models.augmentation import AugmentConfig
 from csboundary.models.checkpoint import file_sha256, load_checkpoint, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.models.style_mixing import add_style_mixing
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity
 from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
@@ -126,6 +127,7 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     train_cities = training_cities(config)
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
     model, model_config = starting_fpn(config, device)
+    add_style_mixing(model, config.style_mix, config.style_mix_alpha)
     groups = [{"params": [p for p in model.parameters() if p.requires_grad], "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
     optimizer = torch.optim.Adam(groups, lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
