@@ -15,11 +15,11 @@ import argparse
 import dataclasses
 
 import torch
+from sweep_edge_support import score_row
 
 import csboundary.pipeline.patch as patch_module
 from csboundary.models.maps import image_tensor
 from csboundary.pipeline.patch import PatchPredictor
-from sweep_edge_support import score_row
 
 
 def window_statistics_probabilities(scope: str):
