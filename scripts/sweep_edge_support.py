@@ -51,28 +51,36 @@ def main() -> None:
     parser.add_argument("--surface", default="", help="surface check: sure level of roadway beside an edge, 0 = off (default: the bundle's)")
     parser.add_argument("--surface-weak", default="", help="surface check: floor below which an edge goes (default: the bundle's)")
     parser.add_argument("--surface-offset", type=float, default=None, help="surface check: distance beside an edge, px (default: the bundle's)")
+    parser.add_argument("--join", default="", help="longest join between two dangling ends, px, 0 = off (default: the bundle's)")
+    parser.add_argument("--join-support", type=float, default=None, help="mean boundary probability along a join (default: EndJoinConfig's)")
+    parser.add_argument("--join-turn", type=float, default=None, help="largest turn from an end's heading, degrees (default: EndJoinConfig's)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
     for name, value in (("cover_px", args.fill_cover), ("snap_px", args.fill_snap), ("threshold", args.fill_threshold)):
         if value is not None:
             predictor.fill = dataclasses.replace(predictor.fill, **{name: value})
+    for name, value in (("min_support", args.join_support), ("max_turn_deg", args.join_turn)):
+        if value is not None:
+            predictor.join = dataclasses.replace(predictor.join, **{name: value})
     gap_level = predictor.support.gap_level if args.gap_level is None else args.gap_level
     if args.surface_offset is not None:
         predictor.surface = dataclasses.replace(predictor.surface, offset_px=args.surface_offset)
-    print("edge vthr support length gap fill surface weak " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    print("edge vthr support length gap fill surface weak join " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
 
     def values(arg: str, bundle_value: float) -> list[float]:
         """A comma-separated list from the command line, or the bundle's own setting."""
         return [float(v) for v in arg.split(",")] if arg else [float(bundle_value)]
 
     support = predictor.support
-    grid = [(e, t, s, n, g, f, r, w) for e in values(args.edge_threshold, predictor.edge_threshold)
+    grid = [(e, t, s, n, g, f, r, w, j) for e in values(args.edge_threshold, predictor.edge_threshold)
             for t in values(args.vertex_threshold, predictor.vertices.threshold) for s in values(args.support, support.min_support)
             for n in values(args.length, support.max_length_px) for g in values(args.gap, support.max_gap_px)
             for f in values(args.fill, predictor.fill.min_length_px)
-            for r in values(args.surface, predictor.surface.strong) for w in values(args.surface_weak, predictor.surface.weak)]
-    for edge, vthr, support, length, gap, fill, strong, weak in grid:
+            for r in values(args.surface, predictor.surface.strong) for w in values(args.surface_weak, predictor.surface.weak)
+            for j in values(args.join, predictor.join.max_px)]
+    for edge, vthr, support, length, gap, fill, strong, weak, join in grid:
+        predictor.join = dataclasses.replace(predictor.join, max_px=join)
         predictor.surface = dataclasses.replace(predictor.surface, strong=strong, weak=weak)
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill)
         predictor.edge_threshold = edge
@@ -80,7 +88,7 @@ def main() -> None:
         predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length,
                                                 max_gap_px=gap, gap_level=gap_level)
         row = score_row(args.sets, predictor)
-        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} {join:4.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 
 if __name__ == "__main__":

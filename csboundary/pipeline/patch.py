@@ -19,20 +19,26 @@ import numpy as np
 import torch
 
 from csboundary.data.grid import Patch
+from csboundary.data.units import MODEL_GSD
+from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
+from csboundary.graph.end_joining import EndJoinConfig, join_ends
 from csboundary.graph.skeleton_fill import FillConfig, fill_from_skeleton
 from csboundary.graph.surface_check import SurfaceCheckConfig, surface_checked
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
-from csboundary.data.units import MODEL_GSD
-from csboundary.errors import InputError
-from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model, shipped_weights
+from csboundary.models.checkpoint import (
+    load_checkpoint,
+    load_fpn,
+    restore_model,
+    shipped_weights,
+)
 from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN, SURFACE
-from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
 from csboundary.models.maps import bands_and_maps, predict_probabilities, unit_bands
+from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
 
 
 @dataclass
@@ -47,6 +53,7 @@ class PatchPredictor:
     crossings: CrossingConfig = field(default_factory=CrossingConfig)  # extra vertices on the grid lines (off by default)
     fill: FillConfig = field(default_factory=FillConfig)  # boundary the graph missed, from the segmentation skeleton (off by default)
     surface: SurfaceCheckConfig = field(default_factory=SurfaceCheckConfig)  # edges need roadway beside them (FPNs with a surface head; off by default)
+    join: EndJoinConfig = field(default_factory=EndJoinConfig)  # dangling ends joined across supported gaps (off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
     min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
@@ -155,7 +162,7 @@ class PatchPredictor:
     def finished(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
         """``graph`` filled in from the skeleton (``fill``), then without the edges no roadway
         borders (``surface``, when the maps carry the FPN's surface channel)."""
-        graph = self.filled(patch, maps, graph)
+        graph = join_ends(self.filled(patch, maps, graph), maps[1], self.join)
         if self.surface.active and maps.shape[0] > SURFACE:
             graph = surface_checked(graph, maps[SURFACE], self.surface)
         return graph
