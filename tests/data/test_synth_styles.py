@@ -184,3 +184,37 @@ def test_synth_cli_writes_the_style_and_refuses_an_unknown_one(tmp_path):
     assert meta["style"] == "suburb" and meta["config"]["layout"] == "suburb" and meta["look"]["source_gsd"] is not None
     bad = run_cli("synth", str(tmp_path / "d"), "--style", "mars", "--quiet")
     assert bad.returncode == 2 and "mars" in bad.stderr and not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_highway_is_crossed_only_by_avenues_each_through_a_diamond_of_four_ramps(seed):
+    config = small("highway")
+    network = plan_city(config, "train", seed, (1, 1)).scene.network
+    (highway,) = [s for s in network.streets if s.kind == "highway"]
+    ramps = [s for s in network.streets if s.kind == "ramp"]
+    through = [s for s in network.streets if s.kind in ("avenue", "boulevard")]
+    hits = [s.centreline.intersection(highway.centreline) for s in through]
+    crossings = [p for h in hits for p in getattr(h, "geoms", [h]) if not p.is_empty]
+    inside = [p for p in crossings if shapely.box(0, 0, 400, 400).contains(p)]
+    # ramp_share 1: a diamond at every crossing (ramps wholly beyond the domain's margin are clipped away)
+    assert inside and 4 * len(inside) <= len(ramps) <= 4 * len(crossings)
+    road = highway.roadway()
+    domain = shapely.box(-80, -80, 480, 480)
+    for ramp in ramps:  # each leaves the highway's outer lane and ends on an avenue (unless cut at the domain's edge)
+        start, end = Point(ramp.centreline.coords[0]), Point(ramp.centreline.coords[-1])
+        if domain.exterior.distance(start) > 1e-6:
+            assert road.contains(start)  # on the outer lane: the ramp's edge flush with the highway's
+            assert start.distance(highway.centreline) == pytest.approx(highway.width / 2 - ramp.width / 2, abs=0.5)
+        if domain.exterior.distance(end) > 1e-6:
+            assert min(end.distance(s.centreline) for s in through) < 1e-6
+            assert end.distance(highway.centreline) > highway.width / 2 + 20
+    for s in network.streets:  # every other street stops short of the highway
+        if s.kind not in ("avenue", "boulevard", "highway", "ramp"):
+            assert s.centreline.distance(highway.centreline) >= highway.width / 2 + config.highway_frontage - 1e-6
+    assert any(m.intersects(highway.centreline) for m in network.medians)  # the median is land, not roadway
+    assert not network.roadway.buffer(1e-6).contains(highway.centreline)
+
+
+def test_highways_off_leave_every_other_style_untouched():
+    assert all(STYLES[name].get("highways", 0) == 0 for name in STYLES if name != "highway")
+    assert SynthConfig().highways == 0

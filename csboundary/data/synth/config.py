@@ -72,6 +72,13 @@ class SynthConfig(Config):
     branch_spacing: tuple[float, float] = (70.0, 140.0)  # suburb: local streets along a collector
     branch_length: tuple[float, float] = (60.0, 160.0)  # suburb: local street length
     loop_share: float = 0.3  # suburb: local streets that come back to their collector (a crescent)
+    highways: int = 0  # motorways across the city (a median, no crossing but the avenues)
+    highway_angle_deg: tuple[float, float] = (15.0, 75.0)  # a highway's angle to the avenues
+    highway_carriageway: tuple[float, float] = (10.0, 15.0)  # one direction's roadway, curb to median
+    highway_median: tuple[float, float] = (3.0, 12.0)
+    highway_frontage: float = 35.0  # streets other than avenues end this far from a highway's edge
+    ramp_share: float = 1.0  # avenue crossings of a highway that get a diamond of four ramps
+    ramp_width: tuple[float, float] = (5.5, 8.0)
     raised_curb: bool = True  # False: rural edge, asphalt straight onto a shoulder and verge
     shoulder_width: tuple[float, float] = (0.0, 0.0)  # gravel shoulder outside the asphalt (no curb)
     verge_share: float = 0.0  # blocks with a grass strip between curb and sidewalk

@@ -460,7 +460,7 @@ def _add_markings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> N
                 continue
             _lane_lines(cfg, rng, scene, s, piece)
             for at_end in (False, True):
-                if rng.random() < cfg.crosswalk_share and piece.length > 20:
+                if s.kind not in ("highway", "ramp") and rng.random() < cfg.crosswalk_share and piece.length > 20:
                     _crosswalk(rng, scene, piece, s.width, at_end)
 
 
@@ -484,6 +484,17 @@ def _lane_lines(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, street
             for line in _offset(piece, side * (street.width / 2 - rng.uniform(0.25, 0.5))):
                 scene.markings.append(Painted(line.buffer(paint / 2 + 0.03, cap_style="flat"), WHITE_PAINT, 3))
     if cfg.lane_paint_share < 1 and rng.random() >= cfg.lane_paint_share:
+        return
+    if street.kind == "highway":  # dashed lanes of 3.6 m, solid lines along the median and the edge
+        carriageway = (street.width - street.median) / 2
+        for side in (-1, 1):
+            for k in range(1, max(1, int(carriageway // 3.6))):
+                for line in _offset(piece, side * (street.median / 2 + 3.6 * k)):
+                    for dash in _dashes(line, 3.0, 9.0):
+                        scene.markings.append(Painted(dash.buffer(paint / 2 + 0.02, cap_style="flat"), WHITE_PAINT, 3))
+            for offset in (street.median / 2 + 0.5, street.width / 2 - 0.5):
+                for line in _offset(piece, side * offset):
+                    scene.markings.append(Painted(line.buffer(paint / 2 + 0.03, cap_style="flat"), WHITE_PAINT, 3))
         return
     if street.kind == "boulevard":
         for side in (-1, 1):
