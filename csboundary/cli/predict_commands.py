@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, SurfaceOption,
+from csboundary.cli.options import (DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers)
 
 
@@ -21,6 +21,7 @@ def predict(
     max_edge_length: EdgeLengthOption = None,
     max_edge_gap: EdgeGapOption = None,
     fill_min_length: FillOption = None,
+    join_ends: JoinOption = None,
     surface_check: SurfaceOption = None,
     min_fragment_length: FragmentOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
@@ -47,7 +48,7 @@ def predict(
     if scheduler and workers:
         raise typer.BadParameter("give --scheduler or --workers, not both")
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
@@ -70,6 +71,7 @@ def predict_patch(
     max_edge_length: EdgeLengthOption = None,
     max_edge_gap: EdgeGapOption = None,
     fill_min_length: FillOption = None,
+    join_ends: JoinOption = None,
     surface_check: SurfaceOption = None,
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
@@ -82,7 +84,7 @@ def predict_patch(
 
     out_dir(out, [image] if image.is_dir() else [])
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, surface_check=surface_check, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine)
     graph = predict_patch_to_folder(image, out, predictor, gsd)
     kinds = graph.edge_kinds or []
     typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({kinds.count('corner')} corner, "

@@ -106,6 +106,7 @@ class PatchPredictor:
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
         fill = FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0)))
+        join = EndJoinConfig(max_px=float(settings.get("join_max_px", 0.0)))
         surface = SurfaceCheckConfig(**{field: float(settings[key]) for key, field in SURFACE_SETTINGS.items() if key in settings})
         if surface.active and not fpn.config.surface:
             raise InputError(path, "damaged weights file: a surface check is set but the FPN has no surface head")
@@ -114,7 +115,7 @@ class PatchPredictor:
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
                    edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support, crossings=crossings, fill=fill, surface=surface, pixel_size_m=float(pixel_size),
+                   support=support, crossings=crossings, fill=fill, surface=surface, join=join, pixel_size_m=float(pixel_size),
                    min_fragment_px=float(settings.get("min_fragment_px", 0.0)))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
@@ -190,7 +191,7 @@ class PatchPredictor:
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
-                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False),
+                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False),
                       "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False)}
 SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px"}  # bundle key -> SurfaceCheckConfig field
 
@@ -215,7 +216,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
-                   fill_min_length: float | None = None, surface_check: float | None = None,
+                   fill_min_length: float | None = None, surface_check: float | None = None, join_ends: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
@@ -236,6 +237,8 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.support = dataclasses.replace(predictor.support, max_gap_px=max_edge_gap)
     if fill_min_length is not None:
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill_min_length)
+    if join_ends is not None:
+        predictor.join = dataclasses.replace(predictor.join, max_px=join_ends)
     if surface_check is not None:
         if surface_check > 0 and not predictor.fpn.config.surface:
             raise InputError("--surface-check", "the FPN of these weights has no road-surface head")

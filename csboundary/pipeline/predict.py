@@ -52,6 +52,8 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
                 "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
                 "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
                 "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
+    if predictor.join.active:  # only then: a run interrupted before end joining existed still resumes
+        settings["join_max_px"] = predictor.join.max_px
     if predictor.surface.active:  # only then: a run interrupted before the check existed still resumes
         settings["surface_check"] = [predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px]
     with view.mosaic, contextlib.ExitStack() as stack:

@@ -120,3 +120,33 @@ def test_joins_are_short_new_and_keep_degrees_at_most_two(points, max_px, turn):
     assert np.all(np.linalg.norm(vertices[new[:, 0]] - vertices[new[:, 1]], axis=1) <= max_px + 1e-9)
     pairs = {tuple(sorted(e)) for e in joined.edges.tolist()}
     assert len(pairs) == joined.n_edges  # no edge twice
+
+
+def test_bundle_carries_the_join_and_a_command_line_value_overrides_it(tmp_path):
+    import torch
+
+    from helpers import shipped_parts
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+
+    shipped_parts(tmp_path)
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", join_max_px=40)
+    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).join.max_px == 40
+    assert not load_predictor(tmp_path / "b.pt", "cpu", join_ends=0, engine="torch").join.active
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
+    assert "join_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
+    assert not PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).join.active
+    assert load_predictor(tmp_path / "off.pt", "cpu", join_ends=25, engine="torch").join.max_px == 25
+
+
+def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
+    from csboundary.pipeline.patch import PatchPredictor
+
+    maps = np.zeros((2, 100, 100), np.float32)
+    maps[1] = line_map()
+    predictor = PatchPredictor(None, None, None, join=ON)
+    joined = predictor.finished(None, maps, two_pieces())
+    assert joined.edge_kinds[-1] == JOIN and sorted(joined.edges[-1].tolist()) == [1, 2]
+    assert PatchPredictor(None, None, None).finished(None, maps, two_pieces()).n_edges == 2
