@@ -10,7 +10,7 @@ from typing import Optional
 import typer
 
 from csboundary.cli.options import (DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
-                                    QuietOption, WeightsOption, finite, out_dir, out_file)
+                                    QuietOption, WeightsOption, finite, out_dir, out_file, readable_inputs)
 
 
 def evaluate(
@@ -82,12 +82,13 @@ def evaluate_model(
 ) -> None:
     """Evaluate a model on a city at patch scale (each patch's graph on its core) and city scale
     (the stitched graph), without writing the prediction."""
+    if json_out is not None:
+        out_file(json_out, (".json",))
+    readable_inputs([city])
     from csboundary.metrics.report import format_rows, write_scores
     from csboundary.pipeline.evaluate_set import evaluate_city
     from csboundary.pipeline.patch import load_predictor
 
-    if json_out is not None:
-        out_file(json_out, (".json",))
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
                                max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
     scores = evaluate_city(city, predictor, seed, batch_size=batch_size, progress=not quiet)

@@ -78,6 +78,16 @@ def out_dir(out: Path, inputs: Sequence[Path] = ()) -> None:
     check_output_dir(out, inputs=inputs)
 
 
+def readable_inputs(inputs: Sequence[Path]) -> None:
+    """The imagery (tiles, a folder of tiles, a city directory) is opened and closed before any
+    network loads: a missing or unreadable input is reported in about a second, not after the
+    seconds it takes to import PyTorch and read the weights."""
+    from csboundary.data.inputs import open_imagery
+
+    mosaic, _ = open_imagery(inputs)
+    mosaic.close()
+
+
 def out_file(path: Path, suffixes: tuple[str, ...]) -> None:
     """An output file is checked (name, place, writable) before any work."""
     from csboundary.data.atomic import check_output_file

@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 
 from csboundary.cli.options import (DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
-                                    QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers)
+                                    QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, readable_inputs)
 
 
 def predict(
@@ -41,12 +41,14 @@ def predict(
     feet, degrees) and 8/16-bit or float imagery are resampled and stretched on the fly
     (docs/city-inference.md). Work is kept as it is done: the same command after an interruption
     continues where it stopped (docs/scaling.md)."""
+    if scheduler and workers:
+        raise typer.BadParameter("give --scheduler or --workers, not both")
+    readable_inputs(inputs)
+    out_dir(out, inputs)
     from csboundary.pipeline.patch import load_predictor
     from csboundary.pipeline.predict import predict_to_folder
     from csboundary.pipeline.run import stage_table
 
-    if scheduler and workers:
-        raise typer.BadParameter("give --scheduler or --workers, not both")
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
                                max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
 
@@ -79,10 +81,11 @@ def predict_patch(
     device: DeviceOption = "auto",
 ) -> None:
     """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
+    out_dir(out, [image] if image.is_dir() else [])
+    readable_inputs([image])
     from csboundary.pipeline.patch import load_predictor
     from csboundary.pipeline.predict import predict_patch_to_folder
 
-    out_dir(out, [image] if image.is_dir() else [])
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
                                max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine)
     graph = predict_patch_to_folder(image, out, predictor, gsd)

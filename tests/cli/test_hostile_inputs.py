@@ -320,3 +320,16 @@ def test_show_clips_a_huge_window_to_the_imagery(world, tmp_path):
 def test_nan_and_inf_options_are_usage_errors(world, tmp_path):
     one_error(run_cli("synth", str(tmp_path / "c"), "--gsd", "nan"), "--gsd")
     one_error(predict(world, world["tif"], out=tmp_path / "o", extra=("--gsd", "inf")), "--gsd")
+
+
+@pytest.mark.parametrize("command", [["predict", "{missing}", "--out", "{out}"], ["predict-patch", "{missing}", "--out", "{out}"],
+                                     ["evaluate-model", "{missing}"]])
+def test_a_missing_input_is_reported_before_pytorch_loads(tmp_path, command):
+    """The one-line error comes from opening the imagery, which needs no network: PyTorch is never imported."""
+    args = [a.format(missing=tmp_path / "missing.tif", out=tmp_path / "out") for a in command]
+    probe = ("import sys\nfrom csboundary.cli.main import main\nsys.argv = ['csboundary', *sys.argv[1:]]\n"
+             "try:\n    main()\nfinally:\n    print('torch imported:', 'torch' in sys.modules)\n")
+    result = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, timeout=120)
+    one_error(result, "missing.tif")
+    assert "torch imported: False" in result.stdout
+    assert not (tmp_path / "out").exists()
