@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential")
+STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential", "highway")
 
 
 def city_dir(style: str, cache: Path) -> Path:
