@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.end_joining import EndJoinConfig
 from csboundary.graph.surface_check import SurfaceCheckConfig, kept_by_hysteresis, side_surface, surface_checked
 
 
@@ -77,7 +78,7 @@ def test_the_predictor_checks_only_maps_that_carry_a_surface_channel():
     from csboundary.pipeline.patch import PatchPredictor
 
     g = graph([[10, 20], [50, 20], [10, 80], [50, 80]], [[0, 1], [2, 3]])
-    host = SimpleNamespace(fill=SimpleNamespace(active=False), surface=SurfaceCheckConfig(strong=0.5))
+    host = SimpleNamespace(fill=SimpleNamespace(active=False), join=EndJoinConfig(), surface=SurfaceCheckConfig(strong=0.5))
     host.filled = lambda patch, maps, graph: graph
     two = np.zeros((2, 100, 100), np.float32)
     assert PatchPredictor.finished(host, None, two, g).n_edges == 2  # an FPN without the surface head
