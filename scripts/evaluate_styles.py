@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential", "highway")
+STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential", "leafy", "highway")
 
 
 def city_dir(style: str, cache: Path) -> Path:

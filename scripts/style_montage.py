@@ -18,9 +18,12 @@ from csboundary.data.ground_truth import read_ground_truth
 from evaluate_styles import STYLES, city_dir
 
 
-def crop_with_truth(city: Path, size: int = 2000, side: int = 480) -> np.ndarray:
-    """The first tile's top-left ``size`` px with the ground truth drawn in magenta, ``side`` px wide."""
-    with rasterio.open(city / "tiles" / "tile_r00_c00.tif") as src:
+TILE = {"highway": "tile_r00_c01.tif"}  # the seed-7 highway city's interchange lies in its top-right tile
+
+
+def crop_with_truth(city: Path, size: int = 2000, side: int = 480, tile: str = "tile_r00_c00.tif") -> np.ndarray:
+    """A tile's top-left ``size`` px with the ground truth drawn in magenta, ``side`` px wide."""
+    with rasterio.open(city / "tiles" / tile) as src:
         rgb = src.read((1, 2, 3)).transpose(1, 2, 0).copy()
         inverse = ~src.transform
         crs = src.crs
@@ -38,7 +41,7 @@ def main() -> None:
     args = parser.parse_args()
     tiles = []
     for style in STYLES:
-        image = crop_with_truth(city_dir(style, args.cache))
+        image = crop_with_truth(city_dir(style, args.cache), tile=TILE.get(style, "tile_r00_c00.tif"))
         cv2.putText(image, style, (12, 36), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (0, 0, 0), 5, cv2.LINE_AA)
         cv2.putText(image, style, (12, 36), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (255, 255, 255), 2, cv2.LINE_AA)
         tiles.append(image)
