@@ -12,7 +12,7 @@ to a multiple of the total stride).
 Two bottom-up paths (``FPNConfig.backbone``):
 
 * ``resnet``: the from-scratch path above (the first shipped model; the baselines' trunks).
-* ``efficientnet-lite0``: the ImageNet-pretrained encoder of
+* ``efficientnet-lite0`` (or ``-lite1``, ``-lite2``): the ImageNet-pretrained encoder of
   :mod:`csboundary.models.efficientnet_lite`, run on the patch resized by ``encoder_scale``
   (default 0.5: at 0.3 m/px a street is still tens of pixels wide, the encoder sees twice the
   context and costs a quarter as much). Its levels at strides 4-32 (of its input) feed the same
@@ -41,9 +41,9 @@ class FPNConfig(Config):
     pyramid: int = 48  # channels of the top-down path
     stem: int = 24  # channels of the stride-2 stem
     out_channels: int = 2
-    backbone: str = "resnet"  # resnet (from scratch) | efficientnet-lite0 (ImageNet-pretrained)
-    encoder_scale: float = 0.5  # efficientnet-lite0 only: the encoder sees the patch resized by this
-    pretrained: bool = True  # efficientnet-lite0 only: start from the ImageNet weights (training)
+    backbone: str = "resnet"  # resnet (from scratch) | efficientnet-lite0/1/2 (ImageNet-pretrained)
+    encoder_scale: float = 0.5  # efficientnet-lite* only: the encoder sees the patch resized by this
+    pretrained: bool = True  # efficientnet-lite* only: start from the ImageNet weights (training)
     head: str = "full"  # full | light: how the stride-2 head joins the pyramid and the stem (see add_head)
     head_channels: int = 16  # light head only: channels at stride 2
     surface: bool = False  # a third output: road-surface logits from the pyramid (see add_surface_head)
@@ -68,7 +68,7 @@ class BasicBlock(nn.Module):
         return F.relu(self.body(x) + self.skip(x))
 
 
-BACKBONES = ("resnet", "efficientnet-lite0")
+BACKBONES = ("resnet", "efficientnet-lite0", "efficientnet-lite1", "efficientnet-lite2")
 
 
 def fpn_for_weights(config: dict) -> nn.Module:
@@ -81,7 +81,7 @@ def FPN(config: FPNConfig = FPNConfig()) -> nn.Module:
     """The FPN of ``config.backbone`` (both map (B, 4, H, W) in [0, 1] to (B, out, H, W) logits)."""
     if config.backbone == "resnet":
         return ResNetFPN(config)
-    if config.backbone == "efficientnet-lite0":
+    if config.backbone in BACKBONES[1:]:
         return LiteFPN(config)
     raise ValueError(f"unknown FPN backbone {config.backbone!r}; expected one of {', '.join(BACKBONES)}")
 
@@ -188,18 +188,19 @@ class ResNetFPN(nn.Module):
 
 
 class LiteFPN(nn.Module):
-    """EfficientNet-Lite0 bottom-up path (ImageNet-pretrained) under the same top-down path and head."""
+    """EfficientNet-Lite bottom-up path (ImageNet-pretrained) under the same top-down path and head."""
 
     def __init__(self, config: FPNConfig):
         super().__init__()
-        from csboundary.models.efficientnet_lite import LITE0_CHANNELS, EfficientNetLite0, pretrained_lite0
+        from csboundary.models.efficientnet_lite import EfficientNetLite, pretrained_lite, tap_channels
 
         if config.encoder_scale not in (1.0, 0.5, 0.25):
             raise ValueError(f"encoder_scale must be 1, 0.5 or 0.25, got {config.encoder_scale}")
         self.config = c = config
-        self.encoder = pretrained_lite0(c.in_channels) if c.pretrained else EfficientNetLite0(c.in_channels)
-        levels = (4, 8, 16, 32)
-        self.lateral = nn.ModuleList(nn.Conv2d(LITE0_CHANNELS[s], c.pyramid, 1) for s in levels)
+        variant = c.backbone.removeprefix("efficientnet-")
+        self.encoder = pretrained_lite(c.in_channels, variant) if c.pretrained else EfficientNetLite(c.in_channels, variant)
+        levels, channels = (4, 8, 16, 32), tap_channels(variant)
+        self.lateral = nn.ModuleList(nn.Conv2d(channels[s], c.pyramid, 1) for s in levels)
         self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in levels)
         self.stem = nn.Sequential(conv_bn_relu(c.in_channels, c.stem, 2), conv_bn_relu(c.stem, c.stem))
         add_head(self, c)

@@ -28,6 +28,27 @@ def test_every_pretrained_tensor_lands_in_the_encoder(source):
     assert torch.equal(model.stages[1][1].depthwise[0].weight, source["_blocks.2._depthwise_conv.weight"])
 
 
+@pytest.mark.parametrize("variant, last_block", [("lite1", 20), ("lite2", 20)])
+def test_larger_variants_load_every_packaged_tensor(variant, last_block):
+    source = torch.load(lite.pretrained_weights_path(variant), map_location="cpu", weights_only=True)
+    model = lite.pretrained_lite(3, variant)  # strict load
+    assert torch.equal(model.stages[6][0].project[0].weight, source[f"_blocks.{last_block}._project_conv.weight"])
+    # lite1/2 have three stride-4 blocks: the third is the source's block 3
+    assert torch.equal(model.stages[1][2].depthwise[0].weight, source["_blocks.3._depthwise_conv.weight"])
+    feats = model(torch.rand(1, 3, 64, 64))
+    assert [f.shape[1] for f in feats] == [lite.tap_channels(variant)[s] for s in (2, 4, 8, 16, 32)]
+    fpn = FPN(FPNConfig(backbone=f"efficientnet-{variant}", pretrained=False)).eval()
+    with torch.no_grad():
+        assert fpn(torch.rand(1, 4, 70, 90)).shape == (1, 2, 70, 90)
+
+
+def test_unknown_variant_is_refused():
+    with pytest.raises(ValueError, match="lite3"):
+        lite.EfficientNetLite(4, "lite3")
+    with pytest.raises(ValueError, match="efficientnet-lite9"):
+        FPN(FPNConfig(backbone="efficientnet-lite9"))
+
+
 def test_nir_filter_is_the_mean_rgb_filter_and_grey_input_keeps_the_stem_response(source):
     stem = lite.imagenet_state_dict(4)["stem.0.weight"]
     rgb = source["_conv_stem.weight"]
