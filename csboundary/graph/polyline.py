@@ -1,5 +1,6 @@
-"""Arc length along a polyline: the one definition every stage uses (edge lengths, spur pruning,
-edge ownership by midpoint, label sampling along a boundary)."""
+"""Arc length along a polyline and the nearest point on one: the definitions every stage uses
+(edge lengths, spur pruning, edge ownership by midpoint, label sampling along a boundary,
+mending seams, the iCurb expert)."""
 
 from __future__ import annotations
 
@@ -18,3 +19,33 @@ def polyline_length(points: np.ndarray) -> float:
     """Total length of a polyline (0 for fewer than two points)."""
     cumulative = arc_lengths(points)
     return float(cumulative[-1]) if len(cumulative) else 0.0
+
+
+def segment_feet(a: np.ndarray, b: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Foot points of ``q`` on the segments a -> b ((N, 2) each): parameter t in [0, 1], foot, distance."""
+    ab = b - a
+    t = np.clip(((q - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0, 1)
+    foot = a + t[:, None] * ab
+    return t, foot, np.linalg.norm(q - foot, axis=-1)
+
+
+def nearest_on_polyline(points: np.ndarray, q: np.ndarray) -> tuple[float, int, np.ndarray]:
+    """Distance from ``q`` to a polyline of two or more points, the index k of the segment
+    (points[k] -> points[k + 1]) that holds the nearest point, and that point (the first of equals)."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    _, feet, distance = segment_feet(points[:-1], points[1:], np.asarray(q, float))
+    k = int(np.argmin(distance))
+    return float(distance[k]), k, feet[k]
+
+
+def split_polyline(points: np.ndarray, k: int, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two pieces of a polyline cut at ``at``, a point of its segment ``k``: points[:k + 1] + at
+    and at + points[k + 1:]. A point equal to the cut is not repeated."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    at = np.asarray(at, float).reshape(1, 2)
+    head, tail = points[: k + 1], points[k + 1:]
+    if np.array_equal(head[-1:], at):
+        head = head[:-1]
+    if np.array_equal(tail[:1], at):
+        tail = tail[1:]
+    return np.concatenate([head, at]), np.concatenate([at, tail])

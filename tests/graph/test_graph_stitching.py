@@ -117,3 +117,60 @@ def test_a_neighbour_mends_two_ends_its_owner_left_dangling():
     # An end that already continues is not joined again.
     branchy = graph([[20, 50], [60, 50], [60, 90]], [[0, 1], [1, 2]])
     assert stitch_patch_graphs({(0, 0): branchy, (0, 1): right}, GRID).n_edges == 3
+
+
+def pieces(city: BoundaryGraph) -> int:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = city.edges
+    return connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(city.n_vertices,) * 2), directed=False)[0]
+
+
+def test_ends_cut_by_the_window_borders_are_mended_onto_the_edge_they_lie_on():
+    # One curb along y = 50. The left patch's edge stops at x = 105, 5 px from its window's right
+    # side; the right patch's starts at x = 91, 1 px inside its window's left side. Neither
+    # extracted the other's cut end (no keypoint there), so snapping finds nothing: each end lies
+    # on the other side's edge.
+    left = graph([[20, 50], [105, 50]], [[0, 1]])
+    right = graph([[91, 50], [180, 50]], [[0, 1]])
+    broken = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(mend_px=0))
+    assert broken.n_edges == 2 and pieces(broken) == 2
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert pieces(city) == 1 and city.n_vertices == 4 and city.n_edges == 3  # 20 - 91 - 105 - 180
+    assert sorted(np.bincount(city.edges.ravel()).tolist()) == [1, 1, 2, 2]
+    lengths = sorted(float(np.linalg.norm(np.subtract(*city.vertices[e]))) for e in city.edges)
+    assert lengths == [14, 71, 75]
+
+
+def test_an_end_beside_the_edge_gets_a_short_seam_edge_and_splits_a_shaped_edge():
+    arc = np.array([[20.0, 50], [60, 50], [100, 50]])
+    left = graph([[20, 50], [100, 50]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[arc], edge_scores=np.array([0.8]))
+    right = graph([[91, 53], [180, 53]], [[0, 1]], edge_kinds=["normal"], edge_scores=np.array([0.6]))
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert pieces(city) == 1 and city.n_edges == 4
+    seam = city.edge_kinds.index("seam")
+    assert sorted(map(tuple, city.vertices[city.edges[seam]].tolist())) == [(91, 50), (91, 53)]
+    assert city.edge_scores[seam] == 0.6 and city.edge_patches[seam].tolist() == [0, 1]
+    corners = [k for k, kind in enumerate(city.edge_kinds) if kind == "corner"]
+    assert len(corners) == 2  # the corner edge, split at (91, 50), keeps its shape on both sides
+    for k in corners:
+        line, (u, v) = city.edge_polyline(k), city.edges[k]
+        assert np.array_equal(line[0], city.vertices[u]) and np.array_equal(line[-1], city.vertices[v])
+    assert sum(float(np.abs(np.diff(city.edge_polyline(k)[:, 0])).sum()) for k in corners) == 80
+
+
+def test_ends_away_from_a_window_border_or_from_any_edge_stay_dangling():
+    # An end 30 px inside its window, 3 px from another curb, is a real end as far as stitching
+    # knows; so is a border end 8 px from the nearest edge.
+    inner = graph([[20, 50], [70, 50], [60, 53], [60, 90]], [[0, 1], [2, 3]])
+    assert stitch_patch_graphs({(0, 0): inner, (0, 1): BoundaryGraph()}, GRID).n_edges == 2
+    left = graph([[20, 50], [100, 50]], [[0, 1]])
+    far = graph([[91, 58], [180, 58]], [[0, 1]])
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): far}, GRID)
+    assert city.n_edges == 2 and pieces(city) == 2
+
+
+def test_config_rejects_a_negative_mend_radius():
+    with pytest.raises(ValueError):
+        StitchConfig(mend_px=-1)

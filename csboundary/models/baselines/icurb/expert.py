@@ -8,7 +8,8 @@ import shapely
 from shapely.geometry import LineString
 
 from csboundary.labels.boundaries import Boundary
-from csboundary.models.baselines.icurb.geometry import inside, segment_feet
+from csboundary.graph.polyline import segment_feet
+from csboundary.models.baselines.icurb.geometry import inside
 
 
 class Expert:

@@ -12,7 +12,8 @@ from skimage.morphology import skeletonize
 from csboundary.graph import BoundaryGraph
 from csboundary.models.baselines.icurb.agent import agent_input
 from csboundary.models.baselines.icurb.config import ICurbConfig
-from csboundary.models.baselines.icurb.geometry import inside, segment_feet
+from csboundary.graph.polyline import segment_feet
+from csboundary.models.baselines.icurb.geometry import inside
 
 
 class Traces:
