@@ -3,7 +3,7 @@
     python benchmarks/fpn_speed.py [--repeats 5] [--weights W ...]
 
 Compares the from-scratch ResNet FPN (the first shipped model) with the EfficientNet-Lite0 FPN
-(what ships now) and the larger Lite1 / Lite2 encoders at the same input, so the ratio is
+(shipped until 2026-12-03) and the larger Lite1 / Lite2 encoders (Lite2 ships since) at the same input, so the ratio is
 measured under the same machine load.
 Prints seconds per patch (median of ``--repeats`` after one warm-up) and the ratio to the first.
 """
@@ -39,10 +39,10 @@ def main() -> None:
     x = torch.rand(1, 4, args.size, args.size)
     models = {
         "resnet (scratch, first shipped)": FPNConfig(),
-        "efficientnet-lite0 @0.5 (shipped)": FPNConfig(backbone="efficientnet-lite0", pretrained=False),
+        "efficientnet-lite0 @0.5 (until 12-03)": FPNConfig(backbone="efficientnet-lite0", pretrained=False),
         "efficientnet-lite0 @1.0": FPNConfig(backbone="efficientnet-lite0", encoder_scale=1.0, pretrained=False),
         "efficientnet-lite1 @0.5": FPNConfig(backbone="efficientnet-lite1", pretrained=False),
-        "efficientnet-lite2 @0.5": FPNConfig(backbone="efficientnet-lite2", pretrained=False),
+        "efficientnet-lite2 @0.5 (shipped)": FPNConfig(backbone="efficientnet-lite2", pretrained=False),
     }
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {args.size}x{args.size} px, median of {args.repeats}")
     print(f"{'FPN':36s} {'params':>9s} {'eager s':>9s} {'ch-last s':>10s} {'eager x':>8s} {'ch-last x':>10s}")
