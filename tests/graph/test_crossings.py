@@ -72,7 +72,8 @@ def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_pat
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "given.pt", vertex_threshold=0.6)
     assert PatchPredictor.load(tmp_path / "trained.pt", torch.device("cpu")).vertices.threshold == 0.35
     assert PatchPredictor.load(tmp_path / "given.pt", torch.device("cpu")).vertices.threshold == 0.6
-    assert PatchPredictor.load(shipped_weights(), torch.device("cpu")).vertices.threshold == 0.5  # older bundles: the default
+    shipped = torch.load(shipped_weights(), map_location="cpu", weights_only=True)["inference"]["vertex_threshold"]
+    assert shipped == 0.4 and PatchPredictor.load(shipped_weights(), torch.device("cpu")).vertices.threshold == shipped  # chosen on the real crops
     # a keypoint blob peaking at 0.45 is a vertex at 0.35, not at 0.6
     maps = np.zeros((2, 200, 200), np.float32)
     yy, xx = np.mgrid[:200, :200]
