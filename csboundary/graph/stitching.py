@@ -21,7 +21,9 @@ the rules here:
 * **Repair** (``repair``, on by default). Where the owner saw no edge between two ends that it
   left dangling but a neighbour, which has both in view, did, the neighbour's edge is added (at
   most once per end, most confident first): otherwise the boundary stays broken at the seam. On
-  the demo city this lifts city-scale APLS from 0.79 to 0.82 at unchanged precision.
+  the demo city this lifts city-scale APLS from 0.79 to 0.82 at unchanged precision. "In view"
+  means both ends at least ``border_px`` from the neighbour's window border: an edge between two
+  points where boundaries leave the window runs along its border, across the road.
 * **Seam mending** (``mend_px``, 5 by default; 0 = off). A boundary that crosses a window's
   border is cut there in that patch's graph: its edge ends on a vertex the neighbour, which sees
   the boundary run on, never extracted (it has no keypoint there), so snapping finds nothing and
@@ -159,6 +161,7 @@ class _Candidate:
     shaped: bool  # the polyline is the edge's shape (a corner arc), not just its two ends
     patch: Index
     owned: bool  # its midpoint lies in its patch's core
+    in_view: bool = True  # both ends at least ``border_px`` from its window's inner border (not cut points)
 
 
 def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig = StitchConfig(),
@@ -210,6 +213,7 @@ def _candidates(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: 
             continue
         x0, y0, x1, y1 = owner_bounds(patch, grid)
         positions = _snapped(graph, patch, grid, safe, config)
+        away = border_distance(graph.vertices, patch, grid) >= config.border_px
         kinds = graph.vertex_kinds or ["vertex"] * graph.n_vertices
         for k, (u, v) in enumerate(graph.edges):
             shaped = graph.edge_polylines is not None and graph.edge_polylines[k] is not None
@@ -220,7 +224,7 @@ def _candidates(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: 
                 line, kinds[u], kinds[v],
                 graph.edge_kinds[k] if graph.edge_kinds is not None else "normal",
                 float(graph.edge_scores[k]) if graph.edge_scores is not None else np.nan,
-                shaped, index, bool(x0 <= mx < x1 and y0 <= my < y1),
+                shaped, index, bool(x0 <= mx < x1 and y0 <= my < y1), bool(away[u] and away[v]),
             ))
     return out
 
@@ -229,13 +233,15 @@ def _repairs(candidates: list[_Candidate], registry: _VertexRegistry, kept: dict
     """Edges from non-owners that join two ends the owners left dangling, most confident first.
 
     Where the owner saw no edge but the neighbour, with the same two vertices in view, did, the
-    boundary would otherwise stay broken at the seam; an end can be mended once.
+    boundary would otherwise stay broken at the seam; an end can be mended once. An edge with an
+    end on the neighbour's own window border is not taken: those ends are where two boundaries
+    leave that window, and the edge between them runs along the border, across the road.
     """
     degree = np.zeros(len(registry.points), int)
     for e in kept.values():
         degree[e["u"]] += 1
         degree[e["v"]] += 1
-    spare = sorted((c for c in candidates if not c.owned), key=lambda c: -np.nan_to_num(c.score, nan=0))
+    spare = sorted((c for c in candidates if not c.owned and c.in_view), key=lambda c: -np.nan_to_num(c.score, nan=0))
     out = []
     for c in spare:
         a, b = registry.find(c.line[0]), registry.find(c.line[-1])

@@ -107,16 +107,31 @@ def test_config_is_checked():
 
 
 def test_a_neighbour_mends_two_ends_its_owner_left_dangling():
-    # The left patch owns x < 100 but saw no edge between its end (60, 50) and the right side's
-    # end (105, 50); the right patch, with both in view, did (midpoint x = 82.5: not its own).
-    left = graph([[20, 50], [60, 50]], [[0, 1]])
-    right = graph([[60, 50], [105, 50], [160, 50]], [[0, 1], [1, 2]], edge_scores=np.array([0.7, 0.9]))
+    # Two curbs of the left patch end at (98, 20) and (99, 80) and it saw no edge between them;
+    # the right patch, with both ends in view (>= 8 px inside its window, which starts at x = 90),
+    # did. The edge's midpoint (x = 98.5) is the left patch's to judge, so it is a repair.
+    left = graph([[20, 20], [98, 20], [99, 80], [20, 80]], [[0, 1], [2, 3]])
+    right = graph([[98, 20], [99, 80]], [[0, 1]], edge_scores=np.array([0.7]))
     city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
-    assert city.n_edges == 3 and sorted(np.bincount(city.edges.ravel()).tolist()) == [1, 1, 2, 2]
+    assert city.n_edges == 3 and pieces(city) == 1
+    assert sorted(np.bincount(city.edges.ravel()).tolist()) == [1, 1, 2, 2]
     assert stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(repair=False)).n_edges == 2
     # An end that already continues is not joined again.
-    branchy = graph([[20, 50], [60, 50], [60, 90]], [[0, 1], [1, 2]])
+    branchy = graph([[20, 20], [98, 20], [99, 80], [20, 80], [60, 50]], [[0, 1], [2, 3], [2, 4]])
     assert stitch_patch_graphs({(0, 0): branchy, (0, 1): right}, GRID).n_edges == 3
+
+
+def test_a_neighbours_edge_along_its_own_window_border_is_no_repair():
+    # Two curbs of the left patch end at x = 91, where they leave the right patch's window (it
+    # starts at x = 90). The right patch's edge between those two cut points runs along its
+    # border, across whatever lies between: not a repair.
+    left = graph([[20, 20], [91, 20], [91, 80], [20, 80]], [[0, 1], [2, 3]])
+    right = graph([[91, 20], [91, 80]], [[0, 1]], edge_scores=np.array([0.9]))
+    assert stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID).n_edges == 2
+    # The same edge 10 px further in (both ends in view) is one.
+    inside = graph([[20, 20], [100, 20], [99, 80], [20, 80]], [[0, 1], [2, 3]])
+    seen = graph([[100, 20], [99, 80]], [[0, 1]], edge_scores=np.array([0.9]))
+    assert stitch_patch_graphs({(0, 0): inside, (0, 1): seen}, GRID).n_edges == 3
 
 
 def pieces(city: BoundaryGraph) -> int:
