@@ -42,6 +42,8 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from csboundary.data.grid import Patch, PatchGrid
@@ -268,9 +270,6 @@ def _edge_line(edge: dict, registry: _VertexRegistry) -> np.ndarray:
 
 def _components(kept: dict, n_vertices: int) -> np.ndarray:
     """Connected-piece label of every output vertex."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     pairs = np.array(list(kept), dtype=np.int64).reshape(-1, 2)
     adjacency = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_vertices, n_vertices))
     return connected_components(adjacency, directed=False)[1]
@@ -297,13 +296,13 @@ def _mend_seam_ends(kept: dict, registry: _VertexRegistry, grid: PatchGrid, conf
     step = 4.0  # spacing of the samples that find an end's candidate edges
     samples, owner = [], []
     for i, line in enumerate(lines):
-        length = arc_lengths(line)[-1]
-        s = np.linspace(0, length, max(2, int(np.ceil(length / step)) + 1))
-        samples.append(np.stack([np.interp(s, arc_lengths(line), line[:, 0]), np.interp(s, arc_lengths(line), line[:, 1])], 1))
+        along = arc_lengths(line)
+        s = np.linspace(0, along[-1], max(2, int(np.ceil(along[-1] / step)) + 1))
+        samples.append(np.stack([np.interp(s, along, line[:, 0]), np.interp(s, along, line[:, 1])], 1))
         owner.append(np.full(len(s), i))
     tree, owner = cKDTree(np.concatenate(samples)), np.concatenate(owner)
     piece = _components(kept, n)
-    cuts: dict[int, list[tuple[float, int, np.ndarray, int]]] = {}  # edge -> (arc position, segment, foot, end)
+    cuts: dict[int, list[tuple[float, np.ndarray, int]]] = {}  # edge -> (arc position of the foot, foot, end)
     for x, near in zip(ends, tree.query_ball_point(points[ends], config.mend_px + step)):
         best = None
         for i in set(owner[near].tolist()):
