@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.pixel_index import nonzero_pixels
 from csboundary.graph.polyline import arc_lengths
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 
@@ -72,7 +73,7 @@ def long_stretches(mask: np.ndarray, min_length_px: float) -> np.ndarray:
     keep = stats[:, cv2.CC_STAT_AREA] >= min_length_px
     keep[0] = False
     out = np.zeros(mask.shape, bool)
-    rows, cols = np.nonzero(labels)
+    rows, cols = nonzero_pixels(labels)
     out[rows, cols] = keep[labels[rows, cols]]
     return out
 
@@ -102,7 +103,7 @@ def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillC
 def _stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
     """The graph of the stretches (:func:`skeleton_graph`, nothing pruned), worked out on the
     stretches' bounding box, not the whole window."""
-    rows, cols = np.nonzero(mask)
+    rows, cols = nonzero_pixels(mask)
     r0, c0 = rows.min(), cols.min()
     box = mask[r0:rows.max() + 1, c0:cols.max() + 1]
     found = skeleton_graph(np.pad(box, 1).astype(np.float32), SkeletonConfig(threshold=0.5, simplify_px=simplify_px, spur_px=0.0, min_length_px=0.0))

@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from csboundary.graph.pixel_index import nonzero_pixels
+
 _STEPS = ((0, 1, 1.0), (1, 0, 1.0), (1, 1, np.sqrt(2.0)), (1, -1, np.sqrt(2.0)))
 
 
@@ -23,12 +25,12 @@ def skeleton_pixel_links(skeleton: np.ndarray, corner_diagonals: bool = True) ->
     (E,) their distances in px. Works on the pixel list (a binary search per neighbour), so the
     cost follows the skeleton's size, not the map's."""
     mask = np.asarray(skeleton, dtype=bool)
-    rows, cols = np.nonzero(mask)
+    rows, cols = nonzero_pixels(mask)
     pixels = np.stack([rows, cols], axis=1)
     if len(rows) == 0:
         return pixels, np.zeros((0, 2), np.int64), np.zeros(0)
     h, w = mask.shape
-    flat = rows * w + cols  # increasing: np.nonzero is in raster order
+    flat = rows * w + cols  # increasing: the pixels come in raster order
 
     def node_at(r: np.ndarray, c: np.ndarray) -> np.ndarray:
         """Node of pixel (r, c), -1 where it is off the map or not a skeleton pixel."""

@@ -39,6 +39,7 @@ from scipy.sparse import csgraph
 from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.pixel_index import nonzero_pixels
 from csboundary.graph.skeleton_pixels import skeleton_distance_graph
 
 ISOLATED = "isolated"  # vertex at the centre of a short piece (same names as csboundary.labels.keypoints)
@@ -158,7 +159,7 @@ def _pieces(prob: np.ndarray, config: VertexConfig) -> tuple[np.ndarray, int]:
     labels, n = ndimage.label(prob >= config.threshold, structure=_EIGHT)
     if n == 0:
         return labels, 0
-    rows, cols = np.nonzero(labels)  # keypoint pixels are a few percent of the map: relabel only them
+    rows, cols = nonzero_pixels(labels)  # keypoint pixels are a few percent of the map: relabel only them
     piece = labels[rows, cols]
     keep = np.bincount(piece, minlength=n + 1) >= config.min_area_px
     keep[0] = False
@@ -170,7 +171,7 @@ def _centres_and_peaks(prob: np.ndarray, labels: np.ndarray, n: int, threshold: 
     """Per piece: (n, 2) centroid (col, row) of its pixels weighted by ``p - threshold`` (plain
     centroid where every weight is 0, i.e. a plateau at exactly the threshold), and (n,) its
     highest probability."""
-    rows, cols = np.nonzero(labels)
+    rows, cols = nonzero_pixels(labels)
     lab = labels[rows, cols]
     p = prob[rows, cols]
     peak = np.full(n + 1, -np.inf)

@@ -104,6 +104,10 @@ class _Timer:
         self.seconds[stage] += time.perf_counter() - start
         return out
 
+    def add(self, seconds: dict[str, float]) -> None:
+        for stage, value in seconds.items():
+            self.seconds[stage] += value
+
 
 @dataclass
 class CityJob:
@@ -127,24 +131,38 @@ class CityJob:
         returns whether each window had imagery (the FPN skips those without) and the seconds
         per stage."""
         timed = _Timer()
-        patches = [self.grid.patch(*i) for i in indices]
         if reads is None:
             reads = timed("read", self.read_batch, indices)
-        has_pixels = [bool(r.valid.any()) for r in reads]
-        work = [k for k, ok in enumerate(has_pixels) if ok]
+        maps, seconds = self.compute_maps(indices, reads)
+        timed.add(seconds)
+        timed.add(self.store_maps(indices, reads, maps))
+        return [m is not None for m in maps], dict(timed.seconds)
+
+    def compute_maps(self, indices: list[Index], reads: list) -> tuple[list[np.ndarray | None], dict[str, float]]:
+        """The FPN maps of one batch's windows (None for a window without imagery, which the FPN
+        skips). Touches neither the store nor the run's state, so it may run in a thread beside
+        the windows being connected."""
+        timed = _Timer()
+        work = [k for k, r in enumerate(reads) if r.valid.any()]
         images = [fill_nodata(reads[k].data, reads[k].valid) for k in work]  # no false edge along the imagery's border
-        predicted = timed("fpn", self.model.patch_maps, [patches[k] for k in work], images) if work else []
-        maps: list[np.ndarray | None] = [None] * len(patches)
+        patches = [self.grid.patch(*indices[k]) for k in work]
+        predicted = timed("fpn", self.model.patch_maps, patches, images) if work else []
+        maps: list[np.ndarray | None] = [None] * len(reads)
         for k, m in zip(work, predicted):
             maps[k] = m * reads[k].valid[None]  # no keypoints where there is no image
+        return maps, dict(timed.seconds)
+
+    def store_maps(self, indices: list[Index], reads: list, maps: list[np.ndarray | None]) -> dict[str, float]:
+        """Store a batch's maps (and images, thumbnails); returns the seconds per stage."""
+        timed = _Timer()
         for index, m, read in zip(indices, maps, reads):
             timed("map_stitching", self.store.save_maps, index, m)
             if m is not None:
                 timed("read", self.store.save_image, index, read.data)
         if self.overview_scale:
-            for index, patch, read in zip(indices, patches, reads):
-                timed("read", self.store.save_thumb, index, core_thumbnail(read, patch, self.overview_scale))
-        return has_pixels, dict(timed.seconds)
+            for index, read in zip(indices, reads):
+                timed("read", self.store.save_thumb, index, core_thumbnail(read, self.grid.patch(*index), self.overview_scale))
+        return dict(timed.seconds)
 
     def stitched_maps(self, index: Index) -> np.ndarray:
         """The window's maps averaged over every patch covering it (float32)."""
@@ -256,23 +274,37 @@ class CityRun:
 
 def run_here(run: CityRun) -> None:
     """Do a run's remaining work in this process, in row-major order: a window is connected as
-    soon as its last covering patch is predicted. The next batch is read by a second thread
-    while this one is predicted (GDAL reads without holding the GIL); "read" then counts only
-    the time spent waiting for it."""
+    soon as its last covering patch is predicted. Two threads work ahead of this one: one reads
+    the FPN batch after next (GDAL), one runs the FPN on the next batch (ONNX Runtime or
+    PyTorch), both without holding the GIL, while this thread stores the current batch's maps and
+    connects the windows they complete; vertex extraction, AfANet and the rest thus overlap the
+    network. Each stage's seconds are the time its own thread spent in it, so they add up to
+    more than the run's wall time."""
     from concurrent.futures import ThreadPoolExecutor
 
     for index in run.schedule.ready():  # windows an interrupted run left ready
         run.connect_here(index)
-    batches = run.batches
-    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-prefetch") as pool:
-        upcoming = pool.submit(run.job.read_batch, batches[0]) if batches else None
-        for k, batch in enumerate(batches):
+    batches, job = run.batches, run.job
+    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-read") as reader, \
+            ThreadPoolExecutor(1, thread_name_prefix="csboundary-fpn") as network:
+        reading = [reader.submit(job.read_batch, b) for b in batches[:2]]
+
+        def read_and_predict(k: int):
             start = time.perf_counter()
-            reads = upcoming.result()
+            reads = reading[k].result()
             waited = time.perf_counter() - start
-            upcoming = pool.submit(run.job.read_batch, batches[k + 1]) if k + 1 < len(batches) else None
-            has_pixels, seconds = run.job.predict_maps(batch, reads)
-            seconds["read"] = seconds.get("read", 0.0) + waited
+            if k + 2 < len(batches):
+                reading.append(reader.submit(job.read_batch, batches[k + 2]))
+            maps, seconds = job.compute_maps(batches[k], reads)
+            seconds["read"] = seconds.get("read", 0.0) + waited  # the reading the FPN waited for
+            return reads, maps, seconds
+
+        upcoming = network.submit(read_and_predict, 0) if batches else None
+        for k, batch in enumerate(batches):
+            reads, maps, seconds = upcoming.result()
+            upcoming = network.submit(read_and_predict, k + 1) if k + 1 < len(batches) else None
+            for stage, value in job.store_maps(batch, reads, maps).items():
+                seconds[stage] = seconds.get(stage, 0.0) + value
             for index in run.maps_finished(batch, seconds):
                 run.connect_here(index)
 

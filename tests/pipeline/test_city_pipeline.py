@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 import torch
@@ -119,6 +121,28 @@ def test_the_fpn_sees_the_imagery_continued_beyond_the_mosaic_edge_not_zeros(tmp
             # the last row and column of the mosaic are repeated into the margin beyond it
             rows, cols = np.nonzero(read.valid)
             assert np.array_equal(image[:, rows.max() + 1:, cols.min():cols.max() + 1], np.repeat(read.data[:, rows.max():rows.max() + 1, cols.min():cols.max() + 1], image.shape[1] - rows.max() - 1, axis=1))
+
+
+def _one_step_after_another(run):
+    """An executor without threads: each batch predicted and stored, then its ready windows connected."""
+    for batch in run.batches:
+        _, seconds = run.job.predict_maps(batch)
+        for index in run.maps_finished(batch, seconds):
+            run.connect_here(index)
+
+
+def test_the_fpn_runs_in_its_own_thread_and_the_city_graph_is_the_one_of_a_run_without_threads(city):
+    mosaic, lines = city
+    model = OracleModel.from_lines(lines, mosaic)
+    threads = []
+    predict = model.patch_maps
+    model.patch_maps = lambda patches, images: threads.append(threading.current_thread().name) or predict(patches, images)
+    overlapped = predict_city(mosaic, model, progress=False)
+    assert len(threads) == 9 and all(name.startswith("csboundary-fpn") for name in threads)
+    serial = predict_city(mosaic, model, progress=False, executor=_one_step_after_another)
+    assert len(threads) == 18 and threads[9:] == [threading.current_thread().name] * 9
+    assert np.array_equal(overlapped.graph.vertices, serial.graph.vertices)
+    assert np.array_equal(overlapped.graph.edges, serial.graph.edges) and overlapped.graph.n_edges > 50
 
 
 class _SkeletonOnlyOracle(OracleModel):
