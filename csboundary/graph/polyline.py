@@ -1,6 +1,6 @@
 """Arc length along a polyline and the nearest point on one: the definitions every stage uses
 (edge lengths, spur pruning, edge ownership by midpoint, label sampling along a boundary,
-mending seams, the iCurb expert)."""
+mending seams, the iCurb expert), and points along one at a fixed spacing."""
 
 from __future__ import annotations
 
@@ -49,3 +49,16 @@ def split_polyline(points: np.ndarray, k: int, at: np.ndarray) -> tuple[np.ndarr
     if np.array_equal(tail[:1], at):
         tail = tail[1:]
     return np.concatenate([head, at]), np.concatenate([at, tail])
+
+
+def dense_samples(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points every <= ``step`` px along a polyline (ends included), and each one's segment index."""
+    points = np.asarray(points, dtype=float)
+    seg = np.diff(points, axis=0)
+    lengths = np.linalg.norm(seg, axis=1)
+    counts = np.maximum(np.ceil(lengths / step).astype(int), 1)
+    index = np.repeat(np.arange(len(seg)), counts)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    t = (np.arange(counts.sum()) - np.repeat(starts, counts)) / np.repeat(counts, counts)
+    samples = points[index] + seg[index] * t[:, None]
+    return np.vstack([samples, points[-1:]]), np.concatenate([index, [len(seg) - 1]])

@@ -48,7 +48,12 @@ from scipy.spatial import cKDTree
 
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.graph.polyline import arc_lengths, nearest_on_polyline, split_polyline
+from csboundary.graph.polyline import (
+    arc_lengths,
+    dense_samples,
+    nearest_on_polyline,
+    split_polyline,
+)
 
 Index = tuple[int, int]
 SEAM = "seam"  # the kind of an edge that joins an end cut by a window border to the edge it lies on
@@ -293,13 +298,9 @@ def _mend_seam_ends(kept: dict, registry: _VertexRegistry, grid: PatchGrid, conf
     joins = {x: (kept[only_edge[x]]["score"], kept[only_edge[x]]["patch"]) for x in ends}  # a seam edge's score and patch: its end's edge's
     keys = list(kept)
     lines = [_edge_line(kept[k], registry) for k in keys]
-    step = 4.0  # spacing of the samples that find an end's candidate edges
-    samples, owner = [], []
-    for i, line in enumerate(lines):
-        along = arc_lengths(line)
-        s = np.linspace(0, along[-1], max(2, int(np.ceil(along[-1] / step)) + 1))
-        samples.append(np.stack([np.interp(s, along, line[:, 0]), np.interp(s, along, line[:, 1])], 1))
-        owner.append(np.full(len(s), i))
+    step = 4.0  # largest spacing of the samples that find an end's candidate edges
+    samples = [dense_samples(line, step)[0] for line in lines]
+    owner = [np.full(len(s), i) for i, s in enumerate(samples)]
     tree, owner = cKDTree(np.concatenate(samples)), np.concatenate(owner)
     piece = _components(kept, n)
     cuts: dict[int, list[tuple[float, np.ndarray, int]]] = {}  # edge -> (arc position of the foot, foot, end)

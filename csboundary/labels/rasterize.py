@@ -15,24 +15,12 @@ import cv2
 import numpy as np
 
 from csboundary.data.windows import PixelWindow
+from csboundary.graph.polyline import dense_samples
 from csboundary.labels.boundaries import Boundary
 from csboundary.labels.keypoints import BoundaryKeypoints
 from csboundary.labels.select import near_window
 
 SAMPLE_STEP = 0.25  # px between samples along a line: every crossed pixel gets at least one
-
-
-def dense_samples(points: np.ndarray, step: float = SAMPLE_STEP) -> tuple[np.ndarray, np.ndarray]:
-    """Points every <= ``step`` px along a polyline (ends included), and each one's segment index."""
-    points = np.asarray(points, dtype=float)
-    seg = np.diff(points, axis=0)
-    lengths = np.linalg.norm(seg, axis=1)
-    counts = np.maximum(np.ceil(lengths / step).astype(int), 1)
-    index = np.repeat(np.arange(len(seg)), counts)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    t = (np.arange(counts.sum()) - np.repeat(starts, counts)) / np.repeat(counts, counts)
-    samples = points[index] + seg[index] * t[:, None]
-    return np.vstack([samples, points[-1:]]), np.concatenate([index, [len(seg) - 1]])
 
 
 def _grown(window: PixelWindow, pad: int) -> PixelWindow:
@@ -60,7 +48,7 @@ def segmentation_label(boundaries: list[Boundary], bounds: np.ndarray, window: P
     big = _grown(window, pad)
     out = np.zeros((big.height, big.width), np.uint8)
     for b in near_window(bounds, big):
-        samples, _ = dense_samples(boundaries[b].points)
+        samples, _ = dense_samples(boundaries[b].points, SAMPLE_STEP)
         _burn(out, big, samples, 1)
     return _widen(out, width)[pad:-pad, pad:-pad]
 
@@ -84,7 +72,7 @@ def orientation_label(boundaries: list[Boundary], bounds: np.ndarray, window: Pi
         seg = np.diff(pts, axis=0)
         norm = np.linalg.norm(seg, axis=1, keepdims=True)
         tables.append(seg / np.where(norm > 0, norm, 1.0))
-        samples, which = dense_samples(pts)
+        samples, which = dense_samples(pts, SAMPLE_STEP)
         _burn(index, big, samples, (which + offset).astype(np.float32))
         offset += len(seg)
     index = _widen(index, width)[pad:-pad, pad:-pad].astype(np.int64)
@@ -107,7 +95,7 @@ def keypoint_heat(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window
         kp = keypoints[b]
         _burn(seeds, big, kp.points, 1)
         for a, e in kp.runs:
-            samples, _ = dense_samples(kp.boundary.between(a, e))
+            samples, _ = dense_samples(kp.boundary.between(a, e), SAMPLE_STEP)
             _burn(seeds, big, samples, 1)
     if not seeds.any():
         return np.zeros((window.height, window.width), np.float32)

@@ -204,7 +204,7 @@ def test_pixel_chain_ground_truth_gives_the_same_corners_after_import_simplifica
 
     radius = 40.0
     poly = round_convex_corners(box(130, 130, 730, 730), radius)[0]
-    dense, _ = __import__("csboundary.labels.rasterize", fromlist=["dense_samples"]).dense_samples(np.asarray(poly.exterior.coords))
+    dense, _ = __import__("csboundary.graph.polyline", fromlist=["dense_samples"]).dense_samples(np.asarray(poly.exterior.coords), 0.25)
     pixels = np.floor(dense).astype(int)
     keep = np.concatenate([[True], np.any(np.diff(pixels, axis=0) != 0, axis=1)])
     chain = pixels[keep][:, ::-1]  # [row, col] like dense_seq
