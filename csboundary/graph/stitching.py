@@ -24,14 +24,17 @@ the rules here:
   the demo city this lifts city-scale APLS from 0.79 to 0.82 at unchanged precision. "In view"
   means both ends at least ``border_px`` from the neighbour's window border: an edge between two
   points where boundaries leave the window runs along its border, across the road.
-* **Seam mending** (``mend_px``, 5 by default; 0 = off). A boundary that crosses a window's
+* **Seam mending** (``mend_px``, 15 by default; 0 = off). A boundary that crosses a window's
   border is cut there in that patch's graph: its edge ends on a vertex the neighbour, which sees
   the boundary run on, never extracted (it has no keypoint there), so snapping finds nothing and
   the end dangles on top of the neighbour's edge. An end left dangling within ``border_px`` of
   the inner border of the window its edge came from, and within ``mend_px`` of an edge of another
   connected piece, is joined to that edge: the edge is split at the nearest point and a short
   ``seam`` edge joins the end to it. On the seed-7 test city 52 of 197 interior dangling ends
-  lay on a window border (Lite2 FPN); a border ring holds about 3 % of the area.
+  lay on a window border (Lite2 FPN); a border ring holds about 3 % of the area. The end of a
+  blob cut by the border sits up to ~15 px off the curb the neighbour sees whole, so the radius
+  is 15 px: 5 px left the suburb test city's APLS at 0.422, 15 px gives 0.503
+  (docs/city-inference.md).
 
 Coordinates are mosaic pixels (col, row), the frame of ``grid.transform``.
 """
@@ -67,7 +70,7 @@ class StitchConfig:
     border_px: float = 8.0  # the ring of a window where pieces may be cut by its border
     snap_px: float = 5.0
     repair: bool = True
-    mend_px: float = 5.0  # farthest edge a dangling end cut by its window's border is joined to (0 = off)
+    mend_px: float = 15.0  # farthest edge a dangling end cut by its window's border is joined to (0 = off)
 
     def __post_init__(self) -> None:
         if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0 and self.mend_px >= 0):

@@ -175,13 +175,25 @@ def test_an_end_beside_the_edge_gets_a_short_seam_edge_and_splits_a_shaped_edge(
     assert sum(float(np.abs(np.diff(city.edge_polyline(k)[:, 0])).sum()) for k in corners) == 80
 
 
+def test_a_cut_end_a_blob_width_beside_the_neighbours_edge_is_mended():
+    # The right window starts at x = 90: the blob cut there gives the right patch a vertex 12 px
+    # below the curb the left patch sees whole (y = 50), further than snapping's 5 px.
+    left = graph([[20, 50], [100, 50]], [[0, 1]])
+    right = graph([[91, 62], [130, 50], [180, 50]], [[0, 1], [1, 2]])
+    city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
+    assert pieces(city) == 1
+    seam = city.edge_kinds.index("seam")
+    assert sorted(map(tuple, city.vertices[city.edges[seam]].tolist())) == [(91, 50), (91, 62)]
+    assert pieces(stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(mend_px=5))) == 2
+
+
 def test_ends_away_from_a_window_border_or_from_any_edge_stay_dangling():
     # An end 30 px inside its window, 3 px from another curb, is a real end as far as stitching
-    # knows; so is a border end 8 px from the nearest edge.
+    # knows; so is a border end 20 px from the nearest edge (beyond the 15 px mending radius).
     inner = graph([[20, 50], [70, 50], [60, 53], [60, 90]], [[0, 1], [2, 3]])
     assert stitch_patch_graphs({(0, 0): inner, (0, 1): BoundaryGraph()}, GRID).n_edges == 2
     left = graph([[20, 50], [100, 50]], [[0, 1]])
-    far = graph([[91, 58], [180, 58]], [[0, 1]])
+    far = graph([[91, 70], [180, 70]], [[0, 1]])
     city = stitch_patch_graphs({(0, 0): left, (0, 1): far}, GRID)
     assert city.n_edges == 2 and pieces(city) == 2
 
