@@ -101,7 +101,8 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     shipped = load_checkpoint(fpn_path, ("fpn",))
     assert shipped["fpn_config"]["surface"]
     assert load_predictor(None, "cpu", surface_check=0.5, engine="torch").surface.strong == 0.5  # the option works on the shipped weights
-    assert not load_predictor(None, "cpu", engine="torch").surface.active  # and is off by default
+    assert load_predictor(None, "cpu", engine="torch").surface.strong == 0.5  # on by default since the model card's choice
+    assert not load_predictor(None, "cpu", surface_check=0.0, engine="torch").surface.active  # and 0 turns it off
     plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}  # an FPN from before the head
     save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
     with pytest.raises(InputError, match="surface head"):
