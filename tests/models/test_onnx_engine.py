@@ -47,12 +47,12 @@ def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictor
     torch_engine, onnx_engine, _ = predictors
     maps_torch = torch_engine.patch_maps([None], [patch_image])[0]
     maps_onnx = onnx_engine.patch_maps([None], [patch_image])[0]
-    assert maps_torch.shape == (2, 1100, 1100)
+    assert maps_torch.shape == (3, 1100, 1100)  # keypoint, boundary and (the shipped surface check reads it) road surface
     assert np.abs(maps_onnx - maps_torch).max() < 1e-5
 
     found = torch_engine.extract(maps_torch)
     assert found.n_vertices >= 20  # a patch with boundaries, so AfANet has work
-    tensor = torch.cat([torch.from_numpy(patch_image / 255.0).float(), torch.from_numpy(maps_torch)], 0)
+    tensor = torch.cat([torch.from_numpy(patch_image / 255.0).float(), torch.from_numpy(maps_torch[:2])], 0)
     vertices = torch.from_numpy(found.vertices.astype(np.float32))
     p_torch = torch_engine.afanet.adjacency(tensor, vertices).numpy()
     p_onnx = adjacency_from_logits(torch.from_numpy(onnx_engine.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()
