@@ -14,7 +14,6 @@ from pathlib import Path
 
 import torch
 
-import csboundary.pipeline.city as city_pipeline
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig
 from csboundary.metrics import evaluate
@@ -32,11 +31,10 @@ def main() -> None:
     print("mend border snap  " + "  ".join(f"{Path(c).name[:17]:>17s}" for c in args.cities))
     for setting in args.settings.split(";"):
         mend, border, snap = (float(v) for v in setting.split(","))
-        # predicted_city runs predict_city with its default stitching: set that default
-        city_pipeline.predict_city.__kwdefaults__["stitch"] = StitchConfig(mend_px=mend, border_px=border, snap_px=snap)
+        stitch = StitchConfig(mend_px=mend, border_px=border, snap_px=snap)
         row = []
         for c in args.cities:
-            run, lines = predicted_city(Path(c), predictor, assume_model_gsd=True)
+            run, lines = predicted_city(Path(c), predictor, assume_model_gsd=True, stitch=stitch)
             gt = BoundaryGraph.from_world_lines(lines, run.grid.transform)
             m = evaluate(run.graph, gt, scale="city", seed=0, extent=(0, 0, run.grid.width, run.grid.height))["metrics"]
             row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")

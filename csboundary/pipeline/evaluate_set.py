@@ -18,10 +18,11 @@ from tqdm import tqdm
 
 from csboundary.data import city as layout
 from csboundary.data.inputs import open_imagery
-from csboundary.labels.mask_import import SET_FILE
 from csboundary.data.model_view import model_view
 from csboundary.data.units import MODEL_GSD
 from csboundary.errors import InputError, InputWarning
+from csboundary.graph.stitching import StitchConfig
+from csboundary.labels.mask_import import SET_FILE
 from csboundary.pipeline.city import CityResult, PatchModel, predict_city
 from csboundary.pipeline.run import evaluate_run
 
@@ -51,11 +52,11 @@ def set_cities(set_dir: str | Path) -> list[Path]:
 
 
 def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd: bool = False, batch_size: int = 1,
-                   progress: bool = False) -> tuple[CityResult, list]:
+                   progress: bool = False, stitch: StitchConfig = StitchConfig()) -> tuple[CityResult, list]:
     """``model``'s prediction of a labelled city directory, read as ``predict`` reads it, and the
     city's ground-truth lines. ``assume_model_gsd``: imagery without a pixel size is taken to be
     at the model's (imported crops), and RGB is read without warnings (NIR := green is the
-    documented rule)."""
+    documented rule); ``stitch``: how patch graphs become the city graph (sweeps vary it)."""
     layout.read_meta(city_dir)
     with warnings.catch_warnings():
         if assume_model_gsd:
@@ -63,7 +64,7 @@ def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd:
         mosaic, lines = open_imagery([city_dir])
         view = model_view(mosaic, model_gsd=getattr(model, "pixel_size_m", MODEL_GSD), assume_model_gsd=assume_model_gsd)
     with view.mosaic:
-        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress)
+        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress, stitch=stitch)
     return result, lines
 
 
