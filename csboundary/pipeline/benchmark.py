@@ -154,8 +154,9 @@ def benchmark_to_folder(out: Path, city_dir: Path | None = None, weights_dir: Pa
         raise ValueError(f"unknown method(s) {', '.join(unknown_methods(methods))}")
     city_dir = Path(city_dir or CitySpec("test", 1, (1, 1), 5000).ensure("data/cities"))
     weights_dir = Path(weights_dir or shipped_weights().parent)
+    version = code_version()  # before the run: its own tables, tracked in docs/benchmark/, would mark the tree dirty
     results = run_benchmark(city_dir, out, weights_dir, device or torch.device("cpu"), methods, seed, progress=progress)
-    record = {"command": command or "csboundary " + " ".join(sys.argv[1:]), "code_version": code_version(), "city": str(city_dir),
+    record = {"command": command or "csboundary " + " ".join(sys.argv[1:]), "code_version": version, "city": str(city_dir),
               "weights": str(weights_dir),
               "results": {k: {"method": r["method"].name, **({"missing": r["missing"]} if "missing" in r else
                               {"scores": {s: v["metrics"] for s, v in r["scores"].items()}, "training": r["training"],

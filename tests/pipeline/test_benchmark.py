@@ -97,3 +97,21 @@ def test_benchmark_writes_every_table_and_the_figure(weights, tmp_path):
     reported = dict(zip(TABLE_METRICS, map(float, table2["csBoundary"])))
     assert reported == pytest.approx({k: again[k] for k in TABLE_METRICS}, abs=2e-3)
     assert 0 <= reported["precision@5"] <= 1 and 0 <= reported["apls"] <= 1
+
+
+def test_benchmark_json_records_the_code_version_from_before_the_run(tmp_path, monkeypatch):
+    # The run rewrites docs/benchmark/, which git tracks: a version read afterwards would always
+    # say ".dirty". Here the version "changes" once the run has started.
+    import csboundary.models.checkpoint as checkpoint
+    import csboundary.pipeline.benchmark as benchmark
+
+    state = {"running": False}
+    monkeypatch.setattr(checkpoint, "code_version", lambda: "0.1.0+abc.dirty" if state["running"] else "0.1.0+abc")
+
+    def fake_run(*args, **kwargs):
+        state["running"] = True
+        return {}
+
+    monkeypatch.setattr(benchmark, "run_benchmark", fake_run)
+    benchmark.benchmark_to_folder(tmp_path, city_dir=tmp_path, weights_dir=tmp_path, progress=False)
+    assert json.loads((tmp_path / "benchmark.json").read_text())["code_version"] == "0.1.0+abc"
