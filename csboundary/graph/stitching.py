@@ -33,7 +33,7 @@ the rules here:
   ``seam`` edge joins the end to it. On the seed-7 test city 52 of 197 interior dangling ends
   lay on a window border (Lite2 FPN); a border ring holds about 3 % of the area. The end of a
   blob cut by the border sits up to ~15 px off the curb the neighbour sees whole, so the radius
-  is 15 px: 5 px left the suburb test city's APLS at 0.422, 15 px gives 0.503
+  is 15 px: 5 px left the suburb test city's APLS at 0.432, 15 px gives 0.513
   (docs/city-inference.md).
 
 Coordinates are mosaic pixels (col, row), the frame of ``grid.transform``.
