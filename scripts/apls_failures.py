@@ -19,20 +19,17 @@ import torch
 
 from csboundary.data import city as layout
 from csboundary.graph import BoundaryGraph
-from csboundary.metrics import _segments
-from csboundary.metrics.apls import pair_costs, paper_pairs
-from csboundary.metrics.config import MetricConfig
-from csboundary.metrics.sampling import resample
+from csboundary.metrics import apls_paper_pairs
+from csboundary.metrics.apls import pair_costs
 from csboundary.pipeline.evaluate_set import predicted_city, set_cities
 from csboundary.pipeline.patch import PatchPredictor
 
 COLUMNS = ("unmatched", "disconnected", "too long", "path cost")
 
 
-def failure_shares(pred: BoundaryGraph, gt: BoundaryGraph, config: MetricConfig = MetricConfig()) -> np.ndarray:
+def failure_shares(pred: BoundaryGraph, gt: BoundaryGraph) -> np.ndarray:
     """(4,) shares of the paper's APLS cost (seed 0) by cause, in the order of ``COLUMNS``."""
-    pred_seg, gt_seg = _segments(pred, gt)
-    pairs = paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(0), config)
+    pairs = apls_paper_pairs(pred, gt)
     if pairs.n_pairs == 0:
         return np.full(4, np.nan)
     finite = np.isfinite(pairs.pred_length)

@@ -15,7 +15,14 @@ import numpy as np
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.metrics.aggregate import evaluate_city, evaluate_patches, metric_names
-from csboundary.metrics.apls import VARIANTS, SymmetricApls, apls_from_pairs, paper_pairs, symmetric_apls
+from csboundary.metrics.apls import (
+    VARIANTS,
+    PairLengths,
+    SymmetricApls,
+    apls_from_pairs,
+    paper_pairs,
+    symmetric_apls,
+)
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.pixel import rasterize, relaxed_scores
 from csboundary.metrics.sampling import Segments, common_origin, flatten, resample
@@ -24,10 +31,12 @@ from csboundary.metrics.tlts import TltsResult, tlts_from_pairs
 __all__ = [
     "MetricConfig",
     "VARIANTS",
+    "PairLengths",
     "SymmetricApls",
     "TltsResult",
     "apls",
     "apls_paper",
+    "apls_paper_pairs",
     "apls_symmetric",
     "evaluate",
     "evaluate_city",
@@ -50,11 +59,16 @@ def pixel_scores(pred: BoundaryGraph, gt: BoundaryGraph, taus=MetricConfig().tau
     return relaxed_scores(rasterize(pred_seg), rasterize(gt_seg), taus)
 
 
+def apls_paper_pairs(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> PairLengths:
+    """The paper's sampled ground-truth pairs and what ``pred`` makes of them (seeded): what
+    :func:`apls_paper` averages, kept for diagnosis (scripts/apls_failures.py)."""
+    pred_seg, gt_seg = _segments(pred, gt)
+    return paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
+
+
 def apls_paper(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> float:
     """APLS as Topo-boundary / csBoundary define it (seeded; nan if the ground truth gives no pair)."""
-    pred_seg, gt_seg = _segments(pred, gt)
-    pairs = paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
-    return apls_from_pairs(pairs)
+    return apls_from_pairs(apls_paper_pairs(pred, gt, seed, config))
 
 
 def apls_symmetric(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> SymmetricApls:

@@ -287,3 +287,17 @@ def test_small_boundaries_get_no_pairs():
 def test_empty_segments_resample_to_nothing():
     s = resample(Segments.empty(), 30)
     assert s.n_vertices == 0 and s.n_components == 0
+
+
+def test_paper_pairs_tell_a_broken_boundary_from_a_whole_one():
+    # One straight boundary of 400 px; the prediction is the same line cut in two halves 20 px
+    # apart: pairs across the cut are disconnected, pairs on one side cost nothing.
+    from csboundary.metrics import apls_paper_pairs
+
+    gt = BoundaryGraph(np.array([[0.0, 100], [400, 100]]), np.array([[0, 1]]))
+    whole = apls_paper_pairs(gt, gt)
+    assert whole.n_pairs > 0 and whole.connected.all() and apls_paper(gt, gt) == 1.0
+    cut = BoundaryGraph(np.array([[0.0, 100], [190, 100], [210, 100], [400, 100]]), np.array([[0, 1], [2, 3]]))
+    pairs = apls_paper_pairs(cut, gt)
+    assert pairs.matched.all() and 0 < pairs.connected.sum() < pairs.n_pairs
+    assert apls_paper(cut, gt) == pytest.approx(pairs.connected.mean(), abs=0.05)
