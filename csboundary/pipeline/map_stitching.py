@@ -21,6 +21,7 @@ import numpy as np
 
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.windows import PixelWindow
+from csboundary.pipeline.float16 import add_float32
 
 Index = tuple[int, int]
 
@@ -43,7 +44,7 @@ def stitch_window(grid: PatchGrid, patch: Patch, load: Callable[[Index], np.ndar
             if maps.shape != (channels, win.height, win.width):
                 raise ValueError(f"maps of patch {q.index} must be ({channels}, {win.height}, {win.width}), got {maps.shape}")
             srows, scols = part.relative_to(q.expanded).slices()
-            total[:, rows, cols] += maps[:, srows, scols]
+            add_float32(total[:, rows, cols], maps[:, srows, scols])
         count[rows, cols] += 1
     return total / np.maximum(count, 1)[None]
 

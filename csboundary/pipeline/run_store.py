@@ -38,6 +38,7 @@ from rasterio.transform import Affine
 
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
+from csboundary.pipeline.float16 import to_float16
 
 MANIFEST = "manifest.json"
 STORE_DIR = ".csboundary-run"  # inside the output folder
@@ -158,7 +159,7 @@ class RunStore:
     def save_maps(self, index: Index, maps: np.ndarray | None) -> None:
         """Store a patch's (C, S, S) maps as float16, or ``None`` for a window without imagery."""
         if maps is not None:
-            maps = maps.astype(np.float16)
+            maps = to_float16(maps)
             if self.channels is None:
                 self._channels = maps.shape[0]
                 if self.root is not None:
@@ -192,7 +193,9 @@ class RunStore:
             return entry[0]
         path = self.root / folder / f"{_stem(index)}.npy"
         try:
-            return np.load(path, mmap_mode="r", allow_pickle=False)
+            # copy-on-write: a writable view (PyTorch's kernels take it, pipeline/float16.py);
+            # nothing is ever written back to the file
+            return np.load(path, mmap_mode="c", allow_pickle=False)
         except FileNotFoundError:
             return None
 
