@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -171,6 +172,13 @@ class CityJob:
 
     def connect_window(self, index: Index, maps: np.ndarray | None = None) -> tuple[BoundaryGraph, dict[str, float]]:
         """Stitch the window, find its vertices and edges, store its graph (mosaic pixels)."""
+        graph, maps, seconds = self.window_graph(index, maps)
+        self.keep_window(index, graph, maps)
+        return graph, seconds
+
+    def window_graph(self, index: Index, maps: np.ndarray | None = None) -> tuple[BoundaryGraph, np.ndarray, dict[str, float]]:
+        """The window's graph (mosaic pixels), its stitched maps and the seconds per stage. Only
+        reads the store, so several windows may be computed at once in threads."""
         timed = _Timer()
         patch = self.grid.patch(*index)
         if maps is None:
@@ -181,13 +189,16 @@ class CityJob:
                 image = timed("read", lambda: self.mosaic.read(patch.expanded).data)
         found = timed("vertex_extraction", self.model.extract, maps)
         graph = to_mosaic(timed("afanet", self.model.connect, patch, image, maps, found), patch)
+        return graph, maps, dict(timed.seconds)
+
+    def keep_window(self, index: Index, graph: BoundaryGraph, maps: np.ndarray) -> None:
+        """Store a window's graph (and its core's maps for maps.tif); its image is no longer needed."""
         if self.write_cores:
-            rows, cols = patch.core_local.slices()
+            rows, cols = self.grid.patch(*index).core_local.slices()
             self.store.save_core(index, np.clip(np.rint(maps[:, rows, cols] * 255), 0, 255).astype(np.uint8))
         self.store.save_graph(index, graph)
         self.store.drop_image(index)
         _trim_heap()
-        return graph, dict(timed.seconds)
 
 
 def fpn_batches(grid: PatchGrid, batch_size: int) -> list[list[Index]]:
@@ -242,6 +253,23 @@ class CityRun:
             self.job.store.drop_maps(q)
         self.bar.update(1)
 
+    def connect_all_here(self, indices: list[Index], workers: int) -> None:
+        """Connect windows in this process, ``workers`` at a time in threads (vertex extraction's
+        skeletons, ONNX Runtime and most array work release the GIL) once the FPN has no more
+        work to share the cores with; stored and counted in ``indices``' order, so the result is
+        the same for any number of workers."""
+        if workers < 2 or len(indices) < 2 or self.on_window is not None:
+            for index in indices:
+                self.connect_here(index)
+            return
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(workers, thread_name_prefix="csboundary-window") as pool:
+            for index, future in [(i, pool.submit(self.job.window_graph, i)) for i in indices]:
+                graph, maps, seconds = future.result()
+                self.job.keep_window(index, graph, maps)
+                self.graph_finished(index, graph, seconds)
+
     def connect_here(self, index: Index) -> None:
         """Connect one window in this process (calls ``on_window`` with its stitched maps)."""
         maps = None
@@ -272,15 +300,19 @@ class CityRun:
                           len(self.job.store.empty_patches()), dict(self.work))
 
 
-def run_here(run: CityRun) -> None:
+def run_here(run: CityRun, drain_workers: int | None = None) -> None:
     """Do a run's remaining work in this process, in row-major order: a window is connected as
     soon as its last covering patch is predicted. Two threads work ahead of this one: one reads
     the FPN batch after next (GDAL), one runs the FPN on the next batch (ONNX Runtime or
     PyTorch), both without holding the GIL, while this thread stores the current batch's maps and
     connects the windows they complete; vertex extraction, AfANet and the rest thus overlap the
-    network. Each stage's seconds are the time its own thread spent in it, so they add up to
-    more than the run's wall time."""
+    network. The windows the last batch completes are connected ``drain_workers`` at a time
+    (default: one per core). Each stage's seconds are the time its own thread spent in it, so
+    they add up to more than the run's wall time."""
     from concurrent.futures import ThreadPoolExecutor
+
+    if drain_workers is None:
+        drain_workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
     for index in run.schedule.ready():  # windows an interrupted run left ready
         run.connect_here(index)
@@ -305,8 +337,9 @@ def run_here(run: CityRun) -> None:
             upcoming = network.submit(read_and_predict, k + 1) if k + 1 < len(batches) else None
             for stage, value in job.store_maps(batch, reads, maps).items():
                 seconds[stage] = seconds.get(stage, 0.0) + value
-            for index in run.maps_finished(batch, seconds):
-                run.connect_here(index)
+            ready = run.maps_finished(batch, seconds)
+            # the last windows have the cores to themselves: connect them side by side
+            run.connect_all_here(ready, workers=1 if upcoming is not None else drain_workers)
 
 
 def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(),

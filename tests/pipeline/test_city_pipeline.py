@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import threading
 
 import numpy as np
@@ -23,7 +24,7 @@ from csboundary.graph.fragments import fragment_lengths
 from csboundary.graph.skeleton_fill import FillConfig
 from csboundary.metrics import evaluate
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.pipeline.city import predict_city, patch_scale_graph
+from csboundary.pipeline.city import patch_scale_graph, predict_city, run_here
 from csboundary.models.maps import predict_mosaic_maps
 from csboundary.pipeline.oracle import OracleModel
 from csboundary.pipeline.patch import PatchPredictor
@@ -151,6 +152,29 @@ def test_the_fpn_runs_in_its_own_thread_and_the_city_graph_is_the_one_of_a_run_w
     assert len(threads) == 18 and threads[9:] == [threading.current_thread().name] * 9
     assert np.array_equal(overlapped.graph.vertices, serial.graph.vertices)
     assert np.array_equal(overlapped.graph.edges, serial.graph.edges) and overlapped.graph.n_edges > 50
+
+
+def test_the_last_windows_are_connected_side_by_side_with_the_same_graph(city):
+    """Once the FPN has nothing left, the windows the last patch completes (its own and the three
+    above and beside it) run in threads; the city graph is that of one window after another."""
+    mosaic, lines = city
+    model = OracleModel.from_lines(lines, mosaic)
+    where = {}
+    connect = model.connect
+
+    def connect_and_note_thread(patch, *rest):
+        where[patch.index] = threading.current_thread().name
+        return connect(patch, *rest)
+
+    model.connect = connect_and_note_thread
+    side_by_side = predict_city(mosaic, model, progress=False, executor=functools.partial(run_here, drain_workers=2))
+    threaded = sorted(i for i, name in where.items() if name.startswith("csboundary-window"))
+    assert threaded == [(1, 1), (1, 2), (2, 1), (2, 2)] and len(where) == 9
+    where.clear()
+    one_by_one = predict_city(mosaic, model, progress=False, executor=functools.partial(run_here, drain_workers=1))
+    assert not any(name.startswith("csboundary-window") for name in where.values())
+    assert np.array_equal(side_by_side.graph.vertices, one_by_one.graph.vertices)
+    assert np.array_equal(side_by_side.graph.edges, one_by_one.graph.edges) and one_by_one.graph.n_edges > 50
 
 
 class _SkeletonOnlyOracle(OracleModel):
