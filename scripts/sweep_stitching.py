@@ -1,44 +1,65 @@
 """City-scale scores of one weights bundle for a grid of stitching settings: the measurement
-behind ``StitchConfig.mend_px`` (docs/city-inference.md, "Seam mending").
+behind ``StitchConfig.mend_px``, ``attach_px`` and ``node_shared`` (docs/city-inference.md).
 
-    python scripts/sweep_stitching.py WEIGHTS CITY... --settings "5,8,5;15,8,5"
+    python scripts/sweep_stitching.py WEIGHTS CITY_OR_SET... --settings "15,8,5,0,0;15,8,5,40,1"
 
-Each setting is ``mend_px,border_px,snap_px``; every city is predicted again per setting (the
-stitching runs inside the city pipeline). Prints F1@5 / APLS / TLTS per city and setting.
+Each setting is ``mend_px,border_px,snap_px,attach_px,node_shared`` (a shorter setting keeps the
+defaults of the fields it leaves out). Every city is predicted once; its patch graphs are
+stitched again per setting (stitching sees nothing else). A SET (``csboundary import-masks``)
+is expanded to its cities and also gets a mean row. Prints F1@5 / APLS / TLTS per city and
+setting.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
+import numpy as np
 import torch
 
+from csboundary.data import city as layout
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig
 from csboundary.metrics import evaluate
-from csboundary.pipeline.evaluate_set import predicted_city
+from csboundary.pipeline.city import city_graph
+from csboundary.pipeline.evaluate_set import predicted_city, set_cities
 from csboundary.pipeline.patch import PatchPredictor
+
+FIELDS = ("mend_px", "border_px", "snap_px", "attach_px", "node_shared")
+
+
+def parse_setting(text: str) -> StitchConfig:
+    values = [float(v) for v in text.split(",")]
+    changes = {name: (bool(v) if name == "node_shared" else v) for name, v in zip(FIELDS, values)}
+    return dataclasses.replace(StitchConfig(), **changes)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights")
-    parser.add_argument("cities", nargs="+")
-    parser.add_argument("--settings", default="5,8,5;15,8,5", help="mend_px,border_px,snap_px;...")
+    parser.add_argument("cities", nargs="+", help="city folders, or sets of them")
+    parser.add_argument("--settings", default="15,8,5,0,0;15,8,5,40,1", help=";-separated " + ",".join(FIELDS))
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-    print("mend border snap  " + "  ".join(f"{Path(c).name[:17]:>17s}" for c in args.cities))
-    for setting in args.settings.split(";"):
-        mend, border, snap = (float(v) for v in setting.split(","))
-        stitch = StitchConfig(mend_px=mend, border_px=border, snap_px=snap)
-        row = []
-        for c in args.cities:
-            run, lines = predicted_city(Path(c), predictor, assume_model_gsd=True, stitch=stitch)
+    settings = [parse_setting(s) for s in args.settings.split(";")]
+    print("setting (" + ",".join(FIELDS) + ")  then per city F1@5 / APLS / TLTS")
+    rows: dict[str, list[np.ndarray]] = {s: [] for s in args.settings.split(";")}
+    for given in args.cities:
+        is_city = (Path(given) / "city.json").exists() and layout.ground_truth_path(Path(given)).exists()
+        for city in [Path(given)] if is_city else set_cities(given):
+            run, lines = predicted_city(city, predictor, assume_model_gsd=True)
             gt = BoundaryGraph.from_world_lines(lines, run.grid.transform)
-            m = evaluate(run.graph, gt, scale="city", seed=0, extent=(0, 0, run.grid.width, run.grid.height))["metrics"]
-            row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
-        print(f"{mend:4.0f} {border:6.0f} {snap:4.0f}  " + "  ".join(f"{r:>17s}" for r in row), flush=True)
+            parts = []
+            for text, stitch in zip(rows, settings):
+                graph = city_graph(run.patch_graphs, run.grid, stitch, run.graph.crs, predictor.min_fragment_px)
+                m = evaluate(graph, gt, scale="city", seed=0, extent=(0, 0, run.grid.width, run.grid.height))["metrics"]
+                rows[text].append(np.array([m["f1@5"], m["apls"], m["tlts"]]))
+                parts.append(f"{text}: {m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
+            print(f"{city.name:28s} " + "  ".join(parts), flush=True)
+    if sum(len(v) for v in rows.values()) > len(rows):
+        print(f"{'mean':28s} " + "  ".join(f"{t}: " + "/".join(f"{x:.3f}" for x in np.mean(v, axis=0)) for t, v in rows.items()))
 
 
 if __name__ == "__main__":

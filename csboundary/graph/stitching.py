@@ -45,21 +45,19 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.end_attachment import attach_ends, better_edge, dangling_ends
+from csboundary.graph.noding import node_shared_points
 from csboundary.graph.polyline import (
     arc_lengths,
-    dense_samples,
-    nearest_on_polyline,
-    split_polyline,
 )
 
 Index = tuple[int, int]
 SEAM = "seam"  # the kind of an edge that joins an end cut by a window border to the edge it lies on
+ATTACH = "attach"  # the kind of an edge that joins any other dangling end to the edge ahead of it
 
 
 @dataclass(frozen=True)
@@ -71,10 +69,15 @@ class StitchConfig:
     snap_px: float = 5.0
     repair: bool = True
     mend_px: float = 15.0  # farthest edge a dangling end cut by its window's border is joined to (0 = off)
+    attach_px: float = 0.0  # farthest edge any dangling end heading towards it is joined to (0 = off)
+    attach_turn_deg: float = 60.0  # largest angle between an end's heading and its way to that edge
+    node_shared: bool = True  # edges whose polylines share points meet there (graph/noding.py)
 
     def __post_init__(self) -> None:
-        if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0 and self.mend_px >= 0):
-            raise ValueError(f"need merge_px > 0, border_px >= 0, snap_px >= 0, mend_px >= 0; got {self}")
+        if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0 and self.mend_px >= 0 and self.attach_px >= 0
+                and 0 <= self.attach_turn_deg <= 180):
+            raise ValueError("need merge_px > 0, border_px, snap_px, mend_px, attach_px >= 0 and attach_turn_deg in [0, 180]; "
+                             f"got {self}")
 
 
 def to_mosaic(graph: BoundaryGraph, patch: Patch) -> BoundaryGraph:
@@ -197,10 +200,8 @@ def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, 
     if config.repair:
         for c in _repairs(candidates, registry, kept):
             keep(c)
-    if config.mend_px > 0:
-        _mend_seam_ends(kept, registry, grid, config)
     edges = list(kept.values())
-    return BoundaryGraph(
+    graph = BoundaryGraph(
         np.array(registry.points).reshape(-1, 2),
         np.array([[e["u"], e["v"]] for e in edges], dtype=np.int64).reshape(-1, 2),
         vertex_kinds=list(registry.kinds),
@@ -211,6 +212,19 @@ def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, 
         transform=grid.transform,
         crs=crs,
     )
+    if config.mend_px > 0:
+        graph = attach_ends(graph, seam_ends(graph, grid, config.border_px), config.mend_px, SEAM, merge_px=config.merge_px)
+    return node_shared_points(graph) if config.node_shared else graph
+
+
+def seam_ends(graph: BoundaryGraph, grid: PatchGrid, border_px: float) -> np.ndarray:
+    """The dangling ends of a stitched graph within ``border_px`` of the inner border of the
+    window their edge came from: where a window's border cut a boundary."""
+    ends, edges, _ = dangling_ends(graph)
+    if graph.edge_patches is None:
+        return ends[:0]
+    near = [border_distance(graph.vertices[x:x + 1], grid.patch(*graph.edge_patches[e]), grid)[0] < border_px for x, e in zip(ends, edges)]
+    return ends[np.array(near, bool)]
 
 
 def _candidates(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig) -> list[_Candidate]:
@@ -269,87 +283,8 @@ def _put(kept: dict, edge: dict) -> None:
         kept[key] = edge
 
 
-def _edge_line(edge: dict, registry: _VertexRegistry) -> np.ndarray:
-    """An output edge's polyline from u to v (its two ends when it has no shape)."""
-    if edge["polyline"] is not None:
-        return np.asarray(edge["polyline"], float)
-    return np.array([registry.points[edge["u"]], registry.points[edge["v"]]], float)
-
-
-def _components(kept: dict, n_vertices: int) -> np.ndarray:
-    """Connected-piece label of every output vertex."""
-    pairs = np.array(list(kept), dtype=np.int64).reshape(-1, 2)
-    adjacency = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_vertices, n_vertices))
-    return connected_components(adjacency, directed=False)[1]
-
-
-def _mend_seam_ends(kept: dict, registry: _VertexRegistry, grid: PatchGrid, config: StitchConfig) -> None:
-    """Join the ends cut by a window border to the edge of another piece they lie on (module
-    docstring, "Seam mending"); edits ``kept`` and ``registry`` in place."""
-    n = len(registry.points)
-    degree = np.zeros(n, int)
-    only_edge: dict[int, tuple[int, int]] = {}
-    for key, e in kept.items():
-        for x in (e["u"], e["v"]):
-            degree[x] += 1
-            only_edge[x] = key
-    points = np.array(registry.points).reshape(-1, 2)
-    ends = [x for x in np.flatnonzero(degree == 1)
-            if border_distance(points[x:x + 1], grid.patch(*kept[only_edge[x]]["patch"]), grid)[0] < config.border_px]
-    if not ends:
-        return
-    joins = {x: (kept[only_edge[x]]["score"], kept[only_edge[x]]["patch"]) for x in ends}  # a seam edge's score and patch: its end's edge's
-    keys = list(kept)
-    lines = [_edge_line(kept[k], registry) for k in keys]
-    step = 4.0  # largest spacing of the samples that find an end's candidate edges
-    samples = [dense_samples(line, step)[0] for line in lines]
-    owner = [np.full(len(s), i) for i, s in enumerate(samples)]
-    tree, owner = cKDTree(np.concatenate(samples)), np.concatenate(owner)
-    piece = _components(kept, n)
-    cuts: dict[int, list[tuple[float, np.ndarray, int]]] = {}  # edge -> (arc position of the foot, foot, end)
-    for x, near in zip(ends, tree.query_ball_point(points[ends], config.mend_px + step)):
-        best = None
-        for i in set(owner[near].tolist()):
-            key = keys[i]
-            if piece[key[0]] == piece[x]:
-                continue
-            distance, k, foot = nearest_on_polyline(lines[i], points[x])
-            if distance <= config.mend_px and (best is None or distance < best[0]):
-                best = (distance, i, k, foot)
-        if best is not None:
-            _, i, k, foot = best
-            position = arc_lengths(lines[i])[k] + float(np.hypot(*(foot - lines[i][k])))
-            cuts.setdefault(i, []).append((position, foot, x))
-    for i, hits in cuts.items():
-        edge = kept.pop(keys[i])
-        rest, start = lines[i], edge["u"]
-        for _, foot, x in sorted(hits, key=lambda h: h[0]):
-            cut = registry.add(foot, SEAM)
-            if cut != start:
-                head, rest = split_polyline(rest, nearest_on_polyline(rest, foot)[1], foot)
-                _put(kept, {**edge, "u": start, "v": cut, "polyline": _shaped(edge, head, registry, start, cut)})
-            start = cut
-            if cut != x:
-                _put(kept, {"u": x, "v": cut, "kind": SEAM, "score": joins[x][0], "polyline": None, "patch": joins[x][1]})
-        if start != edge["v"]:
-            _put(kept, {**edge, "u": start, "v": edge["v"], "polyline": _shaped(edge, rest, registry, start, edge["v"])})
-
-
-def _shaped(edge: dict, line: np.ndarray, registry: _VertexRegistry, u: int, v: int) -> np.ndarray | None:
-    """A piece's polyline (ends on its vertices) when the split edge had a shape."""
-    if edge["polyline"] is None:
-        return None
-    line = np.array(line, float)
-    line[0], line[-1] = registry.points[u], registry.points[v]
-    return line
-
-
 def _better(new: dict, old: dict) -> bool:
-    """Between two edges joining the same vertices, a corner edge (it has the curb's shape) wins,
-    then the more confident one."""
-    if (new["kind"] == "corner") != (old["kind"] == "corner"):
-        return new["kind"] == "corner"
-    return np.nan_to_num(new["score"], nan=-1) > np.nan_to_num(old["score"], nan=-1)
+    return better_edge(new["kind"], new["score"], old["kind"], old["score"])
 
 
 def _safe_vertices(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig) -> dict[Index, np.ndarray]:

@@ -39,8 +39,14 @@ from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.end_attachment import attach_ends, dangling_ends
 from csboundary.graph.fragments import drop_short_fragments
-from csboundary.graph.stitching import StitchConfig, stitch_patch_graphs, to_mosaic
+from csboundary.graph.stitching import (
+    ATTACH,
+    StitchConfig,
+    stitch_patch_graphs,
+    to_mosaic,
+)
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
 from csboundary.pipeline.run_store import RunStore
 from csboundary.viz.overlay import core_thumbnail
@@ -201,6 +207,19 @@ class CityJob:
         _trim_heap()
 
 
+def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch: StitchConfig, crs: str | None,
+               min_fragment_px: float = 0.0) -> BoundaryGraph:
+    """The city graph of a run's patch graphs (mosaic pixels): stitched, without the connected
+    pieces shorter than ``min_fragment_px`` (the model's setting), then with the dangling ends
+    attached to the line ahead of them (``stitch.attach_px``). Attaching comes last so that a
+    short piece, dropped as noise, is not kept alive by being attached to a road."""
+    graph = drop_short_fragments(stitch_patch_graphs(patch_graphs, grid, stitch, crs), min_fragment_px)
+    if stitch.attach_px <= 0:
+        return graph
+    ends, _, headings = dangling_ends(graph)
+    return attach_ends(graph, ends, stitch.attach_px, ATTACH, headings, stitch.attach_turn_deg, stitch.merge_px)
+
+
 def fpn_batches(grid: PatchGrid, batch_size: int) -> list[list[Index]]:
     """The FPN batches of a run: consecutive patches in row-major order. Fixed by the grid and
     the batch size alone, so a resumed or distributed run feeds the FPN the same batches."""
@@ -292,8 +311,7 @@ class CityRun:
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         timed = _Timer()
         with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
-            graph = timed("graph_stitching", stitch_patch_graphs, self.patch_graphs, grid, stitch, crs)
-            graph = timed("graph_stitching", drop_short_fragments, graph, getattr(self.job.model, "min_fragment_px", 0.0))
+            graph = timed("graph_stitching", city_graph, self.patch_graphs, grid, stitch, crs, getattr(self.job.model, "min_fragment_px", 0.0))
             stitch_bar.update(1)
         self.add_seconds(timed.seconds)
         return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,
