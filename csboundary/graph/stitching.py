@@ -50,7 +50,6 @@ from scipy.spatial import cKDTree
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.end_attachment import attach_ends, better_edge, dangling_ends
-from csboundary.graph.noding import node_shared_points
 from csboundary.graph.polyline import (
     arc_lengths,
 )
@@ -69,9 +68,9 @@ class StitchConfig:
     snap_px: float = 5.0
     repair: bool = True
     mend_px: float = 15.0  # farthest edge a dangling end cut by its window's border is joined to (0 = off)
-    attach_px: float = 0.0  # farthest edge any dangling end heading towards it is joined to (0 = off)
+    attach_px: float = 0.0  # city graph: farthest line a dangling end heading to it is joined to (0 = off)
     attach_turn_deg: float = 60.0  # largest angle between an end's heading and its way to that edge
-    node_shared: bool = True  # edges whose polylines share points meet there (graph/noding.py)
+    node_shared: bool = True  # city graph: lines that touch, cross or run together meet at a vertex (graph/noding.py)
 
     def __post_init__(self) -> None:
         if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0 and self.mend_px >= 0 and self.attach_px >= 0
@@ -214,7 +213,7 @@ def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, 
     )
     if config.mend_px > 0:
         graph = attach_ends(graph, seam_ends(graph, grid, config.border_px), config.mend_px, SEAM, merge_px=config.merge_px)
-    return node_shared_points(graph) if config.node_shared else graph
+    return graph
 
 
 def seam_ends(graph: BoundaryGraph, grid: PatchGrid, border_px: float) -> np.ndarray:

@@ -41,6 +41,7 @@ from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.end_attachment import attach_ends, dangling_ends
 from csboundary.graph.fragments import drop_short_fragments
+from csboundary.graph.noding import node_shared_points
 from csboundary.graph.stitching import (
     ATTACH,
     StitchConfig,
@@ -210,10 +211,14 @@ class CityJob:
 def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch: StitchConfig, crs: str | None,
                min_fragment_px: float = 0.0) -> BoundaryGraph:
     """The city graph of a run's patch graphs (mosaic pixels): stitched, without the connected
-    pieces shorter than ``min_fragment_px`` (the model's setting), then with the dangling ends
-    attached to the line ahead of them (``stitch.attach_px``). Attaching comes last so that a
-    short piece, dropped as noise, is not kept alive by being attached to a road."""
+    pieces shorter than ``min_fragment_px`` (the model's setting), noded where lines touch,
+    cross or run together (``stitch.node_shared``), then with the dangling ends attached to the
+    line ahead of them (``stitch.attach_px``). Noding and attaching come after the short pieces
+    are dropped, so that noise is not kept alive by touching a road (Ottawa crops: F1@5 0.450
+    noding first, 0.452 after)."""
     graph = drop_short_fragments(stitch_patch_graphs(patch_graphs, grid, stitch, crs), min_fragment_px)
+    if stitch.node_shared:
+        graph = node_shared_points(graph)
     if stitch.attach_px <= 0:
         return graph
     ends, _, headings = dangling_ends(graph)

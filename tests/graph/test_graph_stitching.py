@@ -149,8 +149,8 @@ def test_ends_cut_by_the_window_borders_are_mended_onto_the_edge_they_lie_on():
     # on the other side's edge.
     left = graph([[20, 50], [105, 50]], [[0, 1]])
     right = graph([[91, 50], [180, 50]], [[0, 1]])
-    broken = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(mend_px=0, node_shared=False))
-    assert broken.n_edges == 2 and pieces(broken) == 2  # (noding alone would join them: they overlap from 91 to 105)
+    broken = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID, StitchConfig(mend_px=0))
+    assert broken.n_edges == 2 and pieces(broken) == 2
     city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
     assert pieces(city) == 1 and city.n_vertices == 4 and city.n_edges == 3  # 20 - 91 - 105 - 180
     assert sorted(np.bincount(city.edges.ravel()).tolist()) == [1, 1, 2, 2]
