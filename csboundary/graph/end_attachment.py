@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
+from shapely import STRtree, points
+from shapely.geometry import LineString
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.fragments import fragment_lengths
 from csboundary.graph.polyline import (
     arc_lengths,
-    dense_samples,
     nearest_on_polyline,
     split_polyline,
 )
@@ -68,9 +69,8 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
     if not len(ends) or graph.n_edges == 0:
         return graph
     lines = [graph.edge_polyline(e) for e in range(graph.n_edges)]
-    samples = [dense_samples(line, SAMPLE_STEP)[0] for line in lines]
-    owner = np.concatenate([np.full(len(s), e) for e, s in enumerate(samples)])
-    tree = cKDTree(np.concatenate(samples))
+    ends_at, near_edges = STRtree([LineString(line) for line in lines]).query(points(graph.vertices[ends]), predicate="dwithin", distance=radius)
+    near = [near_edges[ends_at == k] for k in range(len(ends))]
     edge_piece, _ = fragment_lengths(graph)
     vertex_piece = np.full(graph.n_vertices, -1)
     vertex_piece[graph.edges[:, 0]], vertex_piece[graph.edges[:, 1]] = edge_piece, edge_piece
@@ -79,7 +79,7 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
     for k, x in enumerate(ends):
         point, best = graph.vertices[x], None
         heading = None if headings is None or not np.any(headings[k]) else headings[k]
-        for e in sorted(set(owner[tree.query_ball_point(point, radius[k] + SAMPLE_STEP)].tolist())):
+        for e in sorted(near[k].tolist()):
             if edge_piece[e] == vertex_piece[x]:
                 continue
             distance, segment, foot = nearest_on_polyline(lines[e], point)
@@ -98,21 +98,25 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
 def _with_cuts(graph: BoundaryGraph, lines: list[np.ndarray], cuts: dict[int, list[tuple[float, np.ndarray, int]]], kind: str,
                merge_px: float) -> BoundaryGraph:
     """The graph with every cut edge split at its feet and each end joined to its foot."""
-    points, kinds = [p for p in graph.vertices], list(graph.vertex_kinds or ["isolated"] * graph.n_vertices)
+    vertices, kinds = [p for p in graph.vertices], list(graph.vertex_kinds or ["isolated"] * graph.n_vertices)
     tree = cKDTree(graph.vertices)
-    added: list[int] = []
+    added: dict[tuple[int, int], list[int]] = {}  # new vertices by merge_px cell
 
     def vertex_at(foot: np.ndarray) -> int:
+        """The vertex nearest to ``foot`` closer than ``merge_px``, else a new one there."""
         distance, nearest = tree.query(foot, distance_upper_bound=merge_px)
-        candidates = [(distance, int(nearest))] if np.isfinite(distance) else []
-        candidates += [(float(np.hypot(*(points[i] - foot))), i) for i in added]
-        near = [c for c in candidates if c[0] < merge_px]
-        if near:
-            return min(near)[1]
-        points.append(np.asarray(foot, float))
+        best = (distance, int(nearest)) if distance < merge_px else (np.inf, -1)
+        cx, cy = int(np.floor(foot[0] / merge_px)), int(np.floor(foot[1] / merge_px))
+        for i in (i for dx in (-1, 0, 1) for dy in (-1, 0, 1) for i in added.get((cx + dx, cy + dy), ())):
+            d = float(np.hypot(*(vertices[i] - foot)))
+            if d < merge_px and d < best[0]:
+                best = (d, i)
+        if best[1] >= 0:
+            return best[1]
+        vertices.append(np.asarray(foot, float))
         kinds.append(kind)
-        added.append(len(points) - 1)
-        return len(points) - 1
+        added.setdefault((cx, cy), []).append(len(vertices) - 1)
+        return len(vertices) - 1
 
     scores = graph.edge_scores if graph.edge_scores is not None else np.ones(graph.n_edges)
     edge_kinds = graph.edge_kinds or ["normal"] * graph.n_edges
@@ -126,7 +130,7 @@ def _with_cuts(graph: BoundaryGraph, lines: list[np.ndarray], cuts: dict[int, li
             return
         if line is not None:
             line = np.array(line, float)
-            line[0], line[-1] = points[u], points[v]
+            line[0], line[-1] = vertices[u], vertices[v]
         new = {"u": u, "v": v, "line": line, "kind": edge_kind, "score": float(scores[e]), "patch": None if patches is None else patches[e]}
         key = (min(u, v), max(u, v))
         if key not in kept or better_edge(new["kind"], new["score"], kept[key]["kind"], kept[key]["score"]):
@@ -147,7 +151,7 @@ def _with_cuts(graph: BoundaryGraph, lines: list[np.ndarray], cuts: dict[int, li
         put(start, int(v), rest if shaped[e] else None, e, edge_kinds[e])
     edges = list(kept.values())
     return BoundaryGraph(
-        np.array(points, float).reshape(-1, 2), np.array([[d["u"], d["v"]] for d in edges], np.int64).reshape(-1, 2),
+        np.array(vertices, float).reshape(-1, 2), np.array([[d["u"], d["v"]] for d in edges], np.int64).reshape(-1, 2),
         vertex_kinds=kinds, edge_kinds=[d["kind"] for d in edges], edge_polylines=[d["line"] for d in edges],
         edge_scores=np.array([d["score"] for d in edges], float),
         edge_patches=None if patches is None else np.array([d["patch"] for d in edges], np.int64).reshape(-1, 2),

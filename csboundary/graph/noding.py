@@ -32,7 +32,7 @@ _KEY_SCALE = 1e6  # points equal to 1e-6 px are the same point (BoundaryGraph.fr
 
 
 def _keys(line: np.ndarray) -> list[tuple[int, int]]:
-    return [(int(round(x * _KEY_SCALE)), int(round(y * _KEY_SCALE))) for x, y in line]
+    return list(map(tuple, np.rint(np.asarray(line, float).reshape(-1, 2) * _KEY_SCALE).astype(np.int64).tolist()))
 
 
 def _cut_points(keys: list[list[tuple[int, int]]]) -> set[tuple[int, int]]:
@@ -76,12 +76,12 @@ def _with_crossings(lines: list[np.ndarray]) -> list[np.ndarray]:
     for e, points in extra.items():
         line = np.asarray(lines[e], float)
         present = set(_keys(line))
-        for point in points:
-            if _keys([point])[0] in present:
+        for point, key in zip(points, _keys(points)):
+            if key in present:
                 continue
             _, segment, _ = nearest_on_polyline(line, np.asarray(point))
             line = np.insert(line, segment + 1, point, axis=0)
-            present.add(_keys([point])[0])
+            present.add(key)
         out[e] = line
     return out
 
