@@ -1,5 +1,6 @@
 """City-scale scores of one weights bundle for a grid of stitching settings: the measurement
-behind ``StitchConfig.mend_px``, ``attach_px`` and ``node_shared`` (docs/city-inference.md).
+behind ``StitchConfig.mend_px`` and ``node_shared`` and the bundle's ``attach_max_px``
+(docs/city-inference.md).
 
     python scripts/sweep_stitching.py WEIGHTS CITY_OR_SET... --settings "15,8,5,0,0;15,8,5,40,1"
 
@@ -30,10 +31,12 @@ from csboundary.pipeline.patch import PatchPredictor
 FIELDS = ("mend_px", "border_px", "snap_px", "attach_px", "node_shared")
 
 
-def parse_setting(text: str) -> StitchConfig:
-    values = [float(v) for v in text.split(",")]
-    changes = {name: (bool(v) if name == "node_shared" else v) for name, v in zip(FIELDS, values)}
-    return dataclasses.replace(StitchConfig(), **changes)
+def parse_setting(text: str) -> tuple[StitchConfig, float | None]:
+    """The stitching of a setting and its attachment radius (None: the bundle's)."""
+    values = dict(zip(FIELDS, (float(v) for v in text.split(","))))
+    attach = values.pop("attach_px", None)
+    changes = {name: (bool(v) if name == "node_shared" else v) for name, v in values.items()}
+    return dataclasses.replace(StitchConfig(), **changes), attach
 
 
 def main() -> None:
@@ -52,8 +55,9 @@ def main() -> None:
             run, lines = predicted_city(city, predictor, assume_model_gsd=True)
             gt = BoundaryGraph.from_world_lines(lines, run.grid.transform)
             parts = []
-            for text, stitch in zip(rows, settings):
-                graph = city_graph(run.patch_graphs, run.grid, stitch, run.graph.crs, predictor.min_fragment_px)
+            for text, (stitch, attach) in zip(rows, settings):
+                graph = city_graph(run.patch_graphs, run.grid, stitch, run.graph.crs, predictor.min_fragment_px,
+                                   predictor.attach_px if attach is None else attach)
                 m = evaluate(graph, gt, scale="city", seed=0, extent=(0, 0, run.grid.width, run.grid.height))["metrics"]
                 rows[text].append(np.array([m["f1@5"], m["apls"], m["tlts"]]))
                 parts.append(f"{text}: {m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")

@@ -16,6 +16,8 @@ LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit; default: the w
 GAP_HELP = "Longest stretch of an AfANet edge, in pixels, where the boundary map is below the gap level (0 = no check; default: the weights')."
 FILL_HELP = "Fill in segmentation-skeleton stretches at least this long that no edge covers, in pixels (0 = off; default: the weights')."
 JOIN_HELP = "Join two dangling ends at most this many pixels apart that head towards each other over boundary (0 = off; default: the weights')."
+ATTACH_HELP = ("City graph: join a dangling end to the nearest line of another piece at most this many pixels ahead of it "
+               "(0 = off; default: the weights').")
 FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all; default: the weights')."
 THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
 ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
@@ -42,6 +44,7 @@ SURFACE_HELP = ("Road-surface check: an edge needs this mean road-surface probab
 SurfaceOption = Annotated[Optional[float], typer.Option("--surface-check", callback=finite, min=0.0, max=1.0, help=SURFACE_HELP)]
 FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callback=finite, min=0.0, help=FILL_HELP)]
 JoinOption = Annotated[Optional[float], typer.Option("--join-ends", callback=finite, min=0.0, help=JOIN_HELP)]
+AttachOption = Annotated[Optional[float], typer.Option("--attach-ends", callback=finite, min=0.0, help=ATTACH_HELP)]
 FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
 EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
 DeviceOption = Annotated[str, typer.Option(help=DEVICE_HELP)]

@@ -42,6 +42,7 @@ def bundle_weights(
     gap_level: float = typer.Option(0.3, callback=finite, min=0.0, max=1.0, help="Boundary probability below which a point of an edge is a gap."),
     fill_min_length: float = typer.Option(0.0, "--fill-min-length", callback=finite, min=0.0, help="Default shortest segmentation-skeleton stretch no edge covers that is filled in, in pixels (0 = off)."),
     join_ends: float = typer.Option(0.0, "--join-ends", callback=finite, min=0.0, help="Default longest join between two dangling ends that head towards each other over boundary, in pixels (0 = off)."),
+    attach_ends: float = typer.Option(0.0, "--attach-ends", callback=finite, min=0.0, help="Default farthest line ahead of a dangling end of the city graph it is joined to, in pixels (0 = off)."),
     surface_check: float = typer.Option(0.0, "--surface-check", callback=finite, min=0.0, max=1.0, help="Default road-surface check: an edge needs this mean surface probability beside it, or a connected edge that has it (0 = off; the FPN needs a surface head)."),
     surface_weak: float = typer.Option(0.2, "--surface-weak", callback=finite, min=0.0, max=1.0, help="Surface check: edges below this are dropped even when connected to a sure one."),
     min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0, help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
@@ -55,5 +56,6 @@ def bundle_weights(
     path = make_bundle(fpn, afanet, out, edge_threshold, min_support=min_edge_support, max_length_px=max_edge_length,
                        crossing_spacing_px=grid_crossings, min_fragment_px=min_fragment_length, vertex_threshold=vertex_threshold,
                        max_gap_px=max_edge_gap, gap_level=gap_level, fill_min_length_px=fill_min_length,
-                       surface_strong=surface_check, surface_weak=surface_weak, join_max_px=join_ends)
+                       surface_strong=surface_check, surface_weak=surface_weak, join_max_px=join_ends,
+                       attach_max_px=attach_ends)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")

@@ -31,6 +31,9 @@ from csboundary.graph.polyline import (
 SAMPLE_STEP = 4.0  # largest spacing of the samples that find an end's candidate edges
 
 
+ATTACH = "attach"  # the kind of the city graph's edge from a dangling end to the line ahead of it
+
+
 def better_edge(new_kind: str, new_score: float, old_kind: str, old_score: float) -> bool:
     """Between two edges joining the same vertices, a corner edge (it has the curb's shape) wins,
     then the more confident one."""

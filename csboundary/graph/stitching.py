@@ -56,7 +56,6 @@ from csboundary.graph.polyline import (
 
 Index = tuple[int, int]
 SEAM = "seam"  # the kind of an edge that joins an end cut by a window border to the edge it lies on
-ATTACH = "attach"  # the kind of an edge that joins any other dangling end to the edge ahead of it
 
 
 @dataclass(frozen=True)
@@ -68,15 +67,11 @@ class StitchConfig:
     snap_px: float = 5.0
     repair: bool = True
     mend_px: float = 15.0  # farthest edge a dangling end cut by its window's border is joined to (0 = off)
-    attach_px: float = 0.0  # city graph: farthest line a dangling end heading to it is joined to (0 = off)
-    attach_turn_deg: float = 60.0  # largest angle between an end's heading and its way to that edge
     node_shared: bool = True  # city graph: lines that touch, cross or run together meet at a vertex (graph/noding.py)
 
     def __post_init__(self) -> None:
-        if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0 and self.mend_px >= 0 and self.attach_px >= 0
-                and 0 <= self.attach_turn_deg <= 180):
-            raise ValueError("need merge_px > 0, border_px, snap_px, mend_px, attach_px >= 0 and attach_turn_deg in [0, 180]; "
-                             f"got {self}")
+        if not (self.merge_px > 0 and self.border_px >= 0 and self.snap_px >= 0 and self.mend_px >= 0):
+            raise ValueError(f"need merge_px > 0, border_px >= 0, snap_px >= 0, mend_px >= 0; got {self}")
 
 
 def to_mosaic(graph: BoundaryGraph, patch: Patch) -> BoundaryGraph:

@@ -39,11 +39,10 @@ from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.end_attachment import attach_ends, dangling_ends
+from csboundary.graph.end_attachment import ATTACH, attach_ends, dangling_ends
 from csboundary.graph.fragments import drop_short_fragments
 from csboundary.graph.noding import node_shared_points
 from csboundary.graph.stitching import (
-    ATTACH,
     StitchConfig,
     stitch_patch_graphs,
     to_mosaic,
@@ -209,20 +208,20 @@ class CityJob:
 
 
 def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch: StitchConfig, crs: str | None,
-               min_fragment_px: float = 0.0) -> BoundaryGraph:
+               min_fragment_px: float = 0.0, attach_px: float = 0.0) -> BoundaryGraph:
     """The city graph of a run's patch graphs (mosaic pixels): stitched, without the connected
-    pieces shorter than ``min_fragment_px`` (the model's setting), noded where lines touch,
-    cross or run together (``stitch.node_shared``), then with the dangling ends attached to the
-    line ahead of them (``stitch.attach_px``). Noding and attaching come after the short pieces
+    pieces shorter than ``min_fragment_px``, noded where lines touch, cross or run together
+    (``stitch.node_shared``), then with the dangling ends attached to the line of another piece
+    up to ``attach_px`` ahead of them (both lengths are the model's settings). Noding and attaching come after the short pieces
     are dropped, so that noise is not kept alive by touching a road (Ottawa crops: F1@5 0.450
     noding first, 0.452 after)."""
     graph = drop_short_fragments(stitch_patch_graphs(patch_graphs, grid, stitch, crs), min_fragment_px)
     if stitch.node_shared:
         graph = node_shared_points(graph)
-    if stitch.attach_px <= 0:
+    if attach_px <= 0:
         return graph
     ends, _, headings = dangling_ends(graph)
-    return attach_ends(graph, ends, stitch.attach_px, ATTACH, headings, stitch.attach_turn_deg, stitch.merge_px)
+    return attach_ends(graph, ends, attach_px, ATTACH, headings, merge_px=stitch.merge_px)
 
 
 def fpn_batches(grid: PatchGrid, batch_size: int) -> list[list[Index]]:
@@ -316,7 +315,9 @@ class CityRun:
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         timed = _Timer()
         with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
-            graph = timed("graph_stitching", city_graph, self.patch_graphs, grid, stitch, crs, getattr(self.job.model, "min_fragment_px", 0.0))
+            model = self.job.model
+            graph = timed("graph_stitching", city_graph, self.patch_graphs, grid, stitch, crs, getattr(model, "min_fragment_px", 0.0),
+                          getattr(model, "attach_px", 0.0))
             stitch_bar.update(1)
         self.add_seconds(timed.seconds)
         return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,

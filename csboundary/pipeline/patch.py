@@ -56,6 +56,7 @@ class PatchPredictor:
     join: EndJoinConfig = field(default_factory=EndJoinConfig)  # dangling ends joined across supported gaps (off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
     min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
+    attach_px: float = 0.0  # city graph: dangling ends joined to the line ahead within this (graph/end_attachment.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
 
     @property
@@ -116,7 +117,7 @@ class PatchPredictor:
         return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
                    edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
                    support=support, crossings=crossings, fill=fill, surface=surface, join=join, pixel_size_m=float(pixel_size),
-                   min_fragment_px=float(settings.get("min_fragment_px", 0.0)))
+                   min_fragment_px=float(settings.get("min_fragment_px", 0.0)), attach_px=float(settings.get("attach_max_px", 0.0)))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
         return self.patch_maps([None], [image])[0]
@@ -191,7 +192,7 @@ class PatchPredictor:
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
-                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False),
+                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False), "attach_max_px": (0.0, 1e6, False),
                       "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False)}
 SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px"}  # bundle key -> SurfaceCheckConfig field
 
@@ -217,6 +218,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
                    fill_min_length: float | None = None, surface_check: float | None = None, join_ends: float | None = None,
+                   attach_ends: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
@@ -239,6 +241,8 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill_min_length)
     if join_ends is not None:
         predictor.join = dataclasses.replace(predictor.join, max_px=join_ends)
+    if attach_ends is not None:
+        predictor.attach_px = attach_ends
     if surface_check is not None:
         if surface_check > 0 and not predictor.fpn.config.surface:
             raise InputError("--surface-check", "the FPN of these weights has no road-surface head")

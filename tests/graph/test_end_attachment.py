@@ -1,4 +1,4 @@
-"""Dangling ends joined to the line ahead of them (graph/end_attachment.py, StitchConfig.attach_px)."""
+"""Dangling ends joined to the line ahead of them (graph/end_attachment.py; the city graph's attach_px)."""
 
 from __future__ import annotations
 
@@ -96,7 +96,26 @@ def test_the_city_graph_drops_a_short_piece_before_attaching_the_rest():
     vertices = np.array([[0.0, 100], [300, 100], [150, 40], [150, 70], [250, 0], [250, 70]])
     graph = BoundaryGraph(vertices, np.array([[0, 1], [2, 3], [4, 5]]), edge_kinds=["normal"] * 3, edge_scores=np.ones(3),
                           edge_patches=np.zeros((3, 2), int))
-    city = city_graph({(0, 0): graph}, GRID, StitchConfig(attach_px=40), None, min_fragment_px=50)
+    city = city_graph({(0, 0): graph}, GRID, StitchConfig(), None, min_fragment_px=50, attach_px=40)
     assert city.edge_kinds.count("attach") == 1 and len(fragment_lengths(city)[1]) == 1
     assert not np.any(np.all(city.vertices == [150, 40], axis=1))  # the scrap is gone
-    assert city_graph({(0, 0): graph}, GRID, StitchConfig(attach_px=0), None, min_fragment_px=50).n_edges == 2
+    assert city_graph({(0, 0): graph}, GRID, StitchConfig(), None, min_fragment_px=50).n_edges == 2
+
+
+def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp_path):
+    import torch
+
+    from helpers import shipped_parts
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+
+    shipped_parts(tmp_path)
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", attach_max_px=40)
+    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).attach_px == 40
+    assert load_predictor(tmp_path / "b.pt", "cpu", attach_ends=0, engine="torch").attach_px == 0
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
+    assert "attach_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
+    assert PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).attach_px == 0
+    assert load_predictor(tmp_path / "off.pt", "cpu", attach_ends=25, engine="torch").attach_px == 25
