@@ -34,7 +34,9 @@ the rules here:
   lay on a window border (Lite2 FPN); a border ring holds about 3 % of the area. The end of a
   blob cut by the border sits up to ~15 px off the curb the neighbour sees whole, so the radius
   is 15 px: 5 px left the suburb test city's APLS at 0.432, 15 px gives 0.513
-  (docs/city-inference.md).
+  (docs/city-inference.md). The join itself is :func:`csboundary.graph.end_attachment.attach_ends`,
+  which the city graph also uses for every other dangling end (``city_graph`` in
+  :mod:`csboundary.pipeline.city`, after noding: :mod:`csboundary.graph.noding`).
 
 Coordinates are mosaic pixels (col, row), the frame of ``grid.transform``.
 """
