@@ -104,7 +104,6 @@ def test_the_city_graph_drops_a_short_piece_before_attaching_the_rest():
 
 def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp_path):
     import torch
-
     from helpers import shipped_parts
 
     from csboundary.models.bundle import make_bundle
