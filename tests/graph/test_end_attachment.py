@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.graph import BoundaryGraph
@@ -118,3 +120,34 @@ def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp
     assert "attach_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
     assert PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).attach_px == 0
     assert load_predictor(tmp_path / "off.pt", "cpu", attach_ends=25, engine="torch").attach_px == 25
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 200), st.integers(0, 200), st.integers(0, 200), st.integers(0, 200)), min_size=2, max_size=8),
+       st.floats(5, 60))
+def test_joins_are_short_go_between_pieces_and_only_add_their_own_length(segments, radius):
+    """Random straight pieces: every attach edge is at most the radius long and joins a dangling
+    end to what was another piece; an end joins at most once; splitting a line adds no length,
+    except where the foot snaps onto a vertex within merge_px (1 px), which bends the line by at
+    most 2 px: the graph grows by the joins' length plus 0 to 2 px per dangling end."""
+    segments = [s for s in segments if (s[0], s[1]) != (s[2], s[3])]
+    if len(segments) < 2:
+        return
+    graph = BoundaryGraph.from_polylines([np.array([[a, b], [c, d]], float) for a, b, c, d in segments])
+    before_piece = fragment_lengths(graph)[0]
+    vertex_piece = {}
+    for e, (u, v) in enumerate(graph.edges):
+        vertex_piece[int(u)] = vertex_piece[int(v)] = int(before_piece[e])
+    ends, _, headings = dangling_ends(graph)
+    joined = attach_ends(graph, ends, radius, "attach", headings)
+    joins = [k for k, kind in enumerate(joined.edge_kinds or []) if kind == "attach"]
+    lengths = joined.edge_lengths()
+    assert np.all(lengths[joins] <= radius + 1e-9)
+    bend = lengths.sum() - graph.edge_lengths().sum() - lengths[joins].sum()
+    assert -1e-9 <= bend <= 2.0 * len(ends) + 1e-9
+    starts = [next(int(x) for x in joined.edges[k] if int(x) < graph.n_vertices and x in ends) for k in joins]
+    assert len(starts) == len(set(starts))  # one join per end
+    for k, x in zip(joins, starts):
+        other = [int(y) for y in joined.edges[k] if int(y) != x][0]
+        if other < graph.n_vertices:  # the foot fell on an existing vertex: of another piece
+            assert vertex_piece[other] != vertex_piece[x]
