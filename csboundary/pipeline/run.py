@@ -131,6 +131,7 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
             "edges": graph.n_edges,
             "corner_edges": sum(k == "corner" for k in kinds),
             "skeleton_edges": sum(k == "skeleton" for k in kinds),  # filled in from the segmentation (graph/skeleton_fill.py)
+            "attach_edges": sum(k == "attach" for k in kinds),  # a dangling end joined to the line ahead (graph/end_attachment.py)
             "boundary_km": round(boundary_m / 1000, 4),
             "patch_graph_edges": int(sum(g.n_edges for g in result.patch_graphs.values())),
             "vertex_pairs_within_1px": count_close_pairs(graph.vertices, 1.0),

@@ -114,6 +114,8 @@ def test_predict_writes_georeferenced_outputs_and_a_summary(bundle, four_patch_c
     graph = json.loads((out / "graph.json").read_text())
     assert summary["patches"] == 4 and summary["grid"] == [2, 2] and summary["mosaic_px"] == [1200, 1200]
     assert summary["counts"]["edges"] == len(graph["edges"]) and summary["counts"]["vertex_pairs_within_1px"] == 0
+    kinds = [e["kind"] for e in graph["edges"]]
+    assert [summary["counts"][f"{k}_edges"] for k in ("corner", "skeleton", "attach")] == [kinds.count(k) for k in ("corner", "skeleton", "attach")]
     assert set(summary["seconds_per_patch"]) >= {"fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching", "total"}
     assert summary["area_km2"] == pytest.approx(1200 * 1200 * 0.09 / 1e6)
     assert {layer for layer, _ in pyogrio.list_layers(out / "boundaries.gpkg")} == {"road_boundaries", "edges"}
