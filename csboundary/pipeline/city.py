@@ -212,9 +212,9 @@ def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch
     """The city graph of a run's patch graphs (mosaic pixels): stitched, without the connected
     pieces shorter than ``min_fragment_px``, noded where lines touch, cross or run together
     (``stitch.node_shared``), then with the dangling ends attached to the line of another piece
-    up to ``attach_px`` ahead of them (both lengths are the model's settings). Noding and attaching come after the short pieces
-    are dropped, so that noise is not kept alive by touching a road (Ottawa crops: F1@5 0.450
-    noding first, 0.452 after)."""
+    up to ``attach_px`` ahead of them (both lengths are the model's settings). Noding and
+    attaching come after the short pieces are dropped, so that noise is not kept alive by
+    touching a road (Ottawa crops: F1@5 0.450 noding first, 0.452 after)."""
     graph = drop_short_fragments(stitch_patch_graphs(patch_graphs, grid, stitch, crs), min_fragment_px)
     if stitch.node_shared:
         graph = node_shared_points(graph)
