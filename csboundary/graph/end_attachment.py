@@ -9,7 +9,8 @@ it. Where ``headings`` are given, the point must lie ahead of the end (within ``
 of the direction its line was going), so a line is not bent back across the road.
 
 Two users: seam mending in :mod:`csboundary.graph.stitching` (ends cut by a window border, no
-heading) and the city graph's attachment of every other end (``StitchConfig.attach_px``).
+heading) and the city graph's attachment of every other end (``city_graph`` in
+:mod:`csboundary.pipeline.city`, the bundle's ``attach_max_px``, ``--attach-ends``).
 Pure geometry on pixel (col, row) coordinates.
 """
 
@@ -27,9 +28,6 @@ from csboundary.graph.polyline import (
     nearest_on_polyline,
     split_polyline,
 )
-
-SAMPLE_STEP = 4.0  # largest spacing of the samples that find an end's candidate edges
-
 
 ATTACH = "attach"  # the kind of the city graph's edge from a dangling end to the line ahead of it
 
