@@ -7,12 +7,14 @@ patch owns the edge whose midpoint is in its core), but without a shared vertex 
 two pieces lying on top of each other: APLS counts every route across as lost. On the seed-7
 test city 44 pairs of edges shared 520 polyline points this way.
 
-:func:`node_shared_points` cuts every edge at the points it shares with another edge where the
-two do not run on together (an overlap starts or ends, the lines cross at a point, one of them
-ends there), so overlapping stretches end on the same vertices; a stretch that two edges follow point for point is kept once
-(the corner edge, else the more confident). Points are compared exactly (to 1e-6 px): windows are
-shifted by whole pixels, so the same skeleton pixel has the same coordinates in every patch.
-Straight edges (no polyline) have no interior points and are not cut.
+:func:`node_shared_points` first puts the points where two lines cross or touch between their
+own points into both polylines (the same coordinates in both), then cuts every edge at the points
+it shares with another edge where the two do not run on together (an overlap starts or ends,
+the lines cross, one of them ends there), so overlapping stretches end on the same vertices; a
+stretch that two edges follow point for point is kept once (the corner edge, else the more
+confident). Points are compared exactly (to 1e-6 px): windows are shifted by whole pixels, so
+the same skeleton pixel has the same coordinates in every patch. A line crossing itself is not
+cut at the crossing.
 """
 
 from __future__ import annotations
