@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.edge_support import segment_stats, widened
+from csboundary.graph.end_attachment import dangling_ends
 
 JOIN = "join"
 
@@ -46,22 +47,13 @@ class EndJoinConfig:
 
 def end_headings(graph: BoundaryGraph) -> tuple[np.ndarray, np.ndarray]:
     """(ends (K,), headings (K, 2)): the vertices with fewer than two edges and the unit direction
-    each one's line was heading in when it stopped (from the last step of its edge's polyline);
+    each one's line was heading in when it stopped (:func:`~csboundary.graph.end_attachment.dangling_ends`);
     (0, 0) for a vertex without edges, which may be joined from any side."""
     degree = np.bincount(graph.edges.ravel(), minlength=graph.n_vertices)
     ends = np.flatnonzero(degree < 2)
     heading = np.zeros((len(ends), 2))
-    slot = {int(v): k for k, v in enumerate(ends)}
-    for e, (u, v) in enumerate(graph.edges):
-        line = graph.edge_polyline(e)
-        for vertex, inner in ((int(u), line[1] if len(line) > 1 else None), (int(v), line[-2] if len(line) > 1 else None)):
-            k = slot.get(vertex)
-            if k is None or inner is None or u == v:
-                continue
-            step = graph.vertices[vertex] - inner
-            norm = np.linalg.norm(step)
-            if norm > 0:
-                heading[k] = step / norm
+    dangling, _, directions = dangling_ends(graph)
+    heading[np.searchsorted(ends, dangling)] = directions
     return ends, heading
 
 
