@@ -18,6 +18,8 @@ FILL_HELP = "Fill in segmentation-skeleton stretches at least this long that no 
 JOIN_HELP = "Join two dangling ends at most this many pixels apart that head towards each other over boundary (0 = off; default: the weights')."
 ATTACH_HELP = ("City graph: join a dangling end to the nearest line of another piece at most this many pixels ahead of it "
                "(0 = off; default: the weights').")
+ATTACH_BACKED_HELP = ("Join a dangling end of a window's graph to the nearest line of another piece at most this many pixels ahead "
+                      "of it where the boundary map backs the join, as --join-ends (0 = off; default: the weights').")
 FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all; default: the weights')."
 THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
 ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
@@ -45,6 +47,7 @@ SurfaceOption = Annotated[Optional[float], typer.Option("--surface-check", callb
 FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callback=finite, min=0.0, help=FILL_HELP)]
 JoinOption = Annotated[Optional[float], typer.Option("--join-ends", callback=finite, min=0.0, help=JOIN_HELP)]
 AttachOption = Annotated[Optional[float], typer.Option("--attach-ends", callback=finite, min=0.0, help=ATTACH_HELP)]
+AttachBackedOption = Annotated[Optional[float], typer.Option("--attach-backed", callback=finite, min=0.0, help=ATTACH_BACKED_HELP)]
 FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
 EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
 DeviceOption = Annotated[str, typer.Option(help=DEVICE_HELP)]

@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
+from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, readable_inputs)
 
 
@@ -23,6 +23,7 @@ def predict(
     fill_min_length: FillOption = None,
     join_ends: JoinOption = None,
     attach_ends: AttachOption = None,
+    attach_backed: AttachBackedOption = None,
     surface_check: SurfaceOption = None,
     min_fragment_length: FragmentOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
@@ -51,7 +52,7 @@ def predict(
     from csboundary.pipeline.run import stage_table
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "

@@ -43,6 +43,7 @@ def bundle_weights(
     fill_min_length: float = typer.Option(0.0, "--fill-min-length", callback=finite, min=0.0, help="Default shortest segmentation-skeleton stretch no edge covers that is filled in, in pixels (0 = off)."),
     join_ends: float = typer.Option(0.0, "--join-ends", callback=finite, min=0.0, help="Default longest join between two dangling ends that head towards each other over boundary, in pixels (0 = off)."),
     attach_ends: float = typer.Option(0.0, "--attach-ends", callback=finite, min=0.0, help="Default farthest line ahead of a dangling end of the city graph it is joined to, in pixels (0 = off)."),
+    attach_backed: float = typer.Option(0.0, "--attach-backed", callback=finite, min=0.0, help="Default farthest line ahead of a dangling end of a window's graph it is joined to where the boundary map backs the join, in pixels (0 = off)."),
     surface_check: float = typer.Option(0.0, "--surface-check", callback=finite, min=0.0, max=1.0, help="Default road-surface check: an edge needs this mean surface probability beside it, or a connected edge that has it (0 = off; the FPN needs a surface head)."),
     surface_weak: float = typer.Option(0.2, "--surface-weak", callback=finite, min=0.0, max=1.0, help="Surface check: edges below this are dropped even when connected to a sure one."),
     min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0, help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
@@ -57,5 +58,5 @@ def bundle_weights(
                        crossing_spacing_px=grid_crossings, min_fragment_px=min_fragment_length, vertex_threshold=vertex_threshold,
                        max_gap_px=max_edge_gap, gap_level=gap_level, fill_min_length_px=fill_min_length,
                        surface_strong=surface_check, surface_weak=surface_weak, join_max_px=join_ends,
-                       attach_max_px=attach_ends)
+                       attach_max_px=attach_ends, join_attach_px=attach_backed)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")

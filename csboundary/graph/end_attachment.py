@@ -16,6 +16,8 @@ Pure geometry on pixel (col, row) coordinates.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.spatial import cKDTree
 from shapely import STRtree, points
@@ -60,12 +62,14 @@ def dangling_ends(graph: BoundaryGraph) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind: str, headings: np.ndarray | None = None,
-                max_turn_deg: float = 60.0, merge_px: float = 1.0) -> BoundaryGraph:
+                max_turn_deg: float = 60.0, merge_px: float = 1.0,
+                accept: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None) -> BoundaryGraph:
     """``graph`` with each of ``ends`` (vertices with one edge) joined to the nearest point within
     its ``radius`` of an edge in another connected piece (ahead of it when ``headings`` are given;
     a zero heading accepts any direction); ``graph`` itself when no end finds one. Pieces are
     those of ``graph`` before any join. New edges take ``kind`` and the score and patch of the
-    end's own edge."""
+    end's own edge. ``accept(starts (K, 2), feet (K, 2)) -> (K,) bool``, when given, vets the
+    joins (e.g. the boundary map must back them): an end takes its nearest accepted point."""
     ends, radius = np.asarray(ends, np.int64), np.broadcast_to(np.asarray(radius, float), (len(ends),))
     if not len(ends) or graph.n_edges == 0:
         return graph
@@ -76,21 +80,29 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
     vertex_piece = np.full(graph.n_vertices, -1)
     vertex_piece[graph.edges[:, 0]], vertex_piece[graph.edges[:, 1]] = edge_piece, edge_piece
     cos_turn = np.cos(np.radians(max_turn_deg)) - 1e-9
-    cuts: dict[int, list[tuple[float, np.ndarray, int]]] = {}  # edge -> (arc position of the foot, foot, end)
+    candidates = []  # (end index, distance, edge, segment, foot), nearest first per end
     for k, x in enumerate(ends):
-        point, best = graph.vertices[x], None
+        point, found = graph.vertices[x], []
         heading = None if headings is None or not np.any(headings[k]) else headings[k]
         for e in sorted(near[k].tolist()):
             if edge_piece[e] == vertex_piece[x]:
                 continue
             distance, segment, foot = nearest_on_polyline(lines[e], point)
             ahead = heading is None or distance == 0 or np.dot(foot - point, heading) >= cos_turn * distance
-            if distance <= radius[k] and ahead and (best is None or distance < best[0]):
-                best = (distance, e, segment, foot)
-        if best is not None:
-            _, e, segment, foot = best
-            position = arc_lengths(lines[e])[segment] + float(np.hypot(*(foot - lines[e][segment])))
-            cuts.setdefault(e, []).append((position, foot, int(x)))
+            if distance <= radius[k] and ahead:
+                found.append((k, distance, e, segment, foot))
+        candidates += sorted(found, key=lambda c: c[1])  # stable: the lower edge index wins a tie
+    if accept is not None and candidates:
+        ok = np.asarray(accept(graph.vertices[ends[[c[0] for c in candidates]]], np.array([c[4] for c in candidates])), bool)
+        candidates = [c for c, good in zip(candidates, ok) if good]
+    cuts: dict[int, list[tuple[float, np.ndarray, int]]] = {}  # edge -> (arc position of the foot, foot, end)
+    taken: set[int] = set()
+    for k, _, e, segment, foot in candidates:
+        if k in taken:
+            continue
+        taken.add(k)
+        position = arc_lengths(lines[e])[segment] + float(np.hypot(*(foot - lines[e][segment])))
+        cuts.setdefault(e, []).append((position, foot, int(ends[k])))
     if not cuts:
         return graph
     return _with_cuts(graph, lines, cuts, kind, merge_px)

@@ -7,9 +7,13 @@ for a few pixels of missing line. Here the ends of the graph (vertices with fewe
 edges) are joined to each other when the join is short, continues the direction each end was
 heading in, and runs over boundary (the same mean-support and longest-gap tests as AfANet's
 edges, :mod:`csboundary.graph.edge_support`). Closest pairs first, until a vertex has two
-edges (a vertex without edges may join two ends and link them).
+edges (a vertex without edges may join two ends and link them). An end still dangling then
+may join the nearest point of another piece's line ahead of it (``attach_px``; the line is
+split there, :func:`~csboundary.graph.end_attachment.attach_ends`) when the map backs that join
+the same way: the city graph's unvetted attachment must stay short (it bridges curbs the model
+never saw), while a backed one can reach across a longer gap under a tree.
 
-Pure geometry on pixel (col, row) coordinates; the new edges are of kind ``join``.
+Pure geometry on pixel (col, row) coordinates; the new edges are of kind ``join`` and ``attach``.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.edge_support import segment_stats, widened
-from csboundary.graph.end_attachment import dangling_ends
+from csboundary.graph.end_attachment import ATTACH, attach_ends, dangling_ends
 
 JOIN = "join"
 
@@ -29,6 +33,7 @@ JOIN = "join"
 @dataclass(frozen=True)
 class EndJoinConfig:
     max_px: float = 0.0  # longest join; 0 = off
+    attach_px: float = 0.0  # an end left dangling joins the nearest backed point of another piece's line this close; 0 = off
     max_turn_deg: float = 45.0  # largest angle between an end's heading and its join
     min_support: float = 0.3  # mean boundary probability along the join (map max-filtered over radius_px)
     max_gap_px: float = 10.0  # longest stretch of the join below gap_level
@@ -37,12 +42,12 @@ class EndJoinConfig:
 
     @property
     def active(self) -> bool:
-        return self.max_px > 0
+        return self.max_px > 0 or self.attach_px > 0
 
     def __post_init__(self) -> None:
-        if not (self.max_px >= 0 and 0 <= self.max_turn_deg <= 180 and 0 <= self.min_support <= 1 and self.max_gap_px >= 0
+        if not (self.max_px >= 0 and self.attach_px >= 0 and 0 <= self.max_turn_deg <= 180 and 0 <= self.min_support <= 1 and self.max_gap_px >= 0
                 and 0 <= self.gap_level <= 1 and self.radius_px >= 0):
-            raise ValueError(f"need max_px, max_gap_px, radius_px >= 0, 0 <= max_turn_deg <= 180 and levels in [0, 1]; got {self}")
+            raise ValueError(f"need max_px, attach_px, max_gap_px, radius_px >= 0, 0 <= max_turn_deg <= 180 and levels in [0, 1]; got {self}")
 
 
 def end_headings(graph: BoundaryGraph) -> tuple[np.ndarray, np.ndarray]:
@@ -84,16 +89,35 @@ def join_candidates(graph: BoundaryGraph, config: EndJoinConfig) -> np.ndarray:
 
 
 def join_ends(graph: BoundaryGraph, boundary: np.ndarray, config: EndJoinConfig) -> BoundaryGraph:
-    """``graph`` plus ``join`` edges between its ends (module docstring); ``graph`` itself when
-    nothing is joined. ``boundary`` is the (h, w) boundary probability map of the graph's frame."""
+    """``graph`` plus ``join`` edges between its ends, then (``attach_px``) the ends still
+    dangling joined to the line ahead (module docstring); ``graph`` itself when nothing is
+    joined. ``boundary`` is the (h, w) boundary probability map of the graph's frame."""
     if not config.active or graph.n_vertices < 2:
         return graph
+    support = widened(boundary, config.radius_px)
+    if config.max_px > 0:
+        graph = _joined(graph, support, config)
+    if config.attach_px <= 0:
+        return graph
+    ends, _, headings = dangling_ends(graph)
+    return attach_ends(graph, ends, config.attach_px, ATTACH, headings, config.max_turn_deg,
+                       accept=lambda starts, stops: backing(support, starts, stops, config)[0])
+
+
+def backing(support: np.ndarray, starts: np.ndarray, stops: np.ndarray, config: EndJoinConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(backed (K,) bool, mean support (K,)) of the segments ``starts`` -> ``stops``: backed when the
+    mean reaches ``min_support`` and no stretch below ``gap_level`` is longer than ``max_gap_px``."""
+    mean, gap = segment_stats(support, starts, stops, config.gap_level)
+    return (mean >= config.min_support) & (gap <= config.max_gap_px), mean
+
+
+def _joined(graph: BoundaryGraph, support: np.ndarray, config: EndJoinConfig) -> BoundaryGraph:
+    """``graph`` plus the ``join`` edges between pairs of its ends that ``support`` backs."""
     pairs = join_candidates(graph, config)
     if not len(pairs):
         return graph
     starts, stops = graph.vertices[pairs[:, 0]], graph.vertices[pairs[:, 1]]
-    mean, gap = segment_stats(widened(boundary, config.radius_px), starts, stops, config.gap_level)
-    supported = (mean >= config.min_support) & (gap <= config.max_gap_px)
+    supported, mean = backing(support, starts, stops, config)
     degree = np.bincount(graph.edges.ravel(), minlength=graph.n_vertices)
     chosen, scores = [], []
     for (u, v), score in zip(pairs[supported], mean[supported]):

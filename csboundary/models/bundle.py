@@ -19,12 +19,13 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
                 min_support: float = 0.0, max_length_px: float = 0.0, crossing_spacing_px: int = 0, min_fragment_px: float = 0.0,
                 vertex_threshold: float | None = None, max_gap_px: float = 0.0, gap_level: float = 0.3,
                 fill_min_length_px: float = 0.0, surface_strong: float = 0.0, surface_weak: float = 0.2,
-                surface_offset_px: float = 8.0, join_max_px: float = 0.0, attach_max_px: float = 0.0) -> Path:
+                surface_offset_px: float = 8.0, join_max_px: float = 0.0, attach_max_px: float = 0.0,
+                join_attach_px: float = 0.0) -> Path:
     """One weights file: both models, their provenance and the inference settings (vertex
     threshold: by default the one AfANet's training extracted its vertices at; edge threshold,
     degree cap, edge-support check (mean, length, longest gap), grid-crossing vertices, shortest fragment of the city graph,
-    shortest skeleton stretch filled in, longest join between dangling ends, farthest line a dangling end of the city graph
-    is attached to, road-surface check (an FPN with a surface head);
+    shortest skeleton stretch filled in, longest join between dangling ends, farthest line a dangling end of a window's
+    graph is attached to over boundary, farthest line a dangling end of the city graph is attached to, road-surface check (an FPN with a surface head);
     see :mod:`csboundary.graph.edge_support`, :mod:`csboundary.graph.crossings` and
     :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`, :mod:`csboundary.graph.end_joining`), and the pixel size the FPN was trained at (imagery is
     resampled to it)."""
@@ -56,6 +57,7 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
                    "max_gap_px": max_gap_px, "gap_level": gap_level, "fill_min_length_px": fill_min_length_px,
                    **({"join_max_px": join_max_px} if join_max_px > 0 else {}),  # only when on: older readers know every other key
                    **({"attach_max_px": attach_max_px} if attach_max_px > 0 else {}),
+                   **({"join_attach_px": join_attach_px} if join_attach_px > 0 else {}),
                    **({"surface_strong": surface_strong, "surface_weak": surface_weak, "surface_offset_px": surface_offset_px}
                       if surface_strong > 0 else {})},
         provenance=provenance,

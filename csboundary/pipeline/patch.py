@@ -107,7 +107,7 @@ class PatchPredictor:
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))
         fill = FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0)))
-        join = EndJoinConfig(max_px=float(settings.get("join_max_px", 0.0)))
+        join = EndJoinConfig(max_px=float(settings.get("join_max_px", 0.0)), attach_px=float(settings.get("join_attach_px", 0.0)))
         surface = SurfaceCheckConfig(**{field: float(settings[key]) for key, field in SURFACE_SETTINGS.items() if key in settings})
         if surface.active and not fpn.config.surface:
             raise InputError(path, "damaged weights file: a surface check is set but the FPN has no surface head")
@@ -192,7 +192,8 @@ class PatchPredictor:
 INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
                       "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
-                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False), "attach_max_px": (0.0, 1e6, False),
+                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False), "join_attach_px": (0.0, 1e6, False),
+                      "attach_max_px": (0.0, 1e6, False),
                       "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False)}
 SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px"}  # bundle key -> SurfaceCheckConfig field
 
@@ -218,7 +219,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
                    fill_min_length: float | None = None, surface_check: float | None = None, join_ends: float | None = None,
-                   attach_ends: float | None = None,
+                   attach_ends: float | None = None, attach_backed: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
@@ -241,6 +242,8 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill_min_length)
     if join_ends is not None:
         predictor.join = dataclasses.replace(predictor.join, max_px=join_ends)
+    if attach_backed is not None:
+        predictor.join = dataclasses.replace(predictor.join, attach_px=attach_backed)
     if attach_ends is not None:
         predictor.attach_px = attach_ends
     if surface_check is not None:

@@ -54,6 +54,8 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
                 "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
     if predictor.join.active:  # only then: a run interrupted before end joining existed still resumes
         settings["join_max_px"] = predictor.join.max_px
+        if predictor.join.attach_px > 0:
+            settings["join_attach_px"] = predictor.join.attach_px
     if predictor.attach_px > 0:  # likewise
         settings["attach_max_px"] = predictor.attach_px
     if predictor.surface.active:  # only then: a run interrupted before the check existed still resumes

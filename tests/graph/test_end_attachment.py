@@ -151,3 +151,15 @@ def test_joins_are_short_go_between_pieces_and_only_add_their_own_length(segment
         other = [int(y) for y in joined.edges[k] if int(y) != x][0]
         if other < graph.n_vertices:  # the foot fell on an existing vertex: of another piece
             assert vertex_piece[other] != vertex_piece[x]
+
+
+def test_an_end_takes_the_nearest_point_its_vetting_accepts():
+    # the street stops at (150, 70) heading down; lines cross below it at y = 80 and y = 100
+    vertices = np.array([[0.0, 100], [300, 100], [150, 0], [150, 70], [100, 80], [200, 80]])
+    two_roads = BoundaryGraph(vertices, np.array([[0, 1], [2, 3], [4, 5]]))
+    near = attached(two_roads)
+    far = attached(two_roads, accept=lambda starts, feet: feet[:, 1] > 90)  # e.g. the map backs only the far join
+    assert {tuple(near.vertices[v]) for v in range(near.n_vertices)} >= {(150.0, 80.0)}
+    assert (150.0, 100.0) not in {tuple(v) for v in near.vertices.tolist()}
+    assert (150.0, 100.0) in {tuple(v) for v in far.vertices.tolist()} and (150.0, 80.0) not in {tuple(v) for v in far.vertices.tolist()}
+    assert attached(two_roads, accept=lambda starts, feet: np.zeros(len(feet), bool)) is two_roads

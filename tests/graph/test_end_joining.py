@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.end_attachment import ATTACH
 from csboundary.graph.end_joining import (
     JOIN,
     EndJoinConfig,
@@ -150,3 +151,61 @@ def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
     joined = predictor.finished(None, maps, two_pieces())
     assert joined.edge_kinds[-1] == JOIN and sorted(joined.edges[-1].tolist()) == [1, 2]
     assert PatchPredictor(None, None, None).finished(None, maps, two_pieces()).n_edges == 2
+
+
+def side_street(stop_row: float = 30.5) -> BoundaryGraph:
+    """The row-50 road (one edge) and a side street down column 50 that stops ``stop_row``."""
+    return graph([(0.5, 50.5), (99.5, 50.5), (50.5, 0.5), (50.5, stop_row)], [(0, 1), (2, 3)])
+
+
+def tee_map(gap_from: int = 100) -> np.ndarray:
+    """The road along row 50 and the side street down column 50 to it, blank from ``gap_from`` on."""
+    m = line_map()
+    m[:min(gap_from, 50), 50] = 1.0
+    return m
+
+
+ATTACH_ON = EndJoinConfig(attach_px=30)
+
+
+def test_an_end_short_of_a_line_the_map_leads_to_is_attached_and_the_line_split():
+    tee = join_ends(side_street(), tee_map(), ATTACH_ON)
+    assert tee.n_vertices == 5 and np.allclose(tee.vertices[4], (50.5, 50.5))  # the foot, a new vertex on the road
+    attached = [sorted(tee.edges[k].tolist()) for k, kind in enumerate(tee.edge_kinds) if kind == ATTACH]
+    assert attached == [[3, 4]]
+    assert sorted(map(sorted, tee.edges.tolist())) == [[0, 4], [1, 4], [2, 3], [3, 4]]
+
+
+def test_no_attachment_across_a_gap_the_map_does_not_back():
+    assert join_ends(side_street(), tee_map(gap_from=32), ATTACH_ON).n_edges == 2  # 18 px blank > max_gap_px 10
+    assert join_ends(side_street(), tee_map(), EndJoinConfig(attach_px=15)).n_edges == 2  # 20 px away: beyond 15
+
+
+def test_ends_joined_to_each_other_are_not_attached_as_well():
+    # a break in the road 15 px wide, the side street's end 25 px above it: the road's ends join
+    # each other first, then the street's end reaches the joined road
+    broken = graph([(0.5, 50.5), (40.5, 50.5), (55.5, 50.5), (99.5, 50.5), (70.5, 0.5), (70.5, 25.5)], [(0, 1), (2, 3), (4, 5)])
+    m = line_map()
+    m[:50, 70] = 1.0
+    done = join_ends(broken, m, EndJoinConfig(max_px=20, attach_px=30))
+    kinds = sorted(done.edge_kinds)
+    assert kinds.count(JOIN) == 1 and kinds.count(ATTACH) == 1
+    assert np.bincount(done.edges.ravel()).max() == 3  # the foot on the road: road in, road out, the street
+
+
+def test_bundle_carries_the_backed_attachment_and_a_command_line_value_overrides_it(tmp_path):
+    import torch
+
+    from helpers import shipped_parts
+
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+
+    shipped_parts(tmp_path)
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", join_attach_px=60)
+    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).join.attach_px == 60
+    assert not load_predictor(tmp_path / "b.pt", "cpu", attach_backed=0, engine="torch").join.active
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
+    assert "join_attach_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
+    assert load_predictor(tmp_path / "off.pt", "cpu", attach_backed=25, engine="torch").join.attach_px == 25
