@@ -47,6 +47,34 @@ def test_a_style_city_is_reproduced_from_its_seed(style):
     assert np.array_equal(a.render(0, 0), b.render(0, 0))
 
 
+# NumPy features whose kernels round some functions' last bit differently (AVX-512 machines)
+WIDE_SIMD = "X86_V4 AVX512_ICL AVX512_SPR AVX512_SKX"
+GROUND_TRUTH_HASH = (
+    "import hashlib, sys; from csboundary.data.synth.city import plan_city; from csboundary.data.synth.styles import style_config; "
+    "city = plan_city(style_config(sys.argv[1], tile_size=2000), 'test', 7, (2, 2)); "
+    "print(hashlib.sha256(b''.join(g.wkb for g in city.ground_truth().geometry)).hexdigest())"
+)
+
+
+def test_a_city_is_the_same_on_cpus_with_and_without_avx512(style="suburb"):
+    # the suburb test city (seed 7, 2x2 tiles of 2000 px) was another city on an AVX-512
+    # machine: NumPy's power, one bit off, decided whether two streets crossed
+    import os
+    import subprocess
+    import sys
+
+    from numpy._core._multiarray_umath import __cpu_features__
+
+    if not any(__cpu_features__.get(f) for f in WIDE_SIMD.split()):
+        pytest.skip("this CPU has none of the features to switch off")
+    hashes = []
+    for disabled in ("", " ".join(f for f in WIDE_SIMD.split() if __cpu_features__.get(f))):
+        env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled}
+        done = subprocess.run([sys.executable, "-c", GROUND_TRUTH_HASH, style], env=env, capture_output=True, text=True, check=True)
+        hashes.append(done.stdout.strip())
+    assert hashes[0] == hashes[1]
+
+
 def test_classic_style_is_the_original_generator():
     assert style_config("classic") == SynthConfig()
     assert draw_look(SynthConfig(), "train", 3) == CameraLook()  # no look: pixels as before styles

@@ -323,9 +323,13 @@ def _curvy_branch(rng: np.random.Generator, start: np.ndarray, heading: np.ndarr
 
 
 def _crescent(start: np.ndarray, end: np.ndarray, normal: np.ndarray, depth: float) -> LineString:
-    """A U-shaped street from ``start`` into the block, ``depth`` deep, and back out at ``end``."""
+    """A U-shaped street from ``start`` into the block, ``depth`` deep, and back out at ``end``.
+    The bulge is computed with ``math`` (the C library), not NumPy: NumPy's power rounds the
+    last bit differently on CPUs with AVX-512, and a side street that starts on the crescent
+    then crosses another street on one machine and not the other, giving a different city."""
     s = np.linspace(0, math.pi, 40)
-    pts = start + np.outer((1 - np.cos(s)) / 2, end - start) + np.outer(np.sin(s) ** 0.6 * depth, normal)
+    bulge = np.array([math.sin(v) ** 0.6 for v in s])
+    pts = start + np.outer((1 - np.cos(s)) / 2, end - start) + np.outer(bulge * depth, normal)
     return LineString(pts)
 
 
