@@ -123,7 +123,8 @@ def test_joins_are_short_new_and_keep_degrees_at_most_two(points, max_px, turn):
     assert len(pairs) == joined.n_edges  # no edge twice
 
 
-def test_bundle_carries_the_join_and_a_command_line_value_overrides_it(tmp_path):
+@pytest.mark.parametrize("key, option, field", [("join_max_px", "join_ends", "max_px"), ("join_attach_px", "attach_backed", "attach_px")])
+def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_path, key, option, field):
     import torch
 
     from helpers import shipped_parts
@@ -133,13 +134,13 @@ def test_bundle_carries_the_join_and_a_command_line_value_overrides_it(tmp_path)
     from csboundary.pipeline.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", join_max_px=40)
-    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).join.max_px == 40
-    assert not load_predictor(tmp_path / "b.pt", "cpu", join_ends=0, engine="torch").join.active
+    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", **{key: 40})
+    assert getattr(PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).join, field) == 40
+    assert not load_predictor(tmp_path / "b.pt", "cpu", engine="torch", **{option: 0}).join.active
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
-    assert "join_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
+    assert key not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
     assert not PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).join.active
-    assert load_predictor(tmp_path / "off.pt", "cpu", join_ends=25, engine="torch").join.max_px == 25
+    assert getattr(load_predictor(tmp_path / "off.pt", "cpu", engine="torch", **{option: 25}).join, field) == 25
 
 
 def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
@@ -191,21 +192,3 @@ def test_ends_joined_to_each_other_are_not_attached_as_well():
     kinds = sorted(done.edge_kinds)
     assert kinds.count(JOIN) == 1 and kinds.count(ATTACH) == 1
     assert np.bincount(done.edges.ravel()).max() == 3  # the foot on the road: road in, road out, the street
-
-
-def test_bundle_carries_the_backed_attachment_and_a_command_line_value_overrides_it(tmp_path):
-    import torch
-
-    from helpers import shipped_parts
-
-    from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
-
-    shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", join_attach_px=60)
-    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).join.attach_px == 60
-    assert not load_predictor(tmp_path / "b.pt", "cpu", attach_backed=0, engine="torch").join.active
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
-    assert "join_attach_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
-    assert load_predictor(tmp_path / "off.pt", "cpu", attach_backed=25, engine="torch").join.attach_px == 25
