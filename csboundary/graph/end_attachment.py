@@ -8,9 +8,11 @@ an existing one lies within ``merge_px``) and a straight edge of the given kind 
 it. Where ``headings`` are given, the point must lie ahead of the end (within ``max_turn_deg``
 of the direction its line was going), so a line is not bent back across the road.
 
-Two users: seam mending in :mod:`csboundary.graph.stitching` (ends cut by a window border, no
-heading) and the city graph's attachment of every other end (``city_graph`` in
-:mod:`csboundary.pipeline.city`, the bundle's ``attach_max_px``, ``--attach-ends``).
+Three users: seam mending in :mod:`csboundary.graph.stitching` (ends cut by a window border, no
+heading), the city graph's attachment of every other end (``city_graph`` in
+:mod:`csboundary.pipeline.city`, the bundle's ``attach_max_px``, ``--attach-ends``), and the
+window's attachment where the boundary map backs the join (:mod:`csboundary.graph.end_joining`,
+``join_attach_px``, ``--attach-backed``; the ``accept`` test).
 Pure geometry on pixel (col, row) coordinates.
 """
 
