@@ -53,8 +53,11 @@ from csboundary.viz.overlay import core_thumbnail
 
 GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow with the city
 # GDAL lists a tile's folder on every open to find side-car files; with thousands of tiles in one
-# folder that listing dominates the open (side-cars are still probed one by one)
-GDAL_ENV = {"GDAL_CACHEMAX": GDAL_CACHE_MB, "GDAL_DISABLE_READDIR_ON_OPEN": "TRUE"}
+# folder that listing dominates the open (side-cars are still probed one by one).
+# rasterio hands an integer GDAL_CACHEMAX to GDALSetCacheMax64 as BYTES (GDAL itself reads small
+# values as megabytes): 128 gave a 128-byte cache, so every window decoded its compressed blocks
+# again (an overlapped window read took 30 ms instead of 1-2 ms; tests/pipeline/test_gdal_cache.py).
+GDAL_ENV = {"GDAL_CACHEMAX": GDAL_CACHE_MB * 2**20, "GDAL_DISABLE_READDIR_ON_OPEN": "TRUE"}
 STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching")
 DEFAULT_CHANNELS = 2  # keypoint + segmentation: the maps of a window no covering patch has imagery for
 
