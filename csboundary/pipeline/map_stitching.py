@@ -46,7 +46,7 @@ def stitch_window(grid: PatchGrid, patch: Patch, load: Callable[[Index], np.ndar
             srows, scols = part.relative_to(q.expanded).slices()
             add_float32(total[:, rows, cols], maps[:, srows, scols])
         count[rows, cols] += 1
-    return total / np.maximum(count, 1)[None]
+    return np.divide(total, np.maximum(count, 1)[None], out=total)  # in place: no second window-sized array
 
 
 class WindowSchedule:

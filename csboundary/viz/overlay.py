@@ -16,7 +16,7 @@ from shapely.geometry import LineString, box
 
 from csboundary.data.atomic import atomic_path
 from csboundary.data.grid import Patch, PatchGrid
-from csboundary.data.raster import Mosaic, WindowRead
+from csboundary.data.raster import Mosaic, WindowRead, area_reduced
 from csboundary.data.windows import PixelWindow, world_to_pixel
 
 CYAN = (0, 255, 255)
@@ -111,10 +111,8 @@ def core_thumbnail(read: WindowRead, patch: Patch, scale: float) -> np.ndarray:
     y0, y1 = _reduced_span(core.row_off, core.row_end, scale)
     if x1 <= x0 or y1 <= y0:
         return np.zeros((read.data.shape[0] + 1, y1 - y0, x1 - x0), read.data.dtype)
-    pixels = cv2.resize(np.moveaxis(read.data[:, rows, cols], 0, -1), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
-    valid = cv2.resize(read.valid[rows, cols].astype(np.float32), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA) >= 0.5
-    pixels = pixels.reshape(y1 - y0, x1 - x0, -1)
-    return np.concatenate([np.moveaxis(pixels, -1, 0), valid[None].astype(pixels.dtype)])
+    pixels, valid = area_reduced(read.data[:, rows, cols], read.valid[rows, cols], x1 - x0, y1 - y0)
+    return np.concatenate([pixels, valid[None].astype(pixels.dtype)])
 
 
 def overview_from_thumbs(grid: PatchGrid, scale: float, load) -> WindowRead | None:

@@ -625,3 +625,21 @@ def test_patches_without_imagery_skip_the_model(tmp_path):
         result = predict_city(mosaic, model, grid_config=GridConfig(core=100, margin=10), progress=False)
     # windows of 120 px (cores 100 + 10 px margins): only the middle one (cols 190-310) sees no tile
     assert result.n_patches == 5 and result.patches_without_imagery == 1 and model.seen == 4
+
+
+def test_area_reduced_averages_blocks_of_each_band_and_keeps_half_valid_areas():
+    """4x4 -> 2x2: every output pixel is its 2x2 block's mean (bands apart, from a strided view),
+    valid where at least two of the block's four pixels were."""
+    from csboundary.data.raster import area_reduced
+
+    bands = np.zeros((2, 6, 6), np.uint8)
+    bands[0, 1:5, 1:5] = [[0, 4, 8, 8], [4, 8, 8, 8], [100, 100, 2, 2], [100, 100, 2, 6]]
+    bands[1, 1:5, 1:5] = 200
+    valid = np.zeros((6, 6), bool)
+    valid[1:3, 1:3] = [[True, True], [False, False]]  # half of the top-left block
+    valid[3:5, 3:5] = [[True, False], [False, False]]  # a quarter of the bottom-right one
+    pixels, kept = area_reduced(bands[:, 1:5, 1:5], valid[1:5, 1:5], 2, 2)
+    assert pixels.dtype == np.uint8 and pixels.shape == (2, 2, 2)
+    assert pixels[0].tolist() == [[4, 8], [100, 3]]
+    assert (pixels[1] == 200).all()
+    assert kept.tolist() == [[True, False], [False, False]]
