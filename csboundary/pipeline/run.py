@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import json
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable
 
@@ -76,8 +77,7 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
                               overview_scale=overview_scale(mosaic.window, OVERVIEW_PX))
         rss_after_prediction = peak_rss_mb()
         written_at = time.perf_counter()
-        files = write_graph_outputs(result.graph, stage, units=units)
-        files.update(write_overlays(mosaic, result, stage, ground_truth, store))
+        files = write_outputs(mosaic, result, stage, units, ground_truth, store)
         if write_maps:
             files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
         if lanelet2:
@@ -146,18 +146,33 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
     }
 
 
-def write_overlays(mosaic: Mosaic, result: CityResult, out: Path, ground_truth=(), store: RunStore | None = None) -> dict[str, Path]:
-    """overview.png (whole mosaic; from the run's core thumbnails when ``store`` has them all)
-    and detail.png (the patch core holding the most prediction)."""
-    from csboundary.viz.overlay import overview_from_thumbs, render_window, write_png
+def write_outputs(mosaic: Mosaic, result: CityResult, out: Path, units: GroundUnits, ground_truth=(), store: RunStore | None = None) -> dict[str, Path]:
+    """The vector files (:func:`write_graph_outputs`) and the pictures (:func:`render_overlays`).
+    The pictures are drawn first and PNG-encoded in a second thread while this one builds and
+    writes the vector files: encoding leaves the GIL, so the two overlap (0.27 s instead of 0.40 s
+    on the 16-patch test city); drawing too in that thread made both slower (0.46 s), as their
+    Python work took turns on the GIL."""
+    from csboundary.viz.overlay import write_png
+
+    pictures = render_overlays(mosaic, result, ground_truth, store)
+    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-png") as encoder:
+        encoded = {name: encoder.submit(write_png, out / f"{name}.png", rgb) for name, rgb in pictures.items()}
+        files = write_graph_outputs(result.graph, out, units=units)
+        files.update({name: future.result() for name, future in encoded.items()})
+    return files
+
+
+def render_overlays(mosaic: Mosaic, result: CityResult, ground_truth=(), store: RunStore | None = None) -> dict[str, np.ndarray]:
+    """RGB pictures ``overview`` (whole mosaic; from the run's core thumbnails when ``store`` has
+    them all) and ``detail`` (the patch core holding the most prediction)."""
+    from csboundary.viz.overlay import overview_from_thumbs, render_window
 
     predicted = result.graph.to_linestrings(world=True)
     layers = [(predicted, ORANGE)]
     base = None if store is None else overview_from_thumbs(result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb)
-    overview = write_png(out / "overview.png", render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid,
-                                                             layers=layers, base=base))
+    overview = render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid, layers=layers, base=base)
     busiest = max(result.patch_graphs, key=lambda i: result.patch_graphs[i].edge_lengths().sum(), default=(0, 0))
-    detail = write_png(out / "detail.png", render_window(mosaic, result.grid.patch(*busiest).core, ground_truth, layers=layers))
+    detail = render_window(mosaic, result.grid.patch(*busiest).core, ground_truth, layers=layers)
     return {"overview": overview, "detail": detail}
 
 
