@@ -351,6 +351,7 @@ def run_here(run: CityRun, drain_workers: int | None = None) -> None:
         def read_and_predict(k: int):
             start = time.perf_counter()
             reads = reading[k].result()
+            reading[k] = None  # the batch is held by the caller until its maps are stored, not by this list for the whole run
             waited = time.perf_counter() - start
             if k + 2 < len(batches):
                 reading.append(reader.submit(job.read_batch, batches[k + 2]))
