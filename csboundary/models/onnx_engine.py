@@ -82,17 +82,53 @@ def export_afanet(afanet) -> bytes:
                    {"vertices": {0: "m"}, "logits": {0: "m", 1: "m"}})
 
 
+# ONNX Runtime's graph optimisation levels a session may use. "all" adds the NCHWc layout
+# transform on top of "extended"; which is faster depends on the CPU and the network (measured on
+# a Sapphire Rapids core: the shipped FPN 0.29 s with "extended" and 0.41 s with "all", AfANet
+# 39 ms and 28 ms), so onnx_tuning times both once per machine.
+LEVELS = ("all", "extended")
+DEFAULT_LEVEL = "all"  # ONNX Runtime's own default
+
+
+def open_session(model: bytes, threads: int, level: str, name: str):
+    """An ONNX Runtime CPU session for ``model`` on ``threads`` threads at optimisation ``level``."""
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.log_severity_level = 3
+    options.graph_optimization_level = {"all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
+                                        "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED}[level]
+    # idle pool threads sleep instead of spinning: the city pipeline runs vertex
+    # extraction and AfANet beside the FPN, and spinning threads would take their cores
+    # (measured: 0.57 -> 0.52 s/patch end to end; the FPN alone is as fast either way)
+    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    try:
+        return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # a damaged cache file: one line, not a traceback
+        raise InputError(f"<onnx {name}>", f"ONNX Runtime cannot load the exported network ({str(exc).splitlines()[0]}); "
+                                           "delete the .onnx-cache folder beside the weights") from exc
+
+
 class OnnxNetworks:
     """The FPN and AfANet of one weights file on ONNX Runtime (CPU)."""
 
-    def __init__(self, fpn_model: bytes, afanet_model: bytes, threads: int | None = None):
+    def __init__(self, fpn_model: bytes, afanet_model: bytes, threads: int | None = None, levels: dict[str, str] | None = None):
         self.fpn_model, self.afanet_model, self.threads = fpn_model, afanet_model, threads
+        self.levels = dict(levels or {})  # graph optimisation level per network (see onnx_tuning)
         self._sessions: dict[str, object] = {}
 
+    @property
+    def thread_count(self) -> int:
+        return self.threads or torch.get_num_threads()
+
     @classmethod
-    def for_weights(cls, weights: Path, digest: str, fpn, afanet) -> "OnnxNetworks":
-        """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing."""
+    def for_weights(cls, weights: Path, digest: str, fpn, afanet, tune: bool = True) -> "OnnxNetworks":
+        """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing, with
+        each network's graph optimisation level timed on this machine (once, cached beside them)
+        unless ``tune`` is false (ONNX Runtime's default level then)."""
         from csboundary.data.atomic import atomic_path
+        from csboundary.models.onnx_tuning import tuned_levels
 
         folder = cache_dir(weights)
         models = []
@@ -104,7 +140,10 @@ class OnnxNetworks:
                     tmp.write_bytes(data)
             models.append(path.read_bytes())
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
-        return cls(*models)
+        networks = cls(*models)
+        if tune:
+            networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks)
+        return networks
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
@@ -114,21 +153,8 @@ class OnnxNetworks:
     def _session(self, name: str):
         session = self._sessions.get(name)
         if session is None:
-            import onnxruntime as ort
-
-            options = ort.SessionOptions()
-            options.intra_op_num_threads = self.threads or torch.get_num_threads()
-            options.log_severity_level = 3
-            # idle pool threads sleep instead of spinning: the city pipeline runs vertex
-            # extraction and AfANet beside the FPN, and spinning threads would take their cores
-            # (measured: 0.57 -> 0.52 s/patch end to end; the FPN alone is as fast either way)
-            options.add_session_config_entry("session.intra_op.allow_spinning", "0")
             model = self.fpn_model if name == "fpn" else self.afanet_model
-            try:
-                session = ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
-            except Exception as exc:  # a damaged cache file: one line, not a traceback
-                raise InputError(f"<onnx {name}>", f"ONNX Runtime cannot load the exported network ({str(exc).splitlines()[0]}); "
-                                                   "delete the .onnx-cache folder beside the weights") from exc
+            session = open_session(model, self.thread_count, self.levels.get(name, DEFAULT_LEVEL), name)
             self._sessions[name] = session
         return session
 

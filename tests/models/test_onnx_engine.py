@@ -11,6 +11,7 @@ pytest.importorskip("onnxruntime")
 
 from csboundary.errors import InputError  # noqa: E402
 from csboundary.models.afanet import adjacency_from_logits  # noqa: E402
+from csboundary.models.onnx_engine import LEVELS, OnnxNetworks  # noqa: E402
 from csboundary.pipeline.patch import PatchPredictor  # noqa: E402
 from helpers import run_cli  # noqa: E402
 
@@ -40,11 +41,16 @@ def predictors(tmp_path_factory):
     onnx_engine = PatchPredictor.load(weights, torch.device("cpu"))
     assert onnx_engine.use_engine("onnx", weights) == "onnx" and torch_engine.use_engine("torch", weights) == "torch"
     assert len(list((weights.parent / ".onnx-cache").glob("*.onnx"))) == 2
+    assert set(onnx_engine.onnx.levels) == {"fpn", "afanet"}  # timed on this machine and recorded beside the exports
+    assert len(list((weights.parent / ".onnx-cache").glob("*-tuning-*.json"))) == 1
     return torch_engine, onnx_engine, weights
 
 
-def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictors):
+@pytest.mark.parametrize("level", LEVELS)
+def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictors, level):
+    """At each graph optimisation level the tuning may pick (onnx_tuning)."""
     torch_engine, onnx_engine, _ = predictors
+    onnx_engine.onnx = OnnxNetworks(onnx_engine.onnx.fpn_model, onnx_engine.onnx.afanet_model, levels={"fpn": level, "afanet": level})
     maps_torch = torch_engine.patch_maps([None], [patch_image])[0]
     maps_onnx = onnx_engine.patch_maps([None], [patch_image])[0]
     assert maps_torch.shape == (3, 1100, 1100)  # keypoint, boundary and (the shipped surface check reads it) road surface
@@ -58,6 +64,7 @@ def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictor
     p_onnx = adjacency_from_logits(torch.from_numpy(onnx_engine.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()
     assert np.abs(p_onnx - p_torch).max() < 1e-5
     assert torch_engine.afanet.training is False  # exporting left the PyTorch networks as they were
+    assert set(onnx_engine.onnx._sessions) == {"fpn", "afanet"}  # both ran on ONNX Runtime
 
 
 def test_the_export_is_reused_and_a_changed_weights_file_gets_its_own(predictors, tmp_path):
@@ -65,10 +72,10 @@ def test_the_export_is_reused_and_a_changed_weights_file_gets_its_own(predictors
 
     _, _, weights = predictors
     cache = weights.parent / ".onnx-cache"
-    stamps = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.onnx")}
+    stamps = {p.name: p.stat().st_mtime_ns for p in cache.glob("*")}
     again = PatchPredictor.load(weights, torch.device("cpu"))
     again.use_engine("onnx", weights)
-    assert {p.name: p.stat().st_mtime_ns for p in cache.glob("*.onnx")} == stamps  # not exported again
+    assert {p.name: p.stat().st_mtime_ns for p in cache.glob("*")} == stamps  # not exported or timed again
     other = tmp_path / "other.pt"
     shutil.copy(weights, other)
     with open(other, "ab") as f:

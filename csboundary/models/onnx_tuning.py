@@ -1,0 +1,114 @@
+"""Which ONNX Runtime graph optimisation level runs each network fastest on this machine.
+
+ONNX Runtime's top level ("all") rewrites convolutions into its blocked NCHWc layout. Whether that
+pays depends on the CPU's vector width and on the network's channel counts: on a Sapphire Rapids
+core it made the shipped FPN 1.4x slower (its EfficientNet's 1x1 expansions, 120 -> 720 channels
+at 36 x 36, took 19 ms instead of 2) and AfANet 1.4x faster. So the first ``onnx`` run of a
+weights file on a machine times both levels for each network on inputs of the pipeline's shape
+(a few seconds, beside the export's own) and records the choice in a JSON file beside the
+exports, keyed by the CPU, the onnxruntime version and the thread count; later runs read it.
+Delete the file to time again. Both levels compute the same function (the test suite checks each
+against PyTorch within 1e-5), so the choice moves speed, not results beyond float rounding.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from csboundary.models.onnx_engine import LEVELS, WINDOW, open_session
+
+TIMED_RUNS = 3  # per level, alternated, after one warm-up run each; the fastest run counts
+TUNING_VERTICES = 100  # AfANet's vertex count while timing: a busy window of the test cities
+
+
+def cpu_name() -> str:
+    """The CPU's model name (``/proc/cpuinfo`` on Linux), else what ``platform`` knows."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def machine_key(threads: int) -> str:
+    """What a timing holds for: the CPU, the onnxruntime version and the thread count."""
+    import onnxruntime
+
+    return f"{cpu_name()} | onnxruntime {onnxruntime.__version__} | {threads} threads"
+
+
+def example_inputs(name: str) -> dict[str, np.ndarray]:
+    """Inputs of the pipeline's shapes for network ``name`` ("fpn" or "afanet")."""
+    rng = np.random.default_rng(0)
+    if name == "fpn":
+        return {"image": rng.random((1, 4, WINDOW, WINDOW), dtype=np.float32)}
+    return {"tensor": rng.random((6, WINDOW, WINDOW), dtype=np.float32),
+            "vertices": (rng.random((TUNING_VERTICES, 2)) * WINDOW).astype(np.float32)}
+
+
+def fastest_level(seconds: dict[str, float]) -> str:
+    """The level with the least time; on a tie the one listed first in ``LEVELS`` (the default)."""
+    return min(LEVELS, key=lambda level: (seconds.get(level, math.inf), LEVELS.index(level)))
+
+
+def time_levels(model: bytes, name: str, threads: int, runs: int = TIMED_RUNS,
+                clock: Callable[[], float] = time.perf_counter) -> dict[str, float]:
+    """Fastest of ``runs`` timed runs of ``model`` at each level, the levels alternated so that
+    a change in the machine's load falls on both."""
+    sessions = {level: open_session(model, threads, level, name) for level in LEVELS}
+    inputs = example_inputs(name)
+    for session in sessions.values():
+        session.run(None, inputs)  # first run: memory planning, not steady state
+    best = {level: math.inf for level in LEVELS}
+    for _ in range(runs):
+        for level, session in sessions.items():
+            start = clock()
+            session.run(None, inputs)
+            best[level] = min(best[level], clock() - start)
+    return best
+
+
+def _recorded(path: Path, key: str) -> dict[str, str] | None:
+    """The levels recorded for ``key`` in ``path``; None if absent, unreadable or not valid."""
+    try:
+        entry = json.loads(path.read_text()).get(key, {})
+        levels = entry.get("levels", {})
+    except (OSError, ValueError, AttributeError):
+        return None
+    if isinstance(levels, dict) and set(levels) == {"fpn", "afanet"} and all(v in LEVELS for v in levels.values()):
+        return dict(levels)
+    return None
+
+
+def tuned_levels(path: Path, networks) -> dict[str, str]:
+    """Each network's level for this machine: read from ``path``, else timed and added to it."""
+    from csboundary.data.atomic import atomic_path
+
+    key = machine_key(networks.thread_count)
+    levels = _recorded(path, key)
+    if levels is not None:
+        return levels
+    seconds = {name: time_levels(model, name, networks.thread_count)
+               for name, model in (("fpn", networks.fpn_model), ("afanet", networks.afanet_model))}
+    levels = {name: fastest_level(times) for name, times in seconds.items()}
+    try:
+        record = json.loads(path.read_text())
+        record = record if isinstance(record, dict) else {}
+    except (OSError, ValueError):
+        record = {}  # none yet, or damaged: timed again and replaced
+    record[key] = {"levels": levels, "seconds": {name: {k: round(v, 4) for k, v in times.items()} for name, times in seconds.items()},
+                   "measured": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(record, indent=1) + "\n")
+    return levels
