@@ -6,7 +6,7 @@ CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synth
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
 beforehand, batch 1: the network's time and nothing else), then ``run_prediction`` end to end on
 the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, every output
-file). Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
+file). ``--bfloat16`` adds a third row: the onnx engine with ``--precision bfloat16``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
 table, the core seconds per patch of both (every thread of the process: what the rest of the
 pipeline costs beside the FPN, and the lowest ratio a perfect overlap could reach on this
 machine's cores), and whether the two engines' graph.json are identical (and the largest difference in
@@ -52,6 +52,8 @@ def main() -> None:
     parser.add_argument("city", nargs="?", type=Path, default=Path("data/cities/test-s7-2x2-2000"))
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--weights", default=None, help="weights bundle (default: the shipped one)")
+    parser.add_argument("--bfloat16", action="store_true",
+                        help="also the onnx engine with --precision bfloat16 (the FPN in PyTorch under bfloat16 autocast)")
     args = parser.parse_args()
     if not (args.city / "city.json").exists():
         subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "7", "--split", "test", "--tiles", "2x2",
@@ -60,9 +62,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp, Mosaic.open(args.city / "tiles") as mosaic:
         grid = PatchGrid.for_mosaic(mosaic)
         images = [mosaic.read(p.expanded).data for p in grid]
-        for engine in ("torch", "onnx"):
+        for engine in ("torch", "onnx") + (("onnx+bfloat16",) if args.bfloat16 else ()):
             predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-            predictor.use_engine(engine, args.weights)
+            predictor.use_engine(engine.split("+")[0], args.weights)
+            predictor.use_precision("bfloat16" if engine.endswith("bfloat16") else "float32")
             fpn, fpn_cores = fpn_only(predictor, images, args.repeat)
             out = Path(tmp) / engine
             cores = time.process_time()
@@ -74,12 +77,15 @@ def main() -> None:
             # overlap on this machine's cores could not beat (both networks' work at full use).
             rest = run_cores - fpn_cores
             bound = max(1.0, run_cores / (cores_available() * fpn))
-            print(f"{engine:5s}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
+            print(f"{engine}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
                   f"{summary['km2_per_hour']} km2/h\n       {stage_table(summary)}\n"
                   f"       core s/patch: FPN alone {fpn_cores:.3f}, end to end {run_cores:.3f}, the rest {rest:.3f}; "
                   f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}", flush=True)
     (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
     print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
+    if "onnx+bfloat16" in rows:
+        bf, _, bs, _ = rows["onnx+bfloat16"]
+        print(f"onnx+bfloat16 / torch end-to-end throughput: {bs['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / bf:.2f}x faster")
     if tg == og:
         print("graph.json identical for both engines")
     else:

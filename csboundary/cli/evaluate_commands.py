@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
+from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, PrecisionOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, readable_inputs)
 
 
@@ -79,6 +79,7 @@ def evaluate_model(
     min_fragment_length: FragmentOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     engine: EngineOption = "auto",
+    precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
 ) -> None:
@@ -92,7 +93,7 @@ def evaluate_model(
     from csboundary.pipeline.patch import load_predictor
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine, precision=precision)
     scores = evaluate_city(city, predictor, seed, batch_size=batch_size, progress=not quiet)
     for item in scores.values():
         item["inputs"]["pred"] = f"{weights or 'shipped weights'} on {city}"
@@ -117,6 +118,7 @@ def evaluate_set_cmd(
     surface_check: SurfaceOption = None,
     min_fragment_length: FragmentOption = None,
     engine: EngineOption = "auto",
+    precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
 ) -> None:
@@ -129,7 +131,7 @@ def evaluate_set_cmd(
     if json_out is not None:
         out_file(json_out, (".json",))
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine, precision=precision)
     result = evaluate_set(set_dir, predictor, seed=seed, progress=not quiet)
     result["weights"] = str(weights or "shipped")
     typer.echo(format_set(result))

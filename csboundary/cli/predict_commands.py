@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, SurfaceOption,
+from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, JoinOption, PrecisionOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, readable_inputs)
 
 
@@ -35,6 +35,7 @@ def predict(
     workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
     threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
     engine: EngineOption = "auto",
+    precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
 ) -> None:
@@ -52,7 +53,7 @@ def predict(
     from csboundary.pipeline.run import stage_table
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, engine=engine, precision=precision)
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
@@ -80,6 +81,7 @@ def predict_patch(
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
     engine: EngineOption = "auto",
+    precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
 ) -> None:
     """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
@@ -89,7 +91,7 @@ def predict_patch(
     from csboundary.pipeline.predict import predict_patch_to_folder
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine, precision=precision)
     graph = predict_patch_to_folder(image, out, predictor, gsd)
     kinds = graph.edge_kinds or []
     typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({kinds.count('corner')} corner, "
@@ -154,6 +156,7 @@ def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),
     seed: int = typer.Option(0, min=0, help="City seed (test split)."),
     engine: EngineOption = "auto",
+    precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
 ) -> None:
     """The main job on an embedded default: a small test-split city, predicted and scored.
@@ -168,7 +171,7 @@ def demo(
     from csboundary.pipeline.run import stage_table
 
     out_dir(out)
-    done = run_demo(out, load_predictor(None, device, engine=engine), seed)
+    done = run_demo(out, load_predictor(None, device, engine=engine, precision=precision), seed)
     meta, (width, height) = done["meta"], done["size"]
     typer.echo(format_rows(done["scores"]))
     typer.echo(

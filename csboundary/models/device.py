@@ -19,3 +19,16 @@ def resolve_device(name: str = "auto") -> torch.device:
     if name.startswith("cuda:") and int(name[5:]) >= torch.cuda.device_count():
         raise InputError("--device", f"{name} asked for, but PyTorch sees {torch.cuda.device_count()} CUDA device(s)")
     return torch.device(name)
+
+
+def bfloat16_hardware(device: torch.device, cpuinfo: str = "/proc/cpuinfo") -> bool:
+    """Whether ``device`` computes bfloat16 natively: a GPU PyTorch says supports it, or a CPU
+    with AMX tiles or AVX512-BF16 (elsewhere bfloat16 is emulated and slower than float32)."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    try:
+        with open(cpuinfo) as f:
+            flags = next((line.split(":", 1)[1].split() for line in f if line.startswith("flags")), [])
+    except OSError:  # not Linux: assume not, the user is warned and may go on
+        return False
+    return "amx_bf16" in flags or "avx512_bf16" in flags

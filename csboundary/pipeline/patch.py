@@ -12,6 +12,7 @@ and the surface check on, edges with no roadway beside them are then dropped
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import torch
 
 from csboundary.data.grid import Patch
 from csboundary.data.units import MODEL_GSD
-from csboundary.errors import InputError
+from csboundary.errors import InputError, InputWarning
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
@@ -37,7 +38,8 @@ from csboundary.models.checkpoint import (
 )
 from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN, SURFACE
-from csboundary.models.maps import bands_and_maps, predict_probabilities, unit_bands
+from csboundary.models.device import bfloat16_hardware
+from csboundary.models.maps import PRECISIONS, bands_and_maps, predict_probabilities, unit_bands
 from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
 
 
@@ -58,6 +60,7 @@ class PatchPredictor:
     min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
     attach_px: float = 0.0  # city graph: dangling ends joined to the line ahead within this (graph/end_attachment.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
+    precision: str = "float32"  # the FPN's arithmetic, see use_precision
 
     @property
     def engine(self) -> str:
@@ -88,6 +91,18 @@ class PatchPredictor:
             digest = hashlib.sha256((digest + file_sha256(fpn_weights)).encode()).hexdigest()
         self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet)
         return "onnx"
+
+    def use_precision(self, precision: str) -> None:
+        """``float32`` or ``bfloat16`` (the FPN in PyTorch under bfloat16 autocast, whatever the
+        engine: ONNX Runtime has no bfloat16 convolutions on a CPU; AfANet stays float32 on the
+        engine chosen). Warns where the hardware has no bfloat16 units, as it is slower there."""
+        if precision not in PRECISIONS:
+            raise InputError("--precision", f"unknown precision {precision!r} (float32 or bfloat16)")
+        if precision == "bfloat16" and not bfloat16_hardware(self.device):
+            if self.device.type == "cuda":
+                raise InputError("--precision", f"{torch.cuda.get_device_name(self.device)} has no bfloat16 support; use float32")
+            warnings.warn("this CPU has no bfloat16 units (AMX or AVX512-BF16): --precision bfloat16 will be slower than float32", InputWarning)
+        self.precision = precision
 
     @classmethod
     def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
@@ -126,10 +141,10 @@ class PatchPredictor:
         """FPN maps of several patches in one batch (the city pipeline's ``PatchModel`` step):
         keypoint and boundary, plus the road surface when the surface check is on."""
         batch = np.stack(images)
-        if self.onnx is not None and batch.shape[-2:] == (WINDOW, WINDOW):
+        if self.onnx is not None and self.precision == "float32" and batch.shape[-2:] == (WINDOW, WINDOW):
             probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch)))).numpy()
         else:
-            probs = predict_probabilities(self.fpn, batch, self.device)
+            probs = predict_probabilities(self.fpn, batch, self.device, self.precision)
         if not self.surface.active:  # the surface channel is carried (stitched, stored, written) only when the check reads it
             probs = probs[:, :SURFACE]
         return list(probs)
@@ -221,7 +236,8 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
                    fill_min_length: float | None = None, surface_check: float | None = None, join_ends: float | None = None,
                    attach_ends: float | None = None, attach_backed: float | None = None,
                    max_degree: int | None = None,
-                   min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto") -> PatchPredictor:
+                   min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto",
+                   precision: str = "float32") -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
     inference settings (None keeps the bundle's; ``max_degree`` 0 means no cap), on the chosen
     engine (``auto``: ONNX Runtime on a CPU when installed) and device (``auto``: CUDA if present)."""
@@ -254,5 +270,6 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.max_degree = max_degree or None
     if min_fragment_length is not None:
         predictor.min_fragment_px = min_fragment_length
+    predictor.use_precision(precision)
     predictor.use_engine(engine, weights, fpn_weights)
     return predictor

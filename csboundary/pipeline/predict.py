@@ -58,6 +58,8 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
             settings["join_attach_px"] = predictor.join.attach_px
     if predictor.attach_px > 0:  # likewise
         settings["attach_max_px"] = predictor.attach_px
+    if predictor.precision != "float32":  # likewise
+        settings["precision"] = predictor.precision
     if predictor.surface.active:  # only then: a run interrupted before the check existed still resumes
         settings["surface_check"] = [predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px]
     with view.mosaic, contextlib.ExitStack() as stack:

@@ -67,6 +67,21 @@ def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictor
     assert set(onnx_engine.onnx._sessions) == {"fpn", "afanet"}  # both ran on ONNX Runtime
 
 
+def test_bfloat16_runs_the_fpn_in_pytorch_whatever_the_engine(patch_image, predictors):
+    from csboundary.models.maps import predict_probabilities
+
+    _, onnx_engine, _ = predictors
+    full = onnx_engine.patch_maps([None], [patch_image])[0]
+    onnx_engine.precision = "bfloat16"
+    try:
+        half = onnx_engine.patch_maps([None], [patch_image])[0]
+    finally:
+        onnx_engine.precision = "float32"
+    expected = predict_probabilities(onnx_engine.fpn, patch_image[None], torch.device("cpu"), "bfloat16")[0][: len(half)]
+    assert np.array_equal(half, expected)  # PyTorch's bfloat16 maps, not ONNX Runtime's float32 ones
+    assert 0 < np.abs(half - full).max() < 0.5
+
+
 def test_the_export_is_reused_and_a_changed_weights_file_gets_its_own(predictors, tmp_path):
     import shutil
 
