@@ -125,27 +125,51 @@ class AfANet(nn.Module):
         self.logit_scale = nn.Parameter(torch.tensor(8.0))  # score in [-1, 1] -> BCE logit
         self.logit_bias = nn.Parameter(torch.tensor(-4.0))
 
-    def embed(self, tensor: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
-        """(6, H, W) tensor and (M, 2) pixel (col, row) vertices -> (M, embedding) vertex embeddings."""
+    def views(self, tensor: torch.Tensor, vertices: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """What the rest of the network sees of a (6, H, W) tensor and its (M, 2) pixel (col, row)
+        vertices: the tensor resized to ``global_size`` (1, 6, g, g), the (M, 6, roi, roi) windows
+        around the vertices, and the vertices normalised by the tensor's size (M, 2). A branch that
+        is off gets an empty view. Kept apart so that the ONNX engine can take the views from
+        PyTorch, whose ``grid_sample`` is 2.5x faster than ONNX Runtime's GridSample."""
         c = self.config
         height, width = tensor.shape[-2:]
         m = vertices.shape[0]
-        parts = []
         if self.global_encoder is not None:
             small = F.interpolate(tensor[None], size=(c.global_size, c.global_size), mode="bilinear", align_corners=False)
+        else:
+            small = tensor.new_zeros((1, tensor.shape[0], 0, 0))
+        if self.local_encoder is not None and m:
+            rois = crop_rois(tensor, vertices, c.roi)
+        else:
+            rois = tensor.new_zeros((m, tensor.shape[0], c.roi, c.roi))
+        scale = torch.tensor([width, height], dtype=tensor.dtype, device=tensor.device)
+        return small, rois, vertices.to(tensor.dtype) / scale
+
+    def embed_views(self, small: torch.Tensor, rois: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+        """The :meth:`views` -> (M, embedding) vertex embeddings: global feature, local feature, xy."""
+        m = xy.shape[0]
+        parts = []
+        if self.global_encoder is not None:
             parts.append(self.global_encoder(small).expand(m, -1))
         if self.local_encoder is not None:
-            parts.append(self.local_encoder(crop_rois(tensor, vertices, c.roi)) if m else tensor.new_zeros((0, c.feature)))
-        scale = torch.tensor([width, height], dtype=tensor.dtype, device=tensor.device)
-        parts.append(vertices.to(tensor.dtype) / scale)
+            parts.append(self.local_encoder(rois) if m else xy.new_zeros((0, self.config.feature)))
+        parts.append(xy)
         return torch.cat(parts, dim=1)
+
+    def embed(self, tensor: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
+        """(6, H, W) tensor and (M, 2) pixel (col, row) vertices -> (M, embedding) vertex embeddings."""
+        return self.embed_views(*self.views(tensor, vertices))
 
     def forward(self, tensor: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
         """Adjacency logits (M, M) for the vertices of one patch."""
         m = vertices.shape[0]
         if m == 0:
             return tensor.new_zeros((0, 0))
-        x = self.decoder_input(self.embed(tensor, vertices))[None]
+        return self.logits_from_views(*self.views(tensor, vertices))
+
+    def logits_from_views(self, small: torch.Tensor, rois: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+        """Adjacency logits (M, M) from the :meth:`views` of M >= 1 vertices."""
+        x = self.decoder_input(self.embed_views(small, rois, xy))[None]
         for block in self.blocks:
             x = block(x)
         return self.logit_scale * self.afa(x)[0] + self.logit_bias

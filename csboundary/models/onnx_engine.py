@@ -7,7 +7,8 @@ cached, keyed by the SHA-256 of the weights file (a changed file gets a new expo
 weights when that folder is writable, else under ``$XDG_CACHE_HOME/csboundary/onnx``.
 
 The FPN is exported for the city grid's 1100 x 1100 windows (any batch); other sizes (a smaller
-``predict-patch`` image) run in PyTorch. AfANet is exported for any number of vertices (at least
+``predict-patch`` image) run in PyTorch. AfANet is exported from its views on (the resized
+tensor, the windows around the vertices, cut by PyTorch) for any number of vertices (at least
 two; fewer need no network). Both return logits; the probabilities are taken as in PyTorch.
 A session is not picklable: an :class:`OnnxNetworks` sent to a Dask worker carries the model
 bytes and opens its sessions there on first use.
@@ -27,7 +28,7 @@ from csboundary.errors import InputError
 
 WINDOW = 1100  # the city grid's expanded patch side: the FPN input the export is made for
 OPSET = 17
-EXPORT_VERSION = 2  # bump when the export changes, so cached files are made again
+EXPORT_VERSION = 3  # bump when the export changes, so cached files are made again (3: AfANet from its views)
 
 
 def onnxruntime_available() -> bool:
@@ -49,14 +50,15 @@ def cache_dir(weights: Path) -> Path:
 
 
 class _AfANetLogits(torch.nn.Module):
-    """AfANet's forward for M >= 2 vertices, as a module with tensor inputs only."""
+    """AfANet from its views (``AfANet.views``: resized tensor, vertex windows, normalised
+    vertices) to logits, for M >= 2 vertices: the views stay in PyTorch."""
 
     def __init__(self, afanet):
         super().__init__()
         self.afanet = afanet
 
-    def forward(self, tensor: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
-        return self.afanet(tensor, vertices)
+    def forward(self, small: torch.Tensor, rois: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+        return self.afanet.logits_from_views(small, rois, xy)
 
 
 def _export(module: torch.nn.Module, args: tuple, names: tuple[list[str], list[str]], dynamic: dict) -> bytes:
@@ -76,10 +78,14 @@ def export_fpn(fpn) -> bytes:
     return _export(fpn, (example,), (["image"], ["logits"]), {"image": {0: "batch"}, "logits": {0: "batch"}})
 
 
+AFANET_INPUTS = ("small", "rois", "xy")
+
+
 def export_afanet(afanet) -> bytes:
-    example = (torch.rand(6, WINDOW, WINDOW), torch.rand(8, 2) * WINDOW)
-    return _export(_AfANetLogits(afanet), example, (["tensor", "vertices"], ["logits"]),
-                   {"vertices": {0: "m"}, "logits": {0: "m", 1: "m"}})
+    with torch.no_grad():
+        example = afanet.cpu().eval().views(torch.rand(6, WINDOW, WINDOW), torch.rand(8, 2) * WINDOW)
+    return _export(_AfANetLogits(afanet), example, (list(AFANET_INPUTS), ["logits"]),
+                   {"rois": {0: "m"}, "xy": {0: "m"}, "logits": {0: "m", 1: "m"}})
 
 
 # ONNX Runtime's graph optimisation levels a session may use. "all" adds the NCHWc layout
@@ -162,7 +168,9 @@ class OnnxNetworks:
         """(B, 4, 1100, 1100) float32 in [0, 1] -> (B, 2, 1100, 1100) logits."""
         return self._session("fpn").run(None, {"image": np.ascontiguousarray(images, np.float32)})[0]
 
-    def afanet_logits(self, tensor: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-        """(6, 1100, 1100) tensor and (M >= 2, 2) vertices -> (M, M) logits."""
-        return self._session("afanet").run(None, {"tensor": np.ascontiguousarray(tensor, np.float32),
-                                                  "vertices": np.ascontiguousarray(vertices, np.float32)})[0]
+    def afanet_logits(self, small: np.ndarray, rois: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """AfANet's views (``AfANet.views``) of M >= 2 vertices -> (M, M) logits."""
+        session = self._session("afanet")
+        views = dict(zip(AFANET_INPUTS, (small, rois, xy)))
+        # a branch that is off (the ablations) leaves its view out of the exported graph
+        return session.run(None, {i.name: np.ascontiguousarray(views[i.name], np.float32) for i in session.get_inputs()})[0]

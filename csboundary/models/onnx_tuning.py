@@ -23,7 +23,7 @@ from typing import Callable
 
 import numpy as np
 
-from csboundary.models.onnx_engine import LEVELS, WINDOW, open_session
+from csboundary.models.onnx_engine import LEVELS, open_session
 
 TIMED_RUNS = 3  # per level, alternated, after one warm-up run each; the fastest run counts
 TUNING_VERTICES = 100  # AfANet's vertex count while timing: a busy window of the test cities
@@ -48,13 +48,13 @@ def machine_key(threads: int) -> str:
     return f"{cpu_name()} | onnxruntime {onnxruntime.__version__} | {threads} threads"
 
 
-def example_inputs(name: str) -> dict[str, np.ndarray]:
-    """Inputs of the pipeline's shapes for network ``name`` ("fpn" or "afanet")."""
+def example_inputs(session) -> dict[str, np.ndarray]:
+    """Random inputs of the shapes ``session`` declares: a batch of one window for the FPN,
+    ``TUNING_VERTICES`` vertices for AfANet's views."""
     rng = np.random.default_rng(0)
-    if name == "fpn":
-        return {"image": rng.random((1, 4, WINDOW, WINDOW), dtype=np.float32)}
-    return {"tensor": rng.random((6, WINDOW, WINDOW), dtype=np.float32),
-            "vertices": (rng.random((TUNING_VERTICES, 2)) * WINDOW).astype(np.float32)}
+    sizes = {"batch": 1, "m": TUNING_VERTICES}
+    return {i.name: rng.random([d if isinstance(d, int) else sizes[d] for d in i.shape], dtype=np.float32)
+            for i in session.get_inputs()}
 
 
 def fastest_level(seconds: dict[str, float]) -> str:
@@ -67,7 +67,7 @@ def time_levels(model: bytes, name: str, threads: int, runs: int = TIMED_RUNS,
     """Fastest of ``runs`` timed runs of ``model`` at each level, the levels alternated so that
     a change in the machine's load falls on both."""
     sessions = {level: open_session(model, threads, level, name) for level in LEVELS}
-    inputs = example_inputs(name)
+    inputs = example_inputs(sessions[LEVELS[0]])
     for session in sessions.values():
         session.run(None, inputs)  # first run: memory planning, not steady state
     best = {level: math.inf for level in LEVELS}

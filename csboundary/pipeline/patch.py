@@ -168,8 +168,9 @@ class PatchPredictor:
             return self.finished(patch, maps, graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree))
         tensor = torch.from_numpy(bands_and_maps(image, maps)).to(self.device)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
-        if self.onnx is not None and tensor.shape[-2:] == (WINDOW, WINDOW):
-            probs = adjacency_from_logits(torch.from_numpy(self.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()
+        if self.onnx is not None:  # the views (resized tensor, vertex windows) come from PyTorch either way
+            views = [view.numpy() for view in self.afanet.views(tensor, vertices)]
+            probs = adjacency_from_logits(torch.from_numpy(self.onnx.afanet_logits(*views))).numpy()
         else:
             probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
         for i, j in unsupported_pairs(found.vertices, probs, maps[1], self.edge_threshold, self.support):

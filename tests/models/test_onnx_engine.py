@@ -61,7 +61,8 @@ def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictor
     tensor = torch.cat([torch.from_numpy(patch_image / 255.0).float(), torch.from_numpy(maps_torch[:2])], 0)
     vertices = torch.from_numpy(found.vertices.astype(np.float32))
     p_torch = torch_engine.afanet.adjacency(tensor, vertices).numpy()
-    p_onnx = adjacency_from_logits(torch.from_numpy(onnx_engine.onnx.afanet_logits(tensor.numpy(), vertices.numpy()))).numpy()
+    views = [view.numpy() for view in torch_engine.afanet.views(tensor, vertices)]
+    p_onnx = adjacency_from_logits(torch.from_numpy(onnx_engine.onnx.afanet_logits(*views))).numpy()
     assert np.abs(p_onnx - p_torch).max() < 1e-5
     assert torch_engine.afanet.training is False  # exporting left the PyTorch networks as they were
     assert set(onnx_engine.onnx._sessions) == {"fpn", "afanet"}  # both ran on ONNX Runtime

@@ -66,6 +66,9 @@ def test_time_levels_alternates_the_levels_and_keeps_each_ones_fastest_run(monke
         def __init__(self, level):
             self.level = level
 
+        def get_inputs(self):
+            return []
+
         def run(self, outputs, inputs):
             runs.append(self.level)
 
@@ -74,3 +77,13 @@ def test_time_levels_alternates_the_levels_and_keeps_each_ones_fastest_run(monke
     best = onnx_tuning.time_levels(b"m", "afanet", 2, runs=2, clock=lambda: next(ticks))
     assert best == {"all": 2.0, "extended": 1.0}
     assert runs == ["all", "extended"] + ["all", "extended"] * 2  # one warm-up each, then in turn
+
+
+def test_example_inputs_follow_the_session_with_one_window_and_the_tuning_vertex_count():
+    from types import SimpleNamespace
+
+    session = SimpleNamespace(get_inputs=lambda: [SimpleNamespace(name="image", shape=["batch", 4, 1100, 1100]),
+                                                  SimpleNamespace(name="rois", shape=["m", 6, 64, 64])])
+    inputs = onnx_tuning.example_inputs(session)
+    assert inputs["image"].shape == (1, 4, 1100, 1100) and inputs["rois"].shape == (onnx_tuning.TUNING_VERTICES, 6, 64, 64)
+    assert all(v.dtype == "float32" and 0 <= v.min() and v.max() < 1 for v in inputs.values())
