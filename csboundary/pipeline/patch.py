@@ -30,6 +30,7 @@ from csboundary.graph.skeleton_fill import FillConfig, fill_from_skeleton
 from csboundary.graph.surface_check import SurfaceCheckConfig, surface_checked
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
+from csboundary.models.batchnorm_folding import fold_batch_norms
 from csboundary.models.checkpoint import (
     load_checkpoint,
     load_fpn,
@@ -61,6 +62,7 @@ class PatchPredictor:
     attach_px: float = 0.0  # city graph: dangling ends joined to the line ahead within this (graph/end_attachment.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
     precision: str = "float32"  # the FPN's arithmetic, see use_precision
+    folded_fpn: torch.nn.Module | None = field(default=None, repr=False)  # the FPN with batch norms folded, for bfloat16
 
     @property
     def engine(self) -> str:
@@ -103,6 +105,7 @@ class PatchPredictor:
                 raise InputError("--precision", f"{torch.cuda.get_device_name(self.device)} has no bfloat16 support; use float32")
             warnings.warn("this CPU has no bfloat16 units (AMX or AVX512-BF16): --precision bfloat16 will be slower than float32", InputWarning)
         self.precision = precision
+        self.folded_fpn = fold_batch_norms(self.fpn) if precision == "bfloat16" else None
 
     @classmethod
     def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
@@ -144,7 +147,7 @@ class PatchPredictor:
         if self.onnx is not None and self.precision == "float32" and batch.shape[-2:] == (WINDOW, WINDOW):
             probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch)))).numpy()
         else:
-            probs = predict_probabilities(self.fpn, batch, self.device, self.precision)
+            probs = predict_probabilities(self.fpn if self.folded_fpn is None else self.folded_fpn, batch, self.device, self.precision)
         if not self.surface.active:  # the surface channel is carried (stitched, stored, written) only when the check reads it
             probs = probs[:, :SURFACE]
         return list(probs)
