@@ -21,14 +21,25 @@ def resolve_device(name: str = "auto") -> torch.device:
     return torch.device(name)
 
 
-def bfloat16_hardware(device: torch.device, cpuinfo: str = "/proc/cpuinfo") -> bool:
-    """Whether ``device`` computes bfloat16 natively: a GPU PyTorch says supports it, or a CPU
-    with AMX tiles or AVX512-BF16 (elsewhere bfloat16 is emulated and slower than float32)."""
-    if device.type == "cuda":
-        return torch.cuda.is_bf16_supported()
+def cpuinfo_value(field: str, cpuinfo: str = "/proc/cpuinfo") -> str | None:
+    """The first ``field`` line's value in ``/proc/cpuinfo`` (e.g. ``model name``, ``flags``);
+    None where the file or the field is missing (not Linux)."""
     try:
         with open(cpuinfo) as f:
-            flags = next((line.split(":", 1)[1].split() for line in f if line.startswith("flags")), [])
-    except OSError:  # not Linux: assume not, the user is warned and may go on
-        return False
+            for line in f:
+                key, _, value = line.partition(":")
+                if key.strip() == field:
+                    return value.strip()
+    except OSError:
+        pass
+    return None
+
+
+def bfloat16_hardware(device: torch.device, cpuinfo: str = "/proc/cpuinfo") -> bool:
+    """Whether ``device`` computes bfloat16 natively: a GPU PyTorch says supports it, or a CPU
+    with AMX tiles or AVX512-BF16 (elsewhere bfloat16 is emulated and slower than float32).
+    Without ``/proc/cpuinfo`` (not Linux) the answer is no: the user is warned and may go on."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    flags = (cpuinfo_value("flags", cpuinfo) or "").split()
     return "amx_bf16" in flags or "avx512_bf16" in flags

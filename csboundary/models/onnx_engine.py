@@ -90,8 +90,8 @@ def export_afanet(afanet) -> bytes:
 
 # ONNX Runtime's graph optimisation levels a session may use. "all" adds the NCHWc layout
 # transform on top of "extended"; which is faster depends on the CPU and the network (measured on
-# a Sapphire Rapids core: the shipped FPN 0.29 s with "extended" and 0.41 s with "all", AfANet
-# 39 ms and 28 ms), so onnx_tuning times both once per machine.
+# an AVX-512 Xeon: the shipped FPN 0.29 s with "extended" and 0.41 s with "all", AfANet 39 ms and
+# 28 ms), so onnx_tuning times both once per machine.
 LEVELS = ("all", "extended")
 DEFAULT_LEVEL = "all"  # ONNX Runtime's own default
 
@@ -129,10 +129,9 @@ class OnnxNetworks:
         return self.threads or torch.get_num_threads()
 
     @classmethod
-    def for_weights(cls, weights: Path, digest: str, fpn, afanet, tune: bool = True) -> "OnnxNetworks":
+    def for_weights(cls, weights: Path, digest: str, fpn, afanet) -> "OnnxNetworks":
         """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing, with
-        each network's graph optimisation level timed on this machine (once, cached beside them)
-        unless ``tune`` is false (ONNX Runtime's default level then)."""
+        each network's graph optimisation level timed on this machine (once, cached beside them)."""
         from csboundary.data.atomic import atomic_path
         from csboundary.models.onnx_tuning import tuned_levels
 
@@ -147,8 +146,7 @@ class OnnxNetworks:
             models.append(path.read_bytes())
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
         networks = cls(*models)
-        if tune:
-            networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks)
+        networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks)
         return networks
 
     def __getstate__(self) -> dict:

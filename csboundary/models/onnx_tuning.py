@@ -1,8 +1,8 @@
 """Which ONNX Runtime graph optimisation level runs each network fastest on this machine.
 
 ONNX Runtime's top level ("all") rewrites convolutions into its blocked NCHWc layout. Whether that
-pays depends on the CPU's vector width and on the network's channel counts: on a Sapphire Rapids
-core it made the shipped FPN 1.4x slower (its EfficientNet's 1x1 expansions, 120 -> 720 channels
+pays depends on the CPU's vector width and on the network's channel counts: on an AVX-512 Xeon
+(this project's test machine) it made the shipped FPN 1.4x slower (its EfficientNet's 1x1 expansions, 120 -> 720 channels
 at 36 x 36, took 19 ms instead of 2) and AfANet 1.4x faster. So the first ``onnx`` run of a
 weights file on a machine times both levels for each network on inputs of the pipeline's shape
 (a few seconds, beside the export's own) and records the choice in a JSON file beside the
@@ -23,6 +23,7 @@ from typing import Callable
 
 import numpy as np
 
+from csboundary.models.device import cpuinfo_value
 from csboundary.models.onnx_engine import LEVELS, open_session
 
 TIMED_RUNS = 3  # per level, alternated, after one warm-up run each; the fastest run counts
@@ -31,14 +32,7 @@ TUNING_VERTICES = 100  # AfANet's vertex count while timing: a busy window of th
 
 def cpu_name() -> str:
     """The CPU's model name (``/proc/cpuinfo`` on Linux), else what ``platform`` knows."""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown CPU"
+    return cpuinfo_value("model name") or platform.processor() or platform.machine() or "unknown CPU"
 
 
 def machine_key(threads: int) -> str:

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from csboundary.errors import InputError, InputWarning
-from csboundary.models.device import bfloat16_hardware
+from csboundary.models.device import bfloat16_hardware, cpuinfo_value
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.maps import predict_probabilities
 from helpers import run_cli
@@ -44,6 +44,8 @@ def test_bfloat16_hardware_reads_the_cpu_flags(tmp_path, flags, expected):
     cpuinfo.write_text(f"processor\t: 0\nmodel name\t: Some CPU\nflags\t\t: {flags}\n\nprocessor\t: 1\nflags\t\t: {flags}\n")
     assert bfloat16_hardware(torch.device("cpu"), str(cpuinfo)) is expected
     assert bfloat16_hardware(torch.device("cpu"), str(tmp_path / "missing")) is False
+    assert cpuinfo_value("model name", str(cpuinfo)) == "Some CPU"  # the first processor's, spaces trimmed
+    assert cpuinfo_value("microcode", str(cpuinfo)) is None
 
 
 def test_the_predictor_refuses_unknown_precisions_and_warns_without_bfloat16_units(monkeypatch):
