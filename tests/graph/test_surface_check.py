@@ -123,3 +123,39 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     assert not off.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)  # nothing reads the surface
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_strong", "surface_weak", "surface_offset_px"))
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).surface.active
+
+
+def _side_surface_per_edge(g: BoundaryGraph, surface: np.ndarray, offset_px: float) -> np.ndarray:
+    """The definition, one edge at a time (the loop side_surface replaced)."""
+    from csboundary.graph.edge_support import points_along
+
+    h, w = surface.shape
+    scores = np.zeros(g.n_edges)
+    for k in range(g.n_edges):
+        line = np.asarray(g.edge_polyline(k), float)
+        steps = np.diff(line, axis=0)
+        lengths = np.linalg.norm(steps, axis=1)
+        keep = lengths > 1e-9
+        if not keep.any():
+            continue
+        starts, steps, lengths = line[:-1][keep], steps[keep], lengths[keep]
+        points, segment, _, _ = points_along(starts, starts + steps)
+        normals = np.stack([-steps[:, 1], steps[:, 0]], axis=1)[segment] / lengths[segment, None]
+        sides = [surface[np.clip(np.floor(q[:, 1]).astype(int), 0, h - 1), np.clip(np.floor(q[:, 0]).astype(int), 0, w - 1)]
+                 for q in (points + offset_px * normals, points - offset_px * normals)]
+        scores[k] = float(np.maximum(*sides).mean())
+    return scores
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 12), st.floats(0.0, 12.0))
+def test_all_edges_at_once_score_as_one_edge_at_a_time(seed, n_edges, offset):
+    rng = np.random.default_rng(seed)
+    surface = rng.random((60, 80)).astype(np.float32)
+    vertices = rng.uniform(-10, 90, (2 * n_edges, 2))
+    vertices[1::4] = vertices[0::4][: len(vertices[1::4])]  # some zero-length edges
+    polylines = [np.vstack([vertices[2 * k], rng.uniform(-10, 90, (int(rng.integers(0, 4)), 2)), vertices[2 * k + 1]])
+                 for k in range(n_edges)]
+    g = BoundaryGraph(vertices, np.arange(2 * n_edges).reshape(-1, 2), edge_polylines=polylines)
+    assert np.allclose(side_surface(g, surface, offset), _side_surface_per_edge(g, surface, offset), atol=1e-6)
+    assert side_surface(graph(np.zeros((0, 2)), np.zeros((0, 2))), surface, offset).shape == (0,)
