@@ -1,12 +1,12 @@
 """FPN alone against the whole pipeline, for the torch and onnx engines, in one run (issue 15).
 
-    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE]
+    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE] [--bfloat16] [--int8]
 
 CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synthesized if
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
 beforehand, batch 1: the network's time and nothing else), then ``run_prediction`` end to end on
 the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, every output
-file). ``--bfloat16`` adds a third row: the onnx engine with ``--precision bfloat16``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
+file). ``--bfloat16`` and ``--int8`` add a row each: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
 table, the core seconds per patch of both (every thread of the process: what the rest of the
 pipeline costs beside the FPN, and the lowest ratio a perfect overlap could reach on this
 machine's cores), and whether the two engines' graph.json are identical (and the largest difference in
@@ -54,6 +54,7 @@ def main() -> None:
     parser.add_argument("--weights", default=None, help="weights bundle (default: the shipped one)")
     parser.add_argument("--bfloat16", action="store_true",
                         help="also the onnx engine with --precision bfloat16 (the FPN in PyTorch under bfloat16 autocast)")
+    parser.add_argument("--int8", action="store_true", help="also the onnx engine with --precision int8 (the FPN quantized on ONNX Runtime)")
     args = parser.parse_args()
     if not (args.city / "city.json").exists():
         subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "7", "--split", "test", "--tiles", "2x2",
@@ -62,10 +63,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp, Mosaic.open(args.city / "tiles") as mosaic:
         grid = PatchGrid.for_mosaic(mosaic)
         images = [mosaic.read(p.expanded).data for p in grid]
-        for engine in ("torch", "onnx") + (("onnx+bfloat16",) if args.bfloat16 else ()):
+        extra = tuple(f"onnx+{precision}" for precision in ("bfloat16", "int8") if getattr(args, precision))
+        for engine in ("torch", "onnx") + extra:
             predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
+            predictor.use_precision(engine.split("+")[1] if "+" in engine else "float32")  # before the engine: int8 is made there
             predictor.use_engine(engine.split("+")[0], args.weights)
-            predictor.use_precision("bfloat16" if engine.endswith("bfloat16") else "float32")
             fpn, fpn_cores = fpn_only(predictor, images, args.repeat)
             out = Path(tmp) / engine
             cores = time.process_time()
@@ -83,9 +85,9 @@ def main() -> None:
                   f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}", flush=True)
     (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
     print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
-    if "onnx+bfloat16" in rows:
-        bf, _, bs, _ = rows["onnx+bfloat16"]
-        print(f"onnx+bfloat16 / torch end-to-end throughput: {bs['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / bf:.2f}x faster")
+    for engine in extra:
+        ef, _, es, _ = rows[engine]
+        print(f"{engine} / torch end-to-end throughput: {es['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / ef:.2f}x faster")
     if tg == og:
         print("graph.json identical for both engines")
     else:

@@ -48,7 +48,7 @@ def bands_and_maps(data: np.ndarray, maps: np.ndarray) -> np.ndarray:
     return out
 
 
-PRECISIONS = ("float32", "bfloat16")
+PRECISIONS = ("float32", "bfloat16", "int8")  # int8: ONNX Runtime only (models/onnx_quantization.py)
 
 
 @torch.no_grad()

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import io
 import os
+import sys
 import warnings
 from pathlib import Path
 
@@ -117,36 +118,54 @@ def open_session(model: bytes, threads: int, level: str, name: str):
 
 
 class OnnxNetworks:
-    """The FPN and AfANet of one weights file on ONNX Runtime (CPU)."""
+    """The FPN and AfANet of one weights file on ONNX Runtime (CPU), and the FPN quantized to
+    int8 when ``--precision int8`` asked for it (models/onnx_quantization.py)."""
 
-    def __init__(self, fpn_model: bytes, afanet_model: bytes, threads: int | None = None, levels: dict[str, str] | None = None):
-        self.fpn_model, self.afanet_model, self.threads = fpn_model, afanet_model, threads
+    def __init__(self, fpn_model: bytes, afanet_model: bytes, threads: int | None = None, levels: dict[str, str] | None = None,
+                 fpn_int8_model: bytes | None = None):
+        self.fpn_model, self.afanet_model, self.fpn_int8_model, self.threads = fpn_model, afanet_model, fpn_int8_model, threads
         self.levels = dict(levels or {})  # graph optimisation level per network (see onnx_tuning)
         self._sessions: dict[str, object] = {}
+
+    @property
+    def models(self) -> dict[str, bytes]:
+        """Each network's ONNX model by name: ``fpn``, ``afanet`` and, when made, ``fpn-int8``."""
+        models = {"fpn": self.fpn_model, "afanet": self.afanet_model}
+        if self.fpn_int8_model is not None:
+            models["fpn-int8"] = self.fpn_int8_model
+        return models
 
     @property
     def thread_count(self) -> int:
         return self.threads or torch.get_num_threads()
 
     @classmethod
-    def for_weights(cls, weights: Path, digest: str, fpn, afanet) -> "OnnxNetworks":
-        """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing, with
-        each network's graph optimisation level timed on this machine (once, cached beside them)."""
-        from csboundary.data.atomic import atomic_path
+    def for_weights(cls, weights: Path, digest: str, fpn, afanet, int8: bool = False) -> "OnnxNetworks":
+        """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing (and the
+        FPN quantized to int8 when ``int8``), with each network's graph optimisation level timed
+        on this machine (once, cached beside them)."""
+        from csboundary.models.onnx_quantization import quantize_fpn
         from csboundary.models.onnx_tuning import tuned_levels
 
         folder = cache_dir(weights)
-        models = []
-        for name, network, export in (("fpn", fpn, export_fpn), ("afanet", afanet, export_afanet)):
+
+        def cached(name: str, make) -> bytes:
             path = folder / f"{digest[:16]}-{name}-v{EXPORT_VERSION}.onnx"
             if not path.exists():
-                data = export(network)
+                from csboundary.data.atomic import atomic_path
+
+                print(f"csboundary: preparing the {name} network for ONNX Runtime (once per weights file)", file=sys.stderr, flush=True)
+                data = make()
                 with atomic_path(path) as tmp:
                     tmp.write_bytes(data)
-            models.append(path.read_bytes())
+            return path.read_bytes()
+
+        fpn_model = cached("fpn", lambda: export_fpn(fpn))
+        afanet_model = cached("afanet", lambda: export_afanet(afanet))
+        int8_model = cached("fpn-int8", lambda: quantize_fpn(fpn_model)) if int8 else None
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
-        networks = cls(*models)
-        networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks)
+        networks = cls(fpn_model, afanet_model, fpn_int8_model=int8_model)
+        networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks.models, networks.thread_count)
         return networks
 
     def __getstate__(self) -> dict:
@@ -157,14 +176,15 @@ class OnnxNetworks:
     def _session(self, name: str):
         session = self._sessions.get(name)
         if session is None:
-            model = self.fpn_model if name == "fpn" else self.afanet_model
+            model = self.models[name]
             session = open_session(model, self.thread_count, self.levels.get(name, DEFAULT_LEVEL), name)
             self._sessions[name] = session
         return session
 
-    def fpn_logits(self, images: np.ndarray) -> np.ndarray:
-        """(B, 4, 1100, 1100) float32 in [0, 1] -> (B, 2, 1100, 1100) logits."""
-        return self._session("fpn").run(None, {"image": np.ascontiguousarray(images, np.float32)})[0]
+    def fpn_logits(self, images: np.ndarray, int8: bool = False) -> np.ndarray:
+        """(B, 4, 1100, 1100) float32 in [0, 1] -> (B, C, 1100, 1100) logits; ``int8``: from the
+        quantized FPN (made by ``for_weights(int8=True)``)."""
+        return self._session("fpn-int8" if int8 else "fpn").run(None, {"image": np.ascontiguousarray(images, np.float32)})[0]
 
     def afanet_logits(self, small: np.ndarray, rois: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """AfANet's views (``AfANet.views``) of M >= 2 vertices -> (M, M) logits."""

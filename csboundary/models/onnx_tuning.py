@@ -73,36 +73,43 @@ def time_levels(model: bytes, name: str, threads: int, runs: int = TIMED_RUNS,
     return best
 
 
-def _recorded(path: Path, key: str) -> dict[str, str] | None:
-    """The levels recorded for ``key`` in ``path``; None if absent, unreadable or not valid."""
+def _recorded(path: Path, key: str) -> dict:
+    """The entry recorded for ``key`` in ``path`` with only its valid levels; {} if absent,
+    unreadable or not valid."""
     try:
         entry = json.loads(path.read_text()).get(key, {})
-        levels = entry.get("levels", {})
+        levels, seconds = entry.get("levels", {}), entry.get("seconds", {})
     except (OSError, ValueError, AttributeError):
-        return None
-    if isinstance(levels, dict) and set(levels) == {"fpn", "afanet"} and all(v in LEVELS for v in levels.values()):
-        return dict(levels)
-    return None
+        return {}
+    if not isinstance(levels, dict):
+        return {}
+    seconds = seconds if isinstance(seconds, dict) else {}
+    valid = {name: level for name, level in levels.items() if level in LEVELS}
+    return {"levels": valid, "seconds": {name: seconds.get(name) for name in valid}}
 
 
-def tuned_levels(path: Path, networks) -> dict[str, str]:
-    """Each network's level for this machine: read from ``path``, else timed and added to it."""
+def tuned_levels(path: Path, models: dict[str, bytes], threads: int) -> dict[str, str]:
+    """Each network's level for this machine (``models``: name -> ONNX model): read from
+    ``path``, else timed and added to it (only the networks not recorded yet are timed)."""
     from csboundary.data.atomic import atomic_path
 
-    key = machine_key(networks.thread_count)
-    levels = _recorded(path, key)
-    if levels is not None:
-        return levels
-    seconds = {name: time_levels(model, name, networks.thread_count)
-               for name, model in (("fpn", networks.fpn_model), ("afanet", networks.afanet_model))}
-    levels = {name: fastest_level(times) for name, times in seconds.items()}
+    key = machine_key(threads)
+    entry = _recorded(path, key)
+    levels = dict(entry.get("levels", {}))
+    missing = [name for name in models if name not in levels]
+    if not missing:
+        return {name: levels[name] for name in models}
+    seconds = dict(entry.get("seconds", {}))
+    for name in missing:
+        times = time_levels(models[name], name, threads)
+        levels[name] = fastest_level(times)
+        seconds[name] = {k: round(v, 4) for k, v in times.items()}
     try:
         record = json.loads(path.read_text())
         record = record if isinstance(record, dict) else {}
     except (OSError, ValueError):
         record = {}  # none yet, or damaged: timed again and replaced
-    record[key] = {"levels": levels, "seconds": {name: {k: round(v, 4) for k, v in times.items()} for name, times in seconds.items()},
-                   "measured": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    record[key] = {"levels": levels, "seconds": seconds, "measured": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(record, indent=1) + "\n")
-    return levels
+    return {name: levels[name] for name in models}

@@ -81,6 +81,9 @@ class PatchPredictor:
         if engine == "onnx" and not onnxruntime_available():
             raise InputError("--engine", "onnxruntime is not installed (pip install 'csboundary[onnx]')")
         if engine == "torch" or (engine == "auto" and not (on_cpu and onnxruntime_available())):
+            if self.precision == "int8":
+                raise InputError("--precision", "int8 runs the FPN on ONNX Runtime: use --engine onnx or auto "
+                                                "(on a CPU, with onnxruntime installed: pip install 'csboundary[onnx]')")
             self.onnx = None
             return "torch"
         from csboundary.models.checkpoint import file_sha256
@@ -91,15 +94,19 @@ class PatchPredictor:
             import hashlib
 
             digest = hashlib.sha256((digest + file_sha256(fpn_weights)).encode()).hexdigest()
-        self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet)
+        self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet, int8=self.precision == "int8")
         return "onnx"
 
     def use_precision(self, precision: str) -> None:
-        """``float32`` or ``bfloat16`` (the FPN in PyTorch under bfloat16 autocast, whatever the
+        """``float32``, ``bfloat16`` (the FPN in PyTorch under bfloat16 autocast, whatever the
         engine: ONNX Runtime has no bfloat16 convolutions on a CPU; AfANet stays float32 on the
-        engine chosen). Warns where the hardware has no bfloat16 units, as it is slower there."""
+        engine chosen) or ``int8`` (the FPN quantized on ONNX Runtime: made by ``use_engine``,
+        which must come after, and which refuses the torch engine). Warns where the hardware has
+        no bfloat16 units, as bfloat16 is slower there."""
         if precision not in PRECISIONS:
-            raise InputError("--precision", f"unknown precision {precision!r} (float32 or bfloat16)")
+            raise InputError("--precision", f"unknown precision {precision!r} (float32, bfloat16 or int8)")
+        if precision == "int8" and self.device.type != "cpu":
+            raise InputError("--precision", f"int8 runs the FPN on ONNX Runtime on the CPU, not {self.device}; use --device cpu")
         if precision == "bfloat16" and not bfloat16_hardware(self.device):
             if self.device.type == "cuda":
                 raise InputError("--precision", f"{torch.cuda.get_device_name(self.device)} has no bfloat16 support; use float32")
@@ -144,9 +151,13 @@ class PatchPredictor:
         """FPN maps of several patches in one batch (the city pipeline's ``PatchModel`` step):
         keypoint and boundary, plus the road surface when the surface check is on."""
         batch = np.stack(images)
-        if self.onnx is not None and self.precision == "float32" and batch.shape[-2:] == (WINDOW, WINDOW):
-            probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch)))).numpy()
+        if self.onnx is not None and self.precision != "bfloat16" and batch.shape[-2:] == (WINDOW, WINDOW):
+            int8 = self.precision == "int8" and self.onnx.fpn_int8_model is not None
+            probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch), int8=int8))).numpy()
         else:
+            if self.precision == "int8":
+                warnings.warn(f"the int8 FPN is made for {WINDOW} px windows: this {batch.shape[-1]} x {batch.shape[-2]} px image "
+                              "runs in float32", InputWarning)
             probs = predict_probabilities(self.fpn if self.folded_fpn is None else self.folded_fpn, batch, self.device, self.precision)
         if not self.surface.active:  # the surface channel is carried (stitched, stored, written) only when the check reads it
             probs = probs[:, :SURFACE]

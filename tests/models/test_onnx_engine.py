@@ -118,3 +118,63 @@ def test_the_onnx_engine_is_refused_off_the_cpu_and_unknown_engines(predictors):
         assert torch_engine.use_engine("auto", weights) == "torch"
     finally:
         torch_engine.device = torch.device("cpu")
+
+
+def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors, monkeypatch):
+    import onnx
+
+    from csboundary.models import onnx_quantization
+
+    monkeypatch.setattr(onnx_quantization, "CALIBRATION_STYLES", ("classic", "downtown"))  # two windows: a faster test
+    _, onnx_engine, weights = predictors
+    floats = onnx_engine.patch_maps([None], [patch_image])[0]
+    onnx_engine.use_precision("int8")
+    try:
+        assert onnx_engine.use_engine("onnx", weights) == "onnx"
+        quantized = onnx_engine.patch_maps([None], [patch_image])[0]
+        networks = onnx_engine.onnx
+    finally:
+        onnx_engine.use_precision("float32")
+        onnx_engine.use_engine("onnx", weights)
+    assert quantized.shape == floats.shape and quantized.dtype == np.float32
+    error = np.abs(quantized - floats)
+    assert 0 < error.max() < 0.6 and error.mean() < 0.01  # near, not the float network run again
+    assert set(networks._sessions) == {"fpn-int8"} and set(networks.levels) == {"fpn", "afanet", "fpn-int8"}
+    graph = onnx.load_from_string(networks.fpn_int8_model).graph
+    int8_weights = [t for t in graph.initializer if t.data_type == onnx.TensorProto.INT8 and len(t.dims) == 4]
+    assert len(int8_weights) == sum(n.op_type == "Conv" for n in onnx.load_from_string(networks.fpn_model).graph.node)
+    assert len(networks.fpn_int8_model) < 0.5 * len(networks.fpn_model)
+    assert (weights.parent / ".onnx-cache").glob("*-fpn-int8-*.onnx")
+    assert onnx_engine.onnx.fpn_int8_model is None  # float32 again: the float export only
+
+
+def test_int8_is_refused_where_onnx_runtime_does_not_run_it(predictors, patch_image):
+    import warnings
+
+    torch_engine, _, weights = predictors
+    torch_engine.use_precision("int8")
+    try:
+        with pytest.raises(InputError, match="int8 runs the FPN on ONNX Runtime: use --engine onnx"):
+            torch_engine.use_engine("torch", weights)
+        # an image smaller than the export's window runs in float32 PyTorch, and says so
+        torch_engine.onnx = OnnxNetworks(b"", b"")
+        with pytest.warns(UserWarning, match="int8 FPN is made for 1100 px windows: this 600 x 600 px image runs in float32"):
+            small = torch_engine.patch_maps([None], [patch_image[:, :600, :600]])[0]
+    finally:
+        torch_engine.onnx = None
+        torch_engine.use_precision("float32")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(small, torch_engine.patch_maps([None], [patch_image[:, :600, :600]])[0])
+    torch_engine.device = torch.device("cuda")
+    try:
+        with pytest.raises(InputError, match="int8 runs the FPN on ONNX Runtime on the CPU"):
+            torch_engine.use_precision("int8")
+    finally:
+        torch_engine.device = torch.device("cpu")
+
+
+def test_the_command_line_refuses_int8_on_the_torch_engine(tmp_path):
+    done = run_cli("demo", "--out", str(tmp_path / "demo"), "--engine", "torch", "--precision", "int8")
+    assert done.returncode == 2 and "error: --precision: int8 runs the FPN on ONNX Runtime" in done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "demo" / "prediction").exists()

@@ -27,7 +27,7 @@ def test_a_recorded_choice_is_used_without_timing(tmp_path, monkeypatch):
     path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "all", "afanet": "extended"}},
                                 machine_key(3): {"levels": {"fpn": "extended", "afanet": "extended"}}}))
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed although recorded"))
-    assert tuned_levels(path, networks) == {"fpn": "all", "afanet": "extended"}
+    assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "all", "afanet": "extended"}
 
 
 @pytest.mark.parametrize("content", ["{not json", '["a list"]', None, "{}"])
@@ -39,14 +39,14 @@ def test_a_missing_or_damaged_record_is_timed_and_written(tmp_path, monkeypatch,
     times = {b"fpn": {"all": 0.4, "extended": 0.3}, b"afanet": {"all": 0.02, "extended": 0.03}}
     calls = []
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: calls.append((name, threads)) or times[model])
-    assert tuned_levels(path, networks) == {"fpn": "extended", "afanet": "all"}
+    assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "extended", "afanet": "all"}
     assert sorted(calls) == [("afanet", 2), ("fpn", 2)]
     record = json.loads(path.read_text())
     assert record[machine_key(2)]["levels"] == {"fpn": "extended", "afanet": "all"}
     assert record[machine_key(2)]["seconds"]["fpn"] == {"all": 0.4, "extended": 0.3}
     # read back the second time, not timed again
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed again"))
-    assert tuned_levels(path, networks) == {"fpn": "extended", "afanet": "all"}
+    assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "extended", "afanet": "all"}
 
 
 def test_another_machine_keeps_its_own_entry(tmp_path, monkeypatch):
@@ -54,9 +54,28 @@ def test_another_machine_keeps_its_own_entry(tmp_path, monkeypatch):
     other = {"levels": {"fpn": "all", "afanet": "all"}, "seconds": {}}
     path.write_text(json.dumps({"another CPU | onnxruntime 0.1 | 64 threads": other}))
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: {"all": 2.0, "extended": 1.0})
-    assert tuned_levels(path, OnnxNetworks(b"f", b"a", threads=1)) == {"fpn": "extended", "afanet": "extended"}
+    assert tuned_levels(path, OnnxNetworks(b"f", b"a", threads=1).models, 1) == {"fpn": "extended", "afanet": "extended"}
     record = json.loads(path.read_text())
     assert record["another CPU | onnxruntime 0.1 | 64 threads"] == other and machine_key(1) in record
+
+
+def test_a_network_not_recorded_yet_is_timed_alone_and_added_to_the_entry(tmp_path, monkeypatch):
+    # the int8 FPN is asked for after the float networks were timed: only it is timed
+    networks = OnnxNetworks(b"fpn", b"afanet", threads=2, fpn_int8_model=b"int8")
+    path = tmp_path / "tuning.json"
+    path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "extended", "afanet": "all"},
+                                                 "seconds": {"fpn": {"all": 0.4, "extended": 0.3}}}}))
+    calls = []
+    monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: calls.append(name) or {"all": 0.1, "extended": 0.2})
+    assert tuned_levels(path, networks.models, 2) == {"fpn": "extended", "afanet": "all", "fpn-int8": "all"}
+    assert calls == ["fpn-int8"]
+    entry = json.loads(path.read_text())[machine_key(2)]
+    assert entry["levels"] == {"fpn": "extended", "afanet": "all", "fpn-int8": "all"}
+    assert entry["seconds"]["fpn"] == {"all": 0.4, "extended": 0.3} and entry["seconds"]["fpn-int8"] == {"all": 0.1, "extended": 0.2}
+    # a level that is not one of LEVELS counts as not recorded
+    path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "fastest", "afanet": "all", "fpn-int8": "all"}}}))
+    calls.clear()
+    assert tuned_levels(path, networks.models, 2)["fpn"] == "all" and calls == ["fpn"]
 
 
 def test_time_levels_alternates_the_levels_and_keeps_each_ones_fastest_run(monkeypatch):
