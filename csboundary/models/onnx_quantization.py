@@ -6,7 +6,7 @@ output channel) and each activation as uint8 with a scale and zero point fixed b
 calibration: the float network runs on a few windows and the range of every activation is
 recorded (min/max). Those windows are rendered by the project's own synthetic generator (training
 split, one per training style, fixed seed), never the user's imagery or the real validation crops,
-so the quantized network depends only on the weights file and this module's settings, and is
+so the quantized network is made from the weights file and these fixed windows alone, and is
 cached beside the float export under the weights' hash.
 """
 
