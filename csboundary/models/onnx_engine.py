@@ -144,13 +144,13 @@ class OnnxNetworks:
         """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing (and the
         FPN quantized to int8 when ``int8``), with each network's graph optimisation level timed
         on this machine (once, cached beside them)."""
-        from csboundary.models.onnx_quantization import quantize_fpn
+        from csboundary.models.onnx_quantization import QUANTIZATION_VERSION, quantize_fpn
         from csboundary.models.onnx_tuning import tuned_levels
 
         folder = cache_dir(weights)
 
-        def cached(name: str, make) -> bytes:
-            path = folder / f"{digest[:16]}-{name}-v{EXPORT_VERSION}.onnx"
+        def cached(name: str, make, version: str = f"v{EXPORT_VERSION}") -> bytes:
+            path = folder / f"{digest[:16]}-{name}-{version}.onnx"
             if not path.exists():
                 from csboundary.data.atomic import atomic_path
 
@@ -162,7 +162,7 @@ class OnnxNetworks:
 
         fpn_model = cached("fpn", lambda: export_fpn(fpn))
         afanet_model = cached("afanet", lambda: export_afanet(afanet))
-        int8_model = cached("fpn-int8", lambda: quantize_fpn(fpn_model)) if int8 else None
+        int8_model = cached("fpn-int8", lambda: quantize_fpn(fpn_model), f"v{EXPORT_VERSION}q{QUANTIZATION_VERSION}") if int8 else None
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
         networks = cls(fpn_model, afanet_model, fpn_int8_model=int8_model)
         networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks.models, networks.thread_count)

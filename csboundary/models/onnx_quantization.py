@@ -24,6 +24,7 @@ from csboundary.models.onnx_engine import WINDOW
 # sees each once, so no activation range is set by one kind of city alone
 CALIBRATION_STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential", "leafy")
 CALIBRATION_SEED = 0  # training-split city of each style; the windows are the same on every machine
+QUANTIZATION_VERSION = 1  # in the cached file's name: bump when the calibration or the settings change
 
 
 def calibration_windows(styles: tuple[str, ...] | None = None, seed: int = CALIBRATION_SEED) -> list[np.ndarray]:

@@ -144,7 +144,11 @@ def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors,
     int8_weights = [t for t in graph.initializer if t.data_type == onnx.TensorProto.INT8 and len(t.dims) == 4]
     assert len(int8_weights) == sum(n.op_type == "Conv" for n in onnx.load_from_string(networks.fpn_model).graph.node)
     assert len(networks.fpn_int8_model) < 0.5 * len(networks.fpn_model)
-    assert (weights.parent / ".onnx-cache").glob("*-fpn-int8-*.onnx")
+    from csboundary.models.onnx_engine import EXPORT_VERSION
+    from csboundary.models.onnx_quantization import QUANTIZATION_VERSION
+
+    made = list((weights.parent / ".onnx-cache").glob("*-fpn-int8-*.onnx"))  # cached, versioned with the quantization
+    assert [p.name.endswith(f"-fpn-int8-v{EXPORT_VERSION}q{QUANTIZATION_VERSION}.onnx") for p in made] == [True]
     assert onnx_engine.onnx.fpn_int8_model is None  # float32 again: the float export only
 
 
