@@ -125,6 +125,10 @@ class OnnxNetworks:
                  fpn_int8_model: bytes | None = None):
         self.fpn_model, self.afanet_model, self.fpn_int8_model, self.threads = fpn_model, afanet_model, fpn_int8_model, threads
         self.levels = dict(levels or {})  # graph optimisation level per network (see onnx_tuning)
+        # where the levels were timed and for which machine key: a Dask worker on another CPU or
+        # with another thread count looks its own up (or times them) when it opens a session
+        self.tuning_path: Path | None = None
+        self.tuned_for: str | None = None
         self._sessions: dict[str, object] = {}
 
     @property
@@ -145,7 +149,7 @@ class OnnxNetworks:
         FPN quantized to int8 when ``int8``), with each network's graph optimisation level timed
         on this machine (once, cached beside them)."""
         from csboundary.models.onnx_quantization import QUANTIZATION_VERSION, quantize_fpn
-        from csboundary.models.onnx_tuning import tuned_levels
+        from csboundary.models.onnx_tuning import machine_key, tuned_levels
 
         folder = cache_dir(weights)
 
@@ -165,8 +169,21 @@ class OnnxNetworks:
         int8_model = cached("fpn-int8", lambda: quantize_fpn(fpn_model), f"v{EXPORT_VERSION}q{QUANTIZATION_VERSION}") if int8 else None
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
         networks = cls(fpn_model, afanet_model, fpn_int8_model=int8_model)
-        networks.levels = tuned_levels(folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json", networks.models, networks.thread_count)
+        networks.tuning_path = folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json"
+        networks.levels = tuned_levels(networks.tuning_path, networks.models, networks.thread_count)
+        networks.tuned_for = machine_key(networks.thread_count)
         return networks
+
+    def _levels_here(self) -> None:
+        """The levels for this process's machine and thread count, if they were tuned for others
+        (an instance unpickled on a Dask worker): read from the tuning record, else timed here."""
+        from csboundary.models.onnx_tuning import machine_key, tuned_levels
+
+        if self.tuning_path is None or self.tuned_for is None:
+            return
+        key = machine_key(self.thread_count)
+        if key != self.tuned_for:
+            self.levels, self.tuned_for = tuned_levels(self.tuning_path, self.models, self.thread_count), key
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
@@ -176,6 +193,8 @@ class OnnxNetworks:
     def _session(self, name: str):
         session = self._sessions.get(name)
         if session is None:
+            if not self._sessions:
+                self._levels_here()
             model = self.models[name]
             session = open_session(model, self.thread_count, self.levels.get(name, DEFAULT_LEVEL), name)
             self._sessions[name] = session

@@ -110,6 +110,9 @@ def tuned_levels(path: Path, models: dict[str, bytes], threads: int) -> dict[str
     except (OSError, ValueError):
         record = {}  # none yet, or damaged: timed again and replaced
     record[key] = {"levels": levels, "seconds": seconds, "measured": datetime.now(timezone.utc).isoformat(timespec="seconds")}
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(record, indent=1) + "\n")
+    try:
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(record, indent=1) + "\n")
+    except OSError:
+        pass  # a worker that cannot write there (another machine's cache folder) keeps its timing unrecorded
     return {name: levels[name] for name in models}

@@ -106,3 +106,32 @@ def test_example_inputs_follow_the_session_with_one_window_and_the_tuning_vertex
     inputs = onnx_tuning.example_inputs(session)
     assert inputs["image"].shape == (1, 4, 1100, 1100) and inputs["rois"].shape == (onnx_tuning.TUNING_VERTICES, 6, 64, 64)
     assert all(v.dtype == "float32" and 0 <= v.min() and v.max() < 1 for v in inputs.values())
+
+
+def test_an_instance_moved_to_another_machine_uses_that_machines_levels(tmp_path, monkeypatch):
+    # as on a Dask worker: the instance is unpickled where another CPU or thread count runs it
+    import pickle
+
+    path = tmp_path / "tuning.json"
+    path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "extended", "afanet": "all"}},
+                                machine_key(1): {"levels": {"fpn": "all", "afanet": "extended"}}}))
+    networks = OnnxNetworks(b"fpn", b"afanet", threads=2)
+    networks.tuning_path, networks.tuned_for = path, machine_key(2)
+    networks.levels = tuned_levels(path, networks.models, 2)
+    opened = []
+    monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed although recorded"))
+    monkeypatch.setattr("csboundary.models.onnx_engine.open_session", lambda model, threads, level, name: opened.append((name, threads, level)))
+    moved = pickle.loads(pickle.dumps(networks))
+    moved.threads = 1
+    moved._session("fpn")
+    moved._session("afanet")
+    assert opened == [("fpn", 1, "all"), ("afanet", 1, "extended")] and moved.tuned_for == machine_key(1)
+    networks._session("fpn")  # where it was tuned: its own levels, nothing looked up again
+    assert opened[-1] == ("fpn", 2, "extended")
+
+
+def test_a_timing_that_cannot_be_recorded_is_still_used(tmp_path, monkeypatch):
+    path = tmp_path / "not-a-folder"
+    path.write_text("")
+    monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: {"all": 2.0, "extended": 1.0})
+    assert tuned_levels(path / "tuning.json", {"fpn": b"f"}, 1) == {"fpn": "extended"}
