@@ -203,6 +203,8 @@ class OnnxNetworks:
     def fpn_logits(self, images: np.ndarray, int8: bool = False) -> np.ndarray:
         """(B, 4, 1100, 1100) float32 in [0, 1] -> (B, C, 1100, 1100) logits; ``int8``: from the
         quantized FPN (made by ``for_weights(int8=True)``)."""
+        if int8 and self.fpn_int8_model is None:
+            raise ValueError("no int8 FPN: it is made by for_weights(int8=True) (PatchPredictor.use_precision('int8') before use_engine)")
         return self._session("fpn-int8" if int8 else "fpn").run(None, {"image": np.ascontiguousarray(images, np.float32)})[0]
 
     def afanet_logits(self, small: np.ndarray, rois: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -152,8 +152,7 @@ class PatchPredictor:
         keypoint and boundary, plus the road surface when the surface check is on."""
         batch = np.stack(images)
         if self.onnx is not None and self.precision != "bfloat16" and batch.shape[-2:] == (WINDOW, WINDOW):
-            int8 = self.precision == "int8" and self.onnx.fpn_int8_model is not None
-            probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch), int8=int8))).numpy()
+            probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch), int8=self.precision == "int8"))).numpy()
         else:
             if self.precision == "int8":
                 warnings.warn(f"the int8 FPN is made for {WINDOW} px windows: this {batch.shape[-1]} x {batch.shape[-2]} px image "

@@ -182,3 +182,8 @@ def test_the_command_line_refuses_int8_on_the_torch_engine(tmp_path):
     done = run_cli("demo", "--out", str(tmp_path / "demo"), "--engine", "torch", "--precision", "int8")
     assert done.returncode == 2 and "error: --precision: int8 runs the FPN on ONNX Runtime" in done.stderr
     assert "Traceback" not in done.stderr and not (tmp_path / "demo" / "prediction").exists()
+
+
+def test_the_int8_fpn_is_asked_for_only_once_it_is_made():
+    with pytest.raises(ValueError, match="no int8 FPN"):
+        OnnxNetworks(b"fpn", b"afanet").fpn_logits(None, int8=True)
