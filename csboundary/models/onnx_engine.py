@@ -148,6 +148,7 @@ class OnnxNetworks:
         """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing (and the
         FPN quantized to int8 when ``int8``), with each network's graph optimisation level timed
         on this machine (once, cached beside them)."""
+        from csboundary.data.atomic import atomic_path
         from csboundary.models.onnx_quantization import QUANTIZATION_VERSION, quantize_fpn
         from csboundary.models.onnx_tuning import machine_key, tuned_levels
 
@@ -156,8 +157,6 @@ class OnnxNetworks:
         def cached(name: str, make, version: str = f"v{EXPORT_VERSION}") -> bytes:
             path = folder / f"{digest[:16]}-{name}-{version}.onnx"
             if not path.exists():
-                from csboundary.data.atomic import atomic_path
-
                 print(f"csboundary: preparing the {name} network for ONNX Runtime (once per weights file)", file=sys.stderr, flush=True)
                 data = make()
                 with atomic_path(path) as tmp:
