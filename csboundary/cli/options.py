@@ -25,7 +25,7 @@ THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
 ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
 PRECISION_HELP = ("float32 | bfloat16 | int8: the FPN's arithmetic. bfloat16 runs it in PyTorch under autocast: 2.5x faster on CPUs "
                   "with AMX (Intel Xeon 4th generation and later), slower on CPUs without bfloat16 units. int8 runs it quantized on "
-                  "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.8x faster on CPUs with VNNI or AMX. "
+                  "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.5-2.8x faster on CPUs with VNNI or AMX. "
                   "Scores move a little with either (docs/cpu-inference.md).")
 DEVICE_HELP = "auto | cpu | cuda."
 WEIGHTS_HELP = "Weights bundle (default: the shipped weights)."

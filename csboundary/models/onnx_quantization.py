@@ -1,4 +1,4 @@
-"""The FPN in 8-bit integers on ONNX Runtime (``--precision int8``): 2.8x faster than float32 on
+"""The FPN in 8-bit integers on ONNX Runtime (``--precision int8``): 2.5-2.8x faster than float32 on
 a CPU with VNNI or AMX units, with probabilities that move by about 0.001 on average.
 
 ONNX Runtime's static quantization stores each convolution's weights as int8 (one scale per
