@@ -31,7 +31,7 @@ def test_a_recorded_choice_is_used_without_timing(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("content", ["{not json", '["a list"]', None, "{}"])
-def test_a_missing_or_damaged_record_is_timed_and_written(tmp_path, monkeypatch, content):
+def test_a_missing_or_damaged_record_is_timed_and_written(tmp_path, monkeypatch, capsys, content):
     networks = OnnxNetworks(b"fpn", b"afanet", threads=2)
     path = tmp_path / "tuning.json"
     if content is not None:
@@ -41,12 +41,14 @@ def test_a_missing_or_damaged_record_is_timed_and_written(tmp_path, monkeypatch,
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: calls.append((name, threads)) or times[model])
     assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "extended", "afanet": "all"}
     assert sorted(calls) == [("afanet", 2), ("fpn", 2)]
+    assert "timing ONNX Runtime's optimisation levels for fpn, afanet on this machine (once)" in capsys.readouterr().err
     record = json.loads(path.read_text())
     assert record[machine_key(2)]["levels"] == {"fpn": "extended", "afanet": "all"}
     assert record[machine_key(2)]["seconds"]["fpn"] == {"all": 0.4, "extended": 0.3}
     # read back the second time, not timed again
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed again"))
     assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "extended", "afanet": "all"}
+    assert capsys.readouterr().err == ""  # read back silently
 
 
 def test_another_machine_keeps_its_own_entry(tmp_path, monkeypatch):
