@@ -15,7 +15,6 @@ that moved by more than 0.1.
 from __future__ import annotations
 
 import argparse
-import resource
 import statistics
 import time
 from pathlib import Path
@@ -29,10 +28,7 @@ from csboundary.models.maps import unit_bands
 from csboundary.models.onnx_engine import LEVELS, export_fpn, open_session
 from csboundary.models.onnx_quantization import quantize_fpn
 from csboundary.pipeline.patch import PatchPredictor
-
-
-def peak_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+from csboundary.pipeline.run import peak_rss_mb
 
 
 def main() -> None:
@@ -44,10 +40,10 @@ def main() -> None:
     with Mosaic.open(args.city / "tiles") as mosaic:
         windows = [unit_bands(mosaic.read(p.expanded).data[None]) for p in list(PatchGrid.for_mosaic(mosaic))[: args.windows]]
     float_model = export_fpn(PatchPredictor.load(None, torch.device("cpu")).fpn)
-    before = peak_mb()
+    before = peak_rss_mb()
     start = time.perf_counter()
     int8_model = quantize_fpn(float_model)
-    print(f"quantized in {time.perf_counter() - start:.1f} s; peak memory {peak_mb():.0f} MB (before quantizing {before:.0f} MB); "
+    print(f"quantized in {time.perf_counter() - start:.1f} s; peak memory {peak_rss_mb():.0f} MB (before quantizing {before:.0f} MB); "
           f"{len(float_model) / 2**20:.1f} MB -> {len(int8_model) / 2**20:.1f} MB")
     threads = torch.get_num_threads()
     sessions = {(name, level): open_session(model, threads, level, name)
