@@ -28,6 +28,7 @@ from csboundary.graph.edge_support import EdgeSupportConfig, unsupported_pairs
 from csboundary.graph.end_joining import EndJoinConfig, join_ends
 from csboundary.graph.skeleton_fill import FillConfig, fill_from_skeleton
 from csboundary.graph.surface_check import SurfaceCheckConfig, surface_checked
+from csboundary.graph.surface_gate import SurfaceGateConfig, gated_maps
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
 from csboundary.models.batchnorm_folding import fold_batch_norms
@@ -57,6 +58,7 @@ class PatchPredictor:
     fill: FillConfig = field(default_factory=FillConfig)  # boundary the graph missed, from the segmentation skeleton (off by default)
     surface: SurfaceCheckConfig = field(default_factory=SurfaceCheckConfig)  # edges need roadway beside them (FPNs with a surface head; off by default)
     join: EndJoinConfig = field(default_factory=EndJoinConfig)  # dangling ends joined across supported gaps (off by default)
+    gate: SurfaceGateConfig = field(default_factory=SurfaceGateConfig)  # keypoint and boundary maps only where the surface changes (off by default)
     pixel_size_m: float = MODEL_GSD  # the training imagery's pixel size: input is resampled to it
     min_fragment_px: float = 0.0  # city graph: connected pieces shorter than this are dropped (graph/fragments.py; 0 = off)
     attach_px: float = 0.0  # city graph: dangling ends joined to the line ahead within this (graph/end_attachment.py; 0 = off)
@@ -134,14 +136,15 @@ class PatchPredictor:
         fill = FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0)))
         join = EndJoinConfig(max_px=float(settings.get("join_max_px", 0.0)), attach_px=float(settings.get("join_attach_px", 0.0)))
         surface = SurfaceCheckConfig(**{field: float(settings[key]) for key, field in SURFACE_SETTINGS.items() if key in settings})
-        if surface.active and not fpn.config.surface:
-            raise InputError(path, "damaged weights file: a surface check is set but the FPN has no surface head")
+        gate = SurfaceGateConfig(**{field: kind(settings[key]) for key, (field, kind) in GATE_SETTINGS.items() if key in settings})
+        if (surface.active or gate.active) and not fpn.config.surface:
+            raise InputError(path, "damaged weights file: a surface check or gate is set but the FPN has no surface head")
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
                    edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
-                   support=support, crossings=crossings, fill=fill, surface=surface, join=join, pixel_size_m=float(pixel_size),
+                   support=support, crossings=crossings, fill=fill, surface=surface, join=join, gate=gate, pixel_size_m=float(pixel_size),
                    min_fragment_px=float(settings.get("min_fragment_px", 0.0)), attach_px=float(settings.get("attach_max_px", 0.0)))
 
     def maps(self, image: np.ndarray) -> np.ndarray:
@@ -158,13 +161,20 @@ class PatchPredictor:
                 warnings.warn(f"the int8 FPN is made for {WINDOW} px windows: this {batch.shape[-1]} x {batch.shape[-2]} px image "
                               "runs in float32", InputWarning)
             probs = predict_probabilities(self.fpn if self.folded_fpn is None else self.folded_fpn, batch, self.device, self.precision)
-        if not self.surface.active:  # the surface channel is carried (stitched, stored, written) only when the check reads it
+        if not self.reads_surface:  # the surface channel is carried (stitched, stored, written) only when the check or gate reads it
             probs = probs[:, :SURFACE]
         return list(probs)
 
+    @property
+    def reads_surface(self) -> bool:
+        """Whether the road-surface map is used (check or gate), so carried with the others."""
+        return self.surface.active or self.gate.active
+
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         """Vertices (and corner edges) of a patch's keypoint map, plus, when ``crossings`` is on,
-        the boundary map's crossings with the grid lines (:mod:`csboundary.graph.crossings`)."""
+        the boundary map's crossings with the grid lines (:mod:`csboundary.graph.crossings`); with
+        the gate on, of the maps gated by the surface (:mod:`csboundary.graph.surface_gate`)."""
+        maps = gated_maps(maps, SURFACE, self.gate)
         found = extract_vertices(maps[0], self.vertices)
         extra = added_crossings(found, maps[1], self.crossings)
         if not len(extra):
@@ -175,7 +185,9 @@ class PatchPredictor:
 
     @torch.no_grad()
     def connect(self, patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
-        """The patch graph: ``found``'s vertices joined by its corner edges and AfANet's edges."""
+        """The patch graph: ``found``'s vertices joined by its corner edges and AfANet's edges
+        (AfANet, edge support and the steps after it see the gated maps when the gate is on)."""
+        maps = gated_maps(maps, SURFACE, self.gate)
         m = found.n_vertices
         if m < 2:
             return self.finished(patch, maps, graph_from_adjacency(found, np.zeros((m, m)), self.edge_threshold, self.max_degree))
@@ -223,8 +235,11 @@ INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64,
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
                       "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False), "join_attach_px": (0.0, 1e6, False),
                       "attach_max_px": (0.0, 1e6, False),
-                      "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False)}
+                      "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False),
+                      "surface_gate_px": (0.0, 200.0, False), "surface_gate_full": (0.01, 1.0, False), "surface_gate_min_piece_px": (0, 10**8, True)}
 SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px"}  # bundle key -> SurfaceCheckConfig field
+GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": ("full_change", float),
+                 "surface_gate_min_piece_px": ("min_piece_px", int)}  # bundle key -> SurfaceGateConfig field and type
 
 
 def inference_settings(settings, path: str | Path) -> dict:
@@ -248,7 +263,7 @@ def inference_settings(settings, path: str | Path) -> dict:
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,
                    min_edge_support: float | None = None, max_edge_length: float | None = None, max_edge_gap: float | None = None,
                    fill_min_length: float | None = None, surface_check: float | None = None, join_ends: float | None = None,
-                   attach_ends: float | None = None, attach_backed: float | None = None,
+                   attach_ends: float | None = None, attach_backed: float | None = None, surface_gate: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto",
                    precision: str = "float32") -> PatchPredictor:
@@ -280,6 +295,10 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         if surface_check > 0 and not predictor.fpn.config.surface:
             raise InputError("--surface-check", "the FPN of these weights has no road-surface head")
         predictor.surface = dataclasses.replace(predictor.surface, strong=surface_check)
+    if surface_gate is not None:
+        if surface_gate > 0 and not predictor.fpn.config.surface:
+            raise InputError("--surface-gate", "the FPN of these weights has no road-surface head")
+        predictor.gate = dataclasses.replace(predictor.gate, radius_px=surface_gate)
     if max_degree is not None:
         predictor.max_degree = max_degree or None
     if min_fragment_length is not None:

@@ -48,6 +48,8 @@ class TrainConfig(Config):
     batch: int = 4
     pos_weight_keypoint: float = 20.0
     pos_weight_segmentation: float = 10.0
+    hard_negative_weight: float = 0.0  # extra loss weight on keypoint/boundary negatives where the image has an edge (roofs, cars, lots); 0 = off
+    hard_negative_margin_px: int = 6  # pixels this close to a true boundary are never hard negatives
     # afanet
     afanet: dict = field(default_factory=dict)  # AfANetConfig overrides
     fpn_weights: str = ""  # the trained FPN whose maps and vertices AfANet learns from

@@ -30,15 +30,41 @@ def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
             {"params": [p for p in model.parameters() if id(p) not in inside], "lr_scale": 1.0}]
 
 
-def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, config: TrainConfig) -> torch.Tensor:
-    """Weighted BCE of the keypoint and boundary maps on valid pixels; with a surface channel
-    (logits and target (B, 3, ...)), plus ``surface_weight`` x the surface BCE on valid pixels
-    whose surface is known (target >= 0); with ``surface_only``, the surface term alone."""
+def image_edges(image: torch.Tensor) -> torch.Tensor:
+    """(B, 1, H, W) in [0, 1]: the Sobel gradient magnitude of each sample's mean band, divided
+    by its 95th percentile and clipped: 1 on every strong outline of the scene."""
+    gray = image[:, :3].mean(dim=1, keepdim=True)
+    kx = torch.tensor([[-1.0, 0.0, 1.0], [-2.0, 0.0, 2.0], [-1.0, 0.0, 1.0]], device=image.device, dtype=gray.dtype).view(1, 1, 3, 3)
+    padded = F.pad(gray, (1, 1, 1, 1), mode="replicate")
+    magnitude = torch.sqrt(F.conv2d(padded, kx) ** 2 + F.conv2d(padded, kx.transpose(2, 3)) ** 2)
+    scale = torch.quantile(magnitude.flatten(1), 0.95, dim=1).clamp(min=1e-6).view(-1, 1, 1, 1)
+    return (magnitude / scale).clamp(max=1.0)
+
+
+def hard_negative_weights(image: torch.Tensor, target: torch.Tensor, config: TrainConfig) -> torch.Tensor:
+    """(B, 1, H, W) loss weights of the keypoint and boundary maps: 1, plus
+    ``hard_negative_weight`` x the image's edge strength on pixels farther than
+    ``hard_negative_margin_px`` from a true boundary. Why: on real photographs the boundary map
+    fires on every outline (roofs, parapets, cars, lots); with plain BCE those pixels are a small
+    share of the negatives and cost little."""
+    m = config.hard_negative_margin_px
+    near = F.max_pool2d((target[:, 1:2] > 0.5).to(image.dtype), 2 * m + 1, stride=1, padding=m)
+    return 1.0 + config.hard_negative_weight * image_edges(image) * (1.0 - near)
+
+
+def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, config: TrainConfig,
+             image: torch.Tensor | None = None) -> torch.Tensor:
+    """Weighted BCE of the keypoint and boundary maps on valid pixels (negatives on the image's
+    outlines weighted up when ``hard_negative_weight`` and ``image`` are given); with a surface
+    channel (logits and target (B, 3, ...)), plus ``surface_weight`` x the surface BCE on valid
+    pixels whose surface is known (target >= 0); with ``surface_only``, the surface term alone."""
     weights = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
     mask = valid[:, None].to(logits.dtype)
     total = logits.new_zeros(())
     if not config.surface_only:
         loss = F.binary_cross_entropy_with_logits(logits[:, :2], target[:, :2], pos_weight=weights, reduction="none")
+        if config.hard_negative_weight > 0 and image is not None:
+            loss = loss * hard_negative_weights(image.to(logits.dtype), target[:, :2], config)
         total = (loss * mask).sum() / (mask.sum() * 2).clamp(min=1)
     if logits.shape[1] > 2 and target.shape[1] > 2:
         known = mask[:, 0] * (target[:, 2] >= 0).to(logits.dtype)
@@ -150,7 +176,7 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
         image, target, valid = _fpn_batch(train_cities, rng, config, augmentation, with_surface)
         with autocast(config, device):
             logits = model(image.to(device))
-        return fpn_loss(logits.float(), target.to(device), valid.to(device), config), {}
+        return fpn_loss(logits.float(), target.to(device), valid.to(device), config, image.to(device)), {}
 
     try:
         return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
