@@ -67,7 +67,7 @@ def predict(
 
 
 def predict_patch(
-    image: Path = typer.Argument(..., help="One patch: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
+    image: Path = typer.Argument(..., help="One image: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
     out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
@@ -77,21 +77,26 @@ def predict_patch(
     max_edge_gap: EdgeGapOption = None,
     fill_min_length: FillOption = None,
     join_ends: JoinOption = None,
+    attach_ends: AttachOption = None,
+    attach_backed: AttachBackedOption = None,
     surface_check: SurfaceOption = None,
+    min_fragment_length: FragmentOption = None,
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
 ) -> None:
-    """Predict the road-boundary graph of one patch (FPN -> vertices -> AfANet)."""
+    """Predict the road-boundary graph of one image of at most 1100x1100 px exactly as `predict`
+    predicts it (same patch grid, maps, post-processing and graph), with an overlay picture of
+    the maps and the graph over the image."""
     out_dir(out, [image] if image.is_dir() else [])
     readable_inputs([image])
     from csboundary.pipeline.patch import load_predictor
     from csboundary.pipeline.predict import predict_patch_to_folder
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, surface_check=surface_check, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine, precision=precision)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, min_fragment_length=min_fragment_length, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine, precision=precision)
     graph = predict_patch_to_folder(image, out, predictor, gsd)
     kinds = graph.edge_kinds or []
     typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({kinds.count('corner')} corner, "

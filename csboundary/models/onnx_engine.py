@@ -6,10 +6,10 @@ AfANet to ONNX on first use and runs them with ONNX Runtime's CPU provider when 
 cached, keyed by the SHA-256 of the weights file (a changed file gets a new export): next to the
 weights when that folder is writable, else under ``$XDG_CACHE_HOME/csboundary/onnx``.
 
-The FPN is exported for the city grid's 1100 x 1100 windows (any batch); other sizes (a smaller
-``predict-patch`` image) run in PyTorch. AfANet is exported from its views on (the resized
-tensor, the windows around the vertices, cut by PyTorch) for any number of vertices (at least
-two; fewer need no network). Both return logits; the probabilities are taken as in PyTorch.
+The FPN is exported for the city grid's 1100 x 1100 windows (any batch); other sizes
+(``PatchPredictor.maps`` on an image of its own) run in PyTorch. AfANet is exported from its
+views on (the resized tensor, the windows around the vertices, cut by PyTorch) for any number of
+vertices (at least two; fewer need no network). Both return logits; the probabilities are taken as in PyTorch.
 A session is not picklable: an :class:`OnnxNetworks` sent to a Dask worker carries the model
 bytes and opens its sessions there on first use.
 """

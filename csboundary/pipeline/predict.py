@@ -8,16 +8,16 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import geopandas as gpd
+import numpy as np
 
 from csboundary.data.atomic import check_output_dir, staging_folder
-from csboundary.data.grid import PatchGrid
+from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import ModelInput, model_view
-from csboundary.data.nodata import fill_nodata
-from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.models.checkpoint import file_sha256, shipped_weights
+from csboundary.pipeline.city import predict_city
 from csboundary.pipeline.patch import PatchPredictor
 from csboundary.pipeline.run import run_prediction
 from csboundary.viz.labels import draw_patch_labels
@@ -76,17 +76,22 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
 
 
 def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: PatchPredictor, gsd: float | None = None) -> BoundaryGraph:
-    """One patch (a raster of at most 1100x1100 px at the model's pixel size) -> ``out``/graph.json,
-    boundaries.geojson and overlay.png (maps and graph over the image); returns the graph."""
+    """One image (at most 1100x1100 px at the model's pixel size) -> ``out``/graph.json,
+    boundaries.geojson and overlay.png (maps and graph over the image); returns the graph.
+
+    The image goes through the city pipeline exactly as ``predict`` takes it (in memory, on the
+    same patch grid: one 1100 px window up to 1000 px, two or four windows above), so both write
+    the same graph. An image without a CRS is taken to be at the model's pixel size unless
+    ``gsd`` says otherwise."""
     image, out = Path(image), Path(out)
-    check_output_dir(out, inputs=[image] if image.is_dir() else [])
-    with model_view(Mosaic.open(image), gsd, predictor.pixel_size_m, assume_model_gsd=True).mosaic as mosaic:
+    check_output_dir(out, inputs=[image])
+    mosaic, _ = open_imagery([image])
+    with model_view(mosaic, gsd, predictor.pixel_size_m, assume_model_gsd=True).mosaic as mosaic:
         if mosaic.width > 1100 or mosaic.height > 1100:
             raise InputError(image, f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a patch)")
+        maps = CoreMaps(mosaic.width, mosaic.height)
+        graph = predict_city(mosaic, predictor, progress=False, on_window=maps.add).graph
         read = mosaic.read(mosaic.window)
-        maps = predictor.maps(fill_nodata(read.data, read.valid)) * read.valid[None]  # as the city pipeline does
-        graph = predictor.graph(read.data, maps)
-        graph.transform, graph.crs = mosaic.transform, (mosaic.crs.to_string() if mosaic.crs else None)
     frame = gpd.GeoDataFrame(
         {"kind": graph.edge_kinds or [], "confidence": list(graph.edge_scores) if graph.edge_scores is not None else []},
         geometry=graph.to_linestrings(world=True), crs=graph.crs,
@@ -94,6 +99,21 @@ def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: Patch
     with staging_folder(check_output_dir(out, create=True), last="graph.json") as stage:
         graph.write_json(stage / "graph.json")
         frame.to_file(stage / "boundaries.geojson", driver="GeoJSON", engine="pyogrio", layer="boundaries")
-        arrays = {"segmentation": maps[1] > 0.5, "keypoint_heat": maps[0]}
+        arrays = {"segmentation": maps.array[1] > 0.5, "keypoint_heat": maps.array[0]}
         write_png(stage / "overlay.png", draw_patch_labels(to_display(read.data, read.valid), arrays, graph))
     return graph
+
+
+class CoreMaps:
+    """A mosaic's stitched maps, put together from each window's core as the city pipeline hands
+    the windows over (``predict_city``'s ``on_window``; the cores cover the mosaic once)."""
+
+    def __init__(self, width: int, height: int):
+        self.width, self.height = width, height
+        self.array: np.ndarray | None = None  # (C, height, width)
+
+    def add(self, patch: Patch, maps: np.ndarray) -> None:
+        if self.array is None:
+            self.array = np.zeros((maps.shape[0], self.height, self.width), np.float32)
+        rows, cols = patch.core_local.slices()
+        self.array[(slice(None), *patch.core.slices())] = maps[:, rows, cols]
