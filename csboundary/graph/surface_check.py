@@ -12,6 +12,11 @@ every edge of at least ``weak`` that is connected through such edges to one of a
 ``strong``: a curb's weak stretches stay with it, a cluster of roof and yard outlines that
 nowhere borders roadway goes.
 
+A boundary also has something other than roadway on its other side. An edge with roadway on
+both sides (the mean over its points of the smaller side reaches ``both_sides``) lies inside the
+roadway: a straight edge AfANet drew across the street between vertices on its two curbs, or a
+line along a row of parked cars. Those edges go too (``both_sides`` 0: not checked).
+
 Coordinates are continuous (x, y) pixels of the map, pixel [r, c] centred at (c + 0.5, r + 0.5).
 """
 
@@ -32,17 +37,18 @@ class SurfaceCheckConfig:
     strong: float = 0.0  # an edge this sure of roadway beside it anchors its component; 0 = no check
     weak: float = 0.2  # edges below this are dropped; those above stay if connected to a strong one
     offset_px: float = 8.0  # how far beside the edge the surface is read (1.2 m at 0.152 m/px)
+    both_sides: float = 0.0  # edges with at least this much roadway on their poorer side lie inside the roadway and go; 0 = off
 
     @property
     def active(self) -> bool:
         return self.strong > 0
 
 
-def side_surface(graph: BoundaryGraph, surface: np.ndarray, offset_px: float) -> np.ndarray:
-    """(E,) mean over points every pixel along each edge's polyline of the larger of the two
-    surface probabilities ``offset_px`` to its left and right. Samples outside the map read its
-    nearest pixel; a zero-length edge scores 0. All edges' segments are sampled in one pass
-    (a loop over edges cost 9 ms on a window of ~70 edges)."""
+def side_surface(graph: BoundaryGraph, surface: np.ndarray, offset_px: float, poorer: bool = False) -> np.ndarray:
+    """(E,) mean over points every pixel along each edge's polyline of the larger (``poorer``:
+    the smaller) of the two surface probabilities ``offset_px`` to its left and right. Samples
+    outside the map read its nearest pixel; a zero-length edge scores 0. All edges' segments are
+    sampled in one pass (a loop over edges cost 9 ms on a window of ~70 edges)."""
     h, w = surface.shape
     n = graph.n_edges
     lines = [np.asarray(graph.edge_polyline(k), float).reshape(-1, 2) for k in range(n)]
@@ -63,7 +69,7 @@ def side_surface(graph: BoundaryGraph, surface: np.ndarray, offset_px: float) ->
         rows = np.clip(np.floor(p[:, 1]).astype(int), 0, h - 1)
         sides.append(surface[rows, cols])
     of_point = edge[segment]
-    sums = np.bincount(of_point, weights=np.maximum(*sides), minlength=n)
+    sums = np.bincount(of_point, weights=(np.minimum if poorer else np.maximum)(*sides), minlength=n)
     counts = np.bincount(of_point, minlength=n)
     return np.divide(sums, counts, out=np.zeros(n), where=counts > 0)
 
@@ -83,9 +89,13 @@ def kept_by_hysteresis(edges: np.ndarray, n_vertices: int, scores: np.ndarray, s
 
 
 def surface_checked(graph: BoundaryGraph, surface: np.ndarray, config: SurfaceCheckConfig) -> BoundaryGraph:
-    """``graph`` without the edges no roadway borders (see the module docstring); unchanged when
-    the check is off or the graph has no edge."""
+    """``graph`` without the edges no roadway borders and, with ``both_sides``, without those
+    inside the roadway (see the module docstring); unchanged when the check is off or the graph
+    has no edge."""
     if not config.active or graph.n_edges == 0:
         return graph
     scores = side_surface(graph, surface, config.offset_px)
-    return graph.edge_subgraph(kept_by_hysteresis(graph.edges, graph.n_vertices, scores, config.strong, config.weak))
+    keep = kept_by_hysteresis(graph.edges, graph.n_vertices, scores, config.strong, config.weak)
+    if config.both_sides > 0:
+        keep &= side_surface(graph, surface, config.offset_px, poorer=True) < config.both_sides
+    return graph.edge_subgraph(keep)

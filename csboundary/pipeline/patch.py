@@ -235,9 +235,9 @@ INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64,
                       "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
                       "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False), "join_attach_px": (0.0, 1e6, False),
                       "attach_max_px": (0.0, 1e6, False),
-                      "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False),
+                      "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False), "surface_both_sides": (0.0, 1.0, False),
                       "surface_gate_px": (0.0, 200.0, False), "surface_gate_full": (0.01, 1.0, False), "surface_gate_min_piece_px": (0, 10**8, True)}
-SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px"}  # bundle key -> SurfaceCheckConfig field
+SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px", "surface_both_sides": "both_sides"}  # bundle key -> SurfaceCheckConfig field
 GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": ("full_change", float),
                  "surface_gate_min_piece_px": ("min_piece_px", int)}  # bundle key -> SurfaceGateConfig field and type
 

@@ -159,3 +159,15 @@ def test_all_edges_at_once_score_as_one_edge_at_a_time(seed, n_edges, offset):
     g = BoundaryGraph(vertices, np.arange(2 * n_edges).reshape(-1, 2), edge_polylines=polylines)
     assert np.allclose(side_surface(g, surface, offset), _side_surface_per_edge(g, surface, offset), atol=1e-6)
     assert side_surface(graph(np.zeros((0, 2)), np.zeros((0, 2))), surface, offset).shape == (0,)
+
+
+def test_an_edge_across_the_roadway_has_roadway_on_both_sides_and_goes_with_both_sides_on():
+    surface = np.zeros((100, 100), np.float32)
+    surface[20:60] = 1.0  # a street from row 20 to row 60
+    # a curb along row 20 (roadway below only) and a straight edge across the street at x = 50
+    g = graph([[10, 20], [90, 20], [50, 22], [50, 58]], [[0, 1], [2, 3]])
+    assert side_surface(g, surface, 8.0, poorer=True).tolist() == [0.0, 1.0]
+    out = surface_checked(g, surface, SurfaceCheckConfig(strong=0.5, both_sides=0.5))
+    assert out.n_edges == 1 and np.allclose(out.vertices[out.edges[0]], [[10, 20], [90, 20]])
+    # off (the default), the edge across stays: it has roadway beside it
+    assert surface_checked(g, surface, SurfaceCheckConfig(strong=0.5)).n_edges == 2
