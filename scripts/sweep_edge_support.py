@@ -1,6 +1,6 @@
 """Scores of one weights bundle on validation sets for a grid of edge-support settings.
 
-    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.35,0.5] [--fill 0,40] [--surface 0,0.5 --surface-weak 0.2] [--fragments 0,240] [--attach-backed 0,60,100]
+    python scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40] [--vertex-threshold 0.35,0.5] [--fill 0,40] [--surface 0,0.5 --surface-weak 0.2] [--fragments 0,240] [--attach-backed 0,60,100] [--gate 0,8] [--both-sides 0,0.7]
 
 Every setting not given is the bundle's own, so ``--vertex-threshold 0.4`` alone scores the
 bundle as shipped but for its vertex threshold.
@@ -54,6 +54,8 @@ def main() -> None:
     parser.add_argument("--join", default="", help="longest join between two dangling ends, px, 0 = off (default: the bundle's)")
     parser.add_argument("--fragments", default="", help="shortest connected piece of the city graph kept, px, 0 = keep all (default: the bundle's)")
     parser.add_argument("--attach-backed", default="", help="farthest line ahead a dangling end joins over backed boundary, px, 0 = off (default: the bundle's)")
+    parser.add_argument("--gate", default="", help="surface gate radius, px, 0 = off (default: the bundle's)")
+    parser.add_argument("--both-sides", default="", help="surface check: poorer-side roadway at which an edge is inside the roadway, 0 = off (default: the bundle's)")
     parser.add_argument("--join-support", type=float, default=None, help="mean boundary probability along a join (default: EndJoinConfig's)")
     parser.add_argument("--join-gap", type=float, default=None, help="longest stretch of a join below its gap level, px (default: EndJoinConfig's)")
     parser.add_argument("--join-turn", type=float, default=None, help="largest turn from an end's heading, degrees (default: EndJoinConfig's)")
@@ -69,7 +71,7 @@ def main() -> None:
     gap_level = predictor.support.gap_level if args.gap_level is None else args.gap_level
     if args.surface_offset is not None:
         predictor.surface = dataclasses.replace(predictor.surface, offset_px=args.surface_offset)
-    print("edge vthr support length gap fill surface weak join  frag attach " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
+    print("edge vthr support length gap fill surface weak join  frag attach gate both " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
 
     def values(arg: str, bundle_value: float) -> list[float]:
         """A comma-separated list from the command line, or the bundle's own setting."""
@@ -82,18 +84,22 @@ def main() -> None:
             for f in values(args.fill, predictor.fill.min_length_px)
             for r in values(args.surface, predictor.surface.strong) for w in values(args.surface_weak, predictor.surface.weak)
             for j in values(args.join, predictor.join.max_px) for m in values(args.fragments, predictor.min_fragment_px)
-            for a in values(args.attach_backed, predictor.join.attach_px)]
-    for edge, vthr, support, length, gap, fill, strong, weak, join, fragment, attach in grid:
+            for a in values(args.attach_backed, predictor.join.attach_px)
+            for gr in values(args.gate, predictor.gate.radius_px) for b in values(args.both_sides, predictor.surface.both_sides)]
+    for edge, vthr, support, length, gap, fill, strong, weak, join, fragment, attach, gate, both in grid:
+        if (gate > 0 or strong > 0) and not predictor.fpn.config.surface:
+            raise SystemExit("the surface check and gate need an FPN with a surface head")
+        predictor.gate = dataclasses.replace(predictor.gate, radius_px=gate)
         predictor.min_fragment_px = fragment
         predictor.join = dataclasses.replace(predictor.join, max_px=join, attach_px=attach)
-        predictor.surface = dataclasses.replace(predictor.surface, strong=strong, weak=weak)
+        predictor.surface = dataclasses.replace(predictor.surface, strong=strong, weak=weak, both_sides=both)
         predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill)
         predictor.edge_threshold = edge
         predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
         predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length,
                                                 max_gap_px=gap, gap_level=gap_level)
         row = score_row(args.sets, predictor)
-        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} {join:4.0f} {fragment:5.0f} {attach:6.0f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
+        print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} {join:4.0f}  {fragment:5.0f} {attach:6.0f} {gate:4.0f} {both:4.2f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 
 
 if __name__ == "__main__":

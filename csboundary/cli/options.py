@@ -48,6 +48,9 @@ EdgeGapOption = Annotated[Optional[float], typer.Option("--max-edge-gap", callba
 SURFACE_HELP = ("Road-surface check: an edge needs this mean road-surface probability beside it, or a connected edge that has it "
                 "(0 = off; default: the weights'; the FPN needs a surface head).")
 SurfaceOption = Annotated[Optional[float], typer.Option("--surface-check", callback=finite, min=0.0, max=1.0, help=SURFACE_HELP)]
+GATE_HELP = ("Surface gate: keypoint and boundary maps are kept only within this many pixels of a change of the road surface "
+             "(roofs, lots and rows of parked cars lose their outlines; 0 = off; default: the weights'; the FPN needs a surface head).")
+GateOption = Annotated[Optional[float], typer.Option("--surface-gate", callback=finite, min=0.0, max=200.0, help=GATE_HELP)]
 FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callback=finite, min=0.0, help=FILL_HELP)]
 JoinOption = Annotated[Optional[float], typer.Option("--join-ends", callback=finite, min=0.0, help=JOIN_HELP)]
 AttachOption = Annotated[Optional[float], typer.Option("--attach-ends", callback=finite, min=0.0, help=ATTACH_HELP)]

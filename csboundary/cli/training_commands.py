@@ -46,6 +46,8 @@ def bundle_weights(
     attach_backed: float = typer.Option(0.0, "--attach-backed", callback=finite, min=0.0, help="Default farthest line ahead of a dangling end of a window's graph it is joined to where the boundary map backs the join, in pixels (0 = off)."),
     surface_check: float = typer.Option(0.0, "--surface-check", callback=finite, min=0.0, max=1.0, help="Default road-surface check: an edge needs this mean surface probability beside it, or a connected edge that has it (0 = off; the FPN needs a surface head)."),
     surface_weak: float = typer.Option(0.2, "--surface-weak", callback=finite, min=0.0, max=1.0, help="Surface check: edges below this are dropped even when connected to a sure one."),
+    surface_both_sides: float = typer.Option(0.0, "--surface-both-sides", callback=finite, min=0.0, max=1.0, help="Surface check: edges with at least this mean road-surface probability on their poorer side lie inside the roadway and are dropped (0 = off)."),
+    surface_gate: float = typer.Option(0.0, "--surface-gate", callback=finite, min=0.0, max=200.0, help="Default surface gate: keypoint and boundary maps kept only within this many pixels of a change of the road surface (0 = off; the FPN needs a surface head)."),
     min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0, help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
     grid_crossings: int = typer.Option(0, min=0, help="Add vertices where the boundary crosses grid lines this far apart (0 = off; 250 = the label grid)."),
     vertex_threshold: float | None = typer.Option(None, callback=finite, min=0.01, max=1.0, help="Keypoint probability of a vertex (default: the one AfANet was trained with, 0.5 unless its config says)."),
@@ -58,5 +60,6 @@ def bundle_weights(
                        crossing_spacing_px=grid_crossings, min_fragment_px=min_fragment_length, vertex_threshold=vertex_threshold,
                        max_gap_px=max_edge_gap, gap_level=gap_level, fill_min_length_px=fill_min_length,
                        surface_strong=surface_check, surface_weak=surface_weak, join_max_px=join_ends,
-                       attach_max_px=attach_ends, join_attach_px=attach_backed)
+                       attach_max_px=attach_ends, join_attach_px=attach_backed, surface_both_sides=surface_both_sides,
+                       surface_gate_px=surface_gate)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")

@@ -62,6 +62,10 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
         settings["precision"] = predictor.precision
     if predictor.surface.active:  # only then: a run interrupted before the check existed still resumes
         settings["surface_check"] = [predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px]
+        if predictor.surface.both_sides > 0:  # likewise
+            settings["surface_both_sides"] = predictor.surface.both_sides
+    if predictor.gate.active:  # likewise
+        settings["surface_gate"] = [predictor.gate.radius_px, predictor.gate.full_change, predictor.gate.min_piece_px]
     with view.mosaic, contextlib.ExitStack() as stack:
         options = {}
         if scheduler or workers:
