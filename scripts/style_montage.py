@@ -18,6 +18,8 @@ from csboundary.data.ground_truth import read_ground_truth
 from evaluate_styles import STYLES, city_dir
 
 
+# the scored styles, then those only drawn here (not in scripts/evaluate_styles.py's tables yet)
+MONTAGE_STYLES = (*STYLES, *(s for s in ("dense",) if s not in STYLES))
 TILE = {"highway": "tile_r00_c01.tif"}  # the seed-7 highway city's interchange lies in its top-right tile
 
 
@@ -40,14 +42,15 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=Path("data/cities"))
     args = parser.parse_args()
     tiles = []
-    for style in STYLES:
+    for style in MONTAGE_STYLES:
         image = crop_with_truth(city_dir(style, args.cache), tile=TILE.get(style, "tile_r00_c00.tif"))
         cv2.putText(image, style, (12, 36), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (0, 0, 0), 5, cv2.LINE_AA)
         cv2.putText(image, style, (12, 36), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (255, 255, 255), 2, cv2.LINE_AA)
         tiles.append(image)
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % 3)  # fill the last row
     rows = [np.hstack(tiles[i:i + 3]) for i in range(0, len(tiles), 3)]
     cv2.imwrite(str(args.out), np.vstack(rows)[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 85])
-    print(f"{args.out}: {len(tiles)} styles")
+    print(f"{args.out}: {len(MONTAGE_STYLES)} styles")
 
 
 if __name__ == "__main__":

@@ -88,13 +88,14 @@ def draw_look(config: SynthConfig, split: str, seed: int) -> CameraLook:
     rng = city_rng(split, seed, 2)
     source = float(rng.uniform(*config.source_gsd)) if config.source_gsd is not None else None
     cast = config.colour_cast
-    return CameraLook(
-        source_gsd=source,
-        haze=float(rng.uniform(*config.haze)),
-        saturation=float(rng.uniform(*config.saturation)),
-        gamma=float(rng.uniform(*config.gamma)),
-        gains=tuple(float(g) for g in (rng.uniform(1 - cast, 1 + cast, 4) if cast else np.ones(4))),  # type: ignore[arg-type]
-    )
+    haze = float(rng.uniform(*config.haze))
+    saturation = float(rng.uniform(*config.saturation))
+    gamma = float(rng.uniform(*config.gamma))
+    gains = tuple(float(g) for g in (rng.uniform(1 - cast, 1 + cast, 4) if cast else np.ones(4)))
+    # drawn after the older fields and only when switched on, so older looks stay the same
+    blur = float(rng.uniform(*config.photo_blur)) if config.photo_blur[1] > 0 else 0.0
+    jpeg = int(rng.integers(config.jpeg_quality[0], config.jpeg_quality[1] + 1)) if config.jpeg_quality[1] > 0 else 0
+    return CameraLook(source_gsd=source, haze=haze, saturation=saturation, gamma=gamma, gains=gains, blur=blur, jpeg=jpeg)  # type: ignore[arg-type]
 
 
 def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]) -> SyntheticCity:

@@ -112,12 +112,26 @@ class SynthConfig(Config):
     pool_share: float = 0.0  # back yards with a swimming pool
     yard_canopy: tuple[float, float] = (0.0, 0.0)  # share of a residential yard under clumped tree crowns
     crown_lobes: int = 5  # lobes per crown; more draws the lumpy, sunlit/shaded crowns of real canopy
+    # dense-urban photo look (style ``dense``): every knob off by default, drawing nothing
+    road_wear_per_km: float = 0.0  # asphalt patches, tar seams, cracks and manholes per km of street
+    car_detail: bool = False  # cars with windshields, rear windows, a lit roof, a short shadow; photo car colours
+    flat_roof_detail: float = 0.0  # flat roofs with a parapet, rooftop units, water tanks, light wells
+    relief_lean: tuple[float, float] = (0.0, 0.0)  # roofs shifted away from their footprints, m per m of height
+    house_depth: tuple[float, float] = (10.0, 24.0)  # depth of a (non-lot) building from its front
+    bare_tree_share: float = 0.0  # trees drawn leafless: a see-through crown of grey-brown branches
+    bus_lane_share: float = 0.0  # avenues (18 m or wider) with a red bus lane or a green bike lane beside the parking lane
+    tree_pits: bool = False  # a soil square at the foot of every street tree
+    court_share: float = 0.0  # parks that are sports fields or courts with painted white lines
+    lot_stalls: bool = False  # parking lots are painted stalls with cars in them, not big buildings
+    photo_texture: float = 0.0  # texture at every scale: stains, blotches, grain, gravel specks (DN)
     # camera look, drawn once per city from its own random stream
     source_gsd: tuple[float, float] | None = None  # sensor pixel size (m), resampled to ``gsd``
     haze: tuple[float, float] = (0.0, 0.0)  # blend towards a bright grey-blue veil
     saturation: tuple[float, float] = (1.0, 1.0)
     gamma: tuple[float, float] = (1.0, 1.0)
     colour_cast: float = 0.0  # +- per-band gain change of the whole city
+    photo_blur: tuple[float, float] = (0.0, 0.0)  # Gaussian blur sigma (px) of the finished tile
+    jpeg_quality: tuple[int, int] = (0, 0)  # JPEG round trip at a quality drawn in this range (0: none)
 
 
 def city_rng(split: str, seed: int, *stream: int) -> np.random.Generator:

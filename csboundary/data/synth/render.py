@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 import shapely
+import shapely.affinity
 from shapely.geometry import Polygon
 
-from csboundary.data.synth.scene import ASPHALT, Scene, Tree
+from csboundary.data.synth.scene import ASPHALT, WINDOW, Scene, Tree
 
 SHIFT = 3  # fixed-point bits for cv2 polygon vertices
 SCALE = 1 << SHIFT
@@ -99,24 +100,109 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
         canvas.fill(item.polygon, item.colour, item.roughness)
     for item in scene.ground:
         canvas.fill(item.polygon, item.colour, item.roughness)
+    if any(car.detail for car in scene.cars):
+        _car_shadows(canvas, scene)
     for car in scene.cars:
-        if canvas.visible(car.body):
+        if canvas.visible(car.body) and car.detail:
+            _draw_detailed_car(canvas, car)
+        elif canvas.visible(car.body):
             canvas.fill(car.body, car.colour, 3)
             canvas.fill(car.cabin, _scaled(car.colour, 0.7), 3)
 
     _cast_shadows(canvas, scene)
-    for b in scene.buildings:
-        if canvas.visible(b.footprint) and b.facets:  # pitched: facets lit by the sun, textured shingles
-            for facet, brightness in b.facets:
-                canvas.fill(facet, _scaled(b.roof, brightness), 9)
-            if b.ridge is not None:
-                canvas.fill(b.ridge, _scaled(b.roof, 1.2), 4)
-        elif canvas.visible(b.footprint):
-            canvas.fill(b.footprint, b.roof, 6)
-            if b.detail is not None:
-                canvas.fill(b.detail, b.detail_colour, 6)
+    if scene.lean != (0.0, 0.0):
+        _draw_leaning_buildings(canvas, scene)
+    else:
+        for b in scene.buildings:
+            if canvas.visible(b.footprint):
+                _draw_roof(canvas, b)
     _draw_trees(canvas, scene, rng)
-    return _finish(canvas, rng, noise_sigma)
+    return _finish(canvas, rng, noise_sigma, scene.texture)
+
+
+def _draw_roof(canvas: _Canvas, b, shift: tuple[float, float] = (0.0, 0.0)) -> None:
+    """A building's roof moved by ``shift`` metres: pitched facets lit by the sun (textured
+    shingles) and a ridge, or a flat roof with its structure, parapet rim and rooftop items."""
+    move = (lambda g: shapely.affinity.translate(g, *shift)) if shift != (0.0, 0.0) else (lambda g: g)
+    if b.facets:
+        for facet, brightness in b.facets:
+            canvas.fill(move(facet), _scaled(b.roof, brightness), 9)
+        if b.ridge is not None:
+            canvas.fill(move(b.ridge), _scaled(b.roof, 1.2), 4)
+        return
+    canvas.fill(move(b.footprint), b.roof, 6)
+    if b.detail is not None:
+        canvas.fill(move(b.detail), b.detail_colour, 6)
+    if b.parapet is not None:  # ``flat_roof_detail``
+        rim = b.footprint.difference(b.footprint.buffer(-b.parapet_width, join_style="mitre"))
+        canvas.fill(move(rim), b.parapet, 4)
+        for item, colour in b.roof_items:
+            canvas.fill(move(item), colour, 5)
+
+
+def _draw_leaning_buildings(canvas: _Canvas, scene: Scene) -> None:
+    """Relief displacement: every roof drawn ``lean * height`` metres from its footprint, over
+    the facade strip between them (the wall seen at an angle). Facades first, then roofs, so an
+    attached neighbour's roof covers the wall it leans over. Roof pixels only; the ground truth
+    never moves."""
+    lx, ly = scene.lean
+    shown = []
+    for b in scene.buildings:
+        shift = (lx * b.height, ly * b.height)
+        if not canvas.visible(b.footprint.buffer(math.hypot(*shift) + 1.0)):
+            continue
+        shown.append((b, shift))
+        base = np.asarray(b.footprint.exterior.coords)
+        hull = shapely.convex_hull(shapely.MultiPoint(np.concatenate([base, base + np.asarray(shift)])))
+        canvas.fill(hull, (96, 80, 70, 80), 8)  # the wall seen at an angle: brick and shade
+    for b, shift in shown:
+        _draw_roof(canvas, b, shift)
+
+
+def _car_axes(car) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Centre, unit front direction, unit side direction, length and width of a car's body."""
+    c = np.asarray(car.body.exterior.coords)[:4]
+    along, across = c[1] - c[0], c[3] - c[0]
+    length, width = float(np.linalg.norm(along)), float(np.linalg.norm(across))
+    return c.mean(axis=0), along / length, across / width, length, width
+
+
+def _band(centre, along, across, a0: float, a1: float, width: float) -> Polygon:
+    """The part of a car between fractions ``a0`` and ``a1`` of its length (0 = rear), ``width`` wide."""
+    return Polygon([centre + along * a0 - across * width / 2, centre + along * a1 - across * width / 2,
+                    centre + along * a1 + across * width / 2, centre + along * a0 + across * width / 2])
+
+
+def _draw_detailed_car(canvas: _Canvas, car) -> None:
+    """A car from above: a darker rim, dark windshield and rear window, a lit roof between them."""
+    c, along, across, length, width = _car_axes(car)
+    rear = c - along * length / 2
+    canvas.fill(car.body, _scaled(car.colour, 0.78), 3)
+    canvas.fill(car.body.buffer(-0.12, join_style="round"), car.colour, 3)
+    if length > 5.8:  # vans and trucks: a long flat roof, a windshield at the front only
+        canvas.fill(_band(rear, along, across, 0.05 * length, 0.8 * length, width * 0.9), _scaled(car.colour, 1.08), 2)
+        canvas.fill(_band(rear, along, across, 0.8 * length, 0.88 * length, width * 0.86), WINDOW, 2)
+        return
+    canvas.fill(_band(rear, along, across, 0.14 * length, 0.27 * length, width * 0.78), WINDOW, 2)
+    canvas.fill(_band(rear, along, across, 0.27 * length, 0.56 * length, width * 0.74), _scaled(car.colour, 1.12), 2)
+    canvas.fill(_band(rear, along, across, 0.34 * length, 0.5 * length, width * 0.4), _scaled(car.colour, 1.22), 2)
+    canvas.fill(_band(rear, along, across, 0.56 * length, 0.72 * length, width * 0.8), WINDOW, 2)
+
+
+def _car_shadows(canvas: _Canvas, scene: Scene) -> None:
+    """Short shadows of detailed cars (1.5 m tall) on the ground away from the sun."""
+    frame = canvas.frame
+    shade = np.zeros(canvas.rough.shape, np.uint8)
+    sx, sy = scene.sun
+    for car in scene.cars:
+        if not car.detail or not canvas.visible(car.body.buffer(3.0)):
+            continue
+        base = np.asarray(car.body.exterior.coords)
+        hull = cv2.convexHull(frame.to_pixels(np.concatenate([base, base + np.array([sx, sy]) * 1.5])))
+        cv2.fillConvexPoly(shade, hull, 255, shift=SHIFT)
+    shade = cv2.GaussianBlur(shade, (0, 0), 1.0)
+    factor = 1.0 - 0.5 * (shade.astype(np.float32) / 255.0)
+    canvas.image[:] = (canvas.image * factor[..., None]).astype(np.uint8)
 
 
 def _scaled(colour, factor: float) -> tuple[int, ...]:
@@ -137,6 +223,8 @@ def _cast_shadows(canvas: _Canvas, scene: Scene) -> None:
         hull = cv2.convexHull(frame.to_pixels(np.concatenate([base, moved])))
         cv2.fillConvexPoly(shade, hull, 255, shift=SHIFT)
     for t in scene.trees:
+        if t.bare:  # leafless crowns cast a faint web, not a disc
+            continue
         cx, cy = t.x + sx * t.radius * 1.5, t.y + sy * t.radius * 1.5
         p = frame.to_pixels(np.array([[cx, cy]]))[0]
         cv2.circle(shade, (int(p[0]), int(p[1])), int(t.radius / frame.gsd * SCALE), 255, -1, shift=SHIFT)
@@ -153,6 +241,9 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
         if t.x + t.radius < x0 or t.x - t.radius > x1 or t.y + t.radius < y0 or t.y - t.radius > y1:
             continue
         local = np.random.default_rng(t.shape_seed)  # crown shape depends on the tree, not the tile
+        if t.bare:
+            _draw_bare_crown(canvas, t, local)
+            continue
         if t.lobes != 5:
             _draw_lobed_crown(canvas, t, local, scene.sun)
             continue
@@ -164,6 +255,38 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             p = frame.to_pixels(np.array([[t.x + off[0], t.y + off[1]]]))[0]
             cv2.circle(canvas.image, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), colour, -1, lineType=cv2.LINE_AA, shift=SHIFT)
             cv2.circle(canvas.rough, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), 22, -1, shift=SHIFT)
+
+
+def _draw_bare_crown(canvas: _Canvas, t: Tree, local: np.random.Generator) -> None:
+    """A leafless crown: the ground seen through a grey-brown veil, dark branches radiating from
+    the trunk and forking (spring imagery of a dense city)."""
+    frame = canvas.frame
+    r_px = t.radius / frame.gsd
+    c = frame.to_pixels(np.array([[t.x, t.y]]))[0] / SCALE
+    x0, y0 = int(max(c[0] - r_px - 2, 0)), int(max(c[1] - r_px - 2, 0))
+    x1, y1 = int(min(c[0] + r_px + 3, frame.size)), int(min(c[1] + r_px + 3, frame.size))
+    if x1 <= x0 or y1 <= y0:
+        return
+    mask = np.zeros((y1 - y0, x1 - x0), np.float32)
+    centre = (c[0] - x0, c[1] - y0)
+    cv2.circle(mask, (int(centre[0] * SCALE), int(centre[1] * SCALE)), int(r_px * SCALE), 0.35, -1, lineType=cv2.LINE_AA, shift=SHIFT)
+    for _ in range(int(local.integers(7, 13))):
+        angle, reach = local.uniform(0, 2 * math.pi), local.uniform(0.6, 1.0) * r_px
+        end = (centre[0] + reach * math.cos(angle), centre[1] + reach * math.sin(angle))
+        pts = [centre, end]
+        for _ in range(2):  # two forks near the tip
+            a2 = angle + local.uniform(-0.7, 0.7)
+            mid = (centre[0] + 0.55 * reach * math.cos(angle), centre[1] + 0.55 * reach * math.sin(angle))
+            pts.append(mid)
+            pts.append((mid[0] + 0.45 * reach * math.cos(a2), mid[1] + 0.45 * reach * math.sin(a2)))
+        for a, b in zip(pts[0::2], pts[1::2]):
+            cv2.line(mask, (int(a[0] * SCALE), int(a[1] * SCALE)), (int(b[0] * SCALE), int(b[1] * SCALE)), 0.8,
+                     max(1, int(0.12 / frame.gsd)), lineType=cv2.LINE_AA, shift=SHIFT)
+    mask = cv2.GaussianBlur(mask, (0, 0), max(0.6, 0.08 / frame.gsd))[..., None]
+    roi = canvas.image[y0:y1, x0:x1].astype(np.float32)
+    colour = np.asarray(t.colour, np.float32)
+    canvas.image[y0:y1, x0:x1] = (roi * (1 - mask) + colour * mask).astype(np.uint8)
+    canvas.rough[y0:y1, x0:x1] = np.maximum(canvas.rough[y0:y1, x0:x1], (mask[..., 0] > 0.3) * 14).astype(np.uint8)
 
 
 def _draw_lobed_crown(canvas: _Canvas, t: Tree, local: np.random.Generator, sun: tuple[float, float]) -> None:
@@ -184,10 +307,12 @@ def _draw_lobed_crown(canvas: _Canvas, t: Tree, local: np.random.Generator, sun:
         cv2.circle(canvas.rough, centre, radius, 26, -1, shift=SHIFT)
 
 
-def _finish(canvas: _Canvas, rng: np.random.Generator, noise_sigma: float) -> np.ndarray:
+def _finish(canvas: _Canvas, rng: np.random.Generator, noise_sigma: float, photo_texture: float = 0.0) -> np.ndarray:
     """Texture, illumination, per-tile colour balance and sensor noise; returns (4, H, W) uint8."""
     size = canvas.frame.size
     texture = _smooth_noise(rng, size, 1.2) * canvas.rough.astype(np.float32)
+    if photo_texture > 0:
+        texture += _photo_texture(canvas, rng, photo_texture)
     light = 1.0 + 0.07 * _smooth_noise(rng, size, size / 12)
     gains = rng.uniform(0.85, 1.12) * rng.uniform(0.94, 1.06, 4)
     out = np.empty((4, size, size), np.uint8)
@@ -200,6 +325,19 @@ def _finish(canvas: _Canvas, rng: np.random.Generator, noise_sigma: float) -> np
         np.clip(plane, 0, 255, out=plane)
         out[band] = plane
     return out
+
+
+def _photo_texture(canvas: _Canvas, rng: np.random.Generator, amplitude: float) -> np.ndarray:
+    """Texture at every scale (``photo_texture``): stains and blotches of 1-20 m, a grain of a
+    few pixels and sparse gravel specks, strongest on rough ground and roofs, weak on cars and
+    paint. Pixel scales are those of the frame (metres / gsd), so a coarse sensor sees the same."""
+    size, gsd = canvas.frame.size, canvas.frame.gsd
+    weight = np.minimum(canvas.rough, 10).astype(np.float32) / 6.0
+    field = (0.9 * _smooth_noise(rng, size, 18.0 / gsd) + 0.7 * _smooth_noise(rng, size, 5.0 / gsd)
+             + 0.5 * _smooth_noise(rng, size, 1.2 / gsd) + 0.35 * _smooth_noise(rng, size, 0.45 / gsd))
+    speck = rng.random((size, size), dtype=np.float32)
+    field += np.where(speck < 0.015, 3.0, 0.0) - np.where(speck > 0.985, 3.0, 0.0)
+    return field * weight * amplitude
 
 
 def _smooth_noise(rng: np.random.Generator, size: int, scale: float) -> np.ndarray:
@@ -224,10 +362,13 @@ class CameraLook:
     saturation: float = 1.0
     gamma: float = 1.0
     gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    blur: float = 0.0  # Gaussian blur sigma (px) of the finished tile
+    jpeg: int = 0  # JPEG round-trip quality (0: none), the compression of real orthophotos
 
     @property
     def is_identity(self) -> bool:
-        return self.haze == 0 and self.saturation == 1 and self.gamma == 1 and self.gains == (1.0, 1.0, 1.0, 1.0)
+        return (self.haze == 0 and self.saturation == 1 and self.gamma == 1 and self.gains == (1.0, 1.0, 1.0, 1.0)
+                and self.blur == 0 and self.jpeg == 0)
 
 
 HAZE_VEIL = np.array([196, 202, 212, 180], np.float32)  # a bright, slightly blue veil (NIR less)
@@ -246,7 +387,26 @@ def apply_look(image: np.ndarray, look: CameraLook) -> np.ndarray:
     x *= np.asarray(look.gains, np.float32)[:, None, None]
     if look.haze:
         x = x * (1 - look.haze) + HAZE_VEIL[:, None, None] * look.haze
-    return np.clip(x, 0, 255).astype(np.uint8)
+    out = np.clip(x, 0, 255).astype(np.uint8)
+    if look.blur > 0:
+        out = np.stack([cv2.GaussianBlur(band, (0, 0), look.blur) for band in out])
+    if look.jpeg > 0:
+        out = jpeg_round_trip(out, look.jpeg)
+    return out
+
+
+def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
+    """(4, H, W) uint8 -> same after JPEG compression (RGB as one colour image, NIR as grey)."""
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
+    bgr = np.ascontiguousarray(image[2::-1].transpose(1, 2, 0))  # OpenCV's colour order
+    ok, buf = cv2.imencode(".jpg", bgr, params)
+    ok2, buf2 = cv2.imencode(".jpg", np.ascontiguousarray(image[3]), params)
+    if not (ok and ok2):
+        raise RuntimeError("JPEG encoding failed")
+    out = np.empty_like(image)
+    out[:3] = cv2.imdecode(buf, cv2.IMREAD_COLOR).transpose(2, 0, 1)[::-1]
+    out[3] = cv2.imdecode(buf2, cv2.IMREAD_GRAYSCALE)
+    return out
 
 
 def resample(image: np.ndarray, size: int) -> np.ndarray:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
+import shapely.affinity
 from shapely.geometry import LineString, Polygon
 from shapely.ops import substring
 
@@ -50,8 +51,17 @@ SIDEWALK_MATERIALS: dict[str, Colour] = {
     "pavers_grey": (141, 139, 134, 126),
     "asphalt_walk": (96, 96, 98, 86),
 }
-ROOF_PALETTES = ("grey", "warm", "dark", "mixed")
+ROOF_PALETTES = ("grey", "warm", "dark", "mixed", "tar")  # tar: flat tar, gravel and membrane roofs
 CROP_COLOURS: tuple[Colour, ...] = ((96, 128, 60, 215), (150, 140, 84, 170), (118, 100, 74, 120), (70, 104, 48, 225), (176, 160, 104, 160))
+# Car colours as seen in dense-city photographs: mostly white, black, silver and grey, a few saturated.
+CAR_PHOTO_COLOURS: tuple[tuple[Colour, float], ...] = (
+    ((232, 233, 230, 200), 0.24), ((28, 29, 33, 30), 0.2), ((178, 181, 185, 150), 0.14), ((105, 108, 114, 95), 0.14),
+    ((52, 58, 70, 55), 0.07), ((150, 32, 32, 70), 0.06), ((32, 58, 118, 60), 0.05), ((120, 96, 70, 90), 0.04),
+    ((225, 190, 45, 160), 0.03), ((60, 96, 60, 80), 0.03),
+)
+WINDOW: Colour = (38, 44, 52, 40)  # windshields and rear windows: dark glass
+TAR_ROOFS: tuple[Colour, ...] = ((120, 120, 118, 108), (64, 64, 66, 58), (212, 214, 212, 190), (186, 186, 182, 165), (158, 150, 138, 140), (92, 90, 88, 80))
+COURTS: tuple[Colour, ...] = ((50, 78, 50, 60), (140, 78, 66, 96), (70, 108, 82, 90), (134, 84, 72, 90))  # turf, then courts: red, green, red
 CAR_COLOURS: tuple[Colour, ...] = (
     (235, 235, 232, 205), (25, 26, 30, 30), (160, 163, 168, 140), (100, 102, 108, 90),
     (150, 30, 30, 70), (35, 55, 120, 60), (40, 70, 50, 70), (225, 185, 40, 160), (200, 200, 205, 175),
@@ -76,6 +86,9 @@ class Building:
     detail_colour: Colour = (0, 0, 0, 0)
     facets: list[tuple[Polygon, float]] = field(default_factory=list)  # pitched roof: facet, brightness factor
     ridge: Polygon | None = None  # pitched roof: the ridge line as a thin strip
+    parapet: Colour | None = None  # flat roof: a rim of this colour, ``parapet_width`` wide, along the outline
+    parapet_width: float = 0.0
+    roof_items: list[tuple[Polygon, Colour]] = field(default_factory=list)  # units, tanks, wells and their shadows
 
 
 @dataclass
@@ -86,6 +99,7 @@ class Tree:
     colour: Colour
     shape_seed: int = 0
     lobes: int = 5  # crown lobes (render: 5 = simple crown, more = lobes lit from the sun's side)
+    bare: bool = False  # leafless: branches over a see-through crown (``bare_tree_share``)
 
 
 @dataclass
@@ -93,6 +107,7 @@ class Car:
     body: Polygon
     colour: Colour
     cabin: Polygon
+    detail: bool = False  # drawn with windows, a lit roof and a shadow (``car_detail``)
 
 
 @dataclass
@@ -105,6 +120,8 @@ class Scene:
     trees: list[Tree] = field(default_factory=list)
     sun: tuple[float, float] = (0.5, -0.3)  # shadow offset per metre of height (x, y)
     road: Colour = ASPHALT  # the roadway's material, painted under everything
+    lean: tuple[float, float] = (0.0, 0.0)  # relief displacement of roofs, metres per metre of height (x, y)
+    texture: float = 0.0  # ``photo_texture``: amplitude of the texture at every scale
 
 
 def _jitter(rng: np.random.Generator, colour: Colour, amount: float) -> Colour:
@@ -154,6 +171,12 @@ def build_scene(cfg: SynthConfig, rng: np.random.Generator, network: StreetNetwo
         sidewalk_colour = SIDEWALK_MATERIALS[cfg.sidewalk_materials[int(rng.integers(len(cfg.sidewalk_materials)))]]
     roadway = network.roadway
     shapely.prepare(roadway)
+    scene.texture = cfg.photo_texture
+    if cfg.relief_lean[1] > 0:
+        lean_angle, lean = rng.uniform(0, 2 * math.pi), rng.uniform(*cfg.relief_lean)
+        scene.lean = (lean * math.cos(lean_angle), lean * math.sin(lean_angle))
+    if cfg.road_wear_per_km > 0:
+        _add_road_wear(cfg, rng, scene)
     _add_markings(cfg, rng, scene)
     for polygon in network.islands + network.medians:
         scene.ground.append(Painted(polygon, _jitter(rng, CONCRETE, 0.05), 5))
@@ -169,6 +192,11 @@ def build_scene(cfg: SynthConfig, rng: np.random.Generator, network: StreetNetwo
     for block in network.blocks:
         _populate_block(cfg, rng, scene, block.polygon, roadway, sidewalk_colour)
     _add_moving_cars(cfg, rng, scene)
+    if cfg.bare_tree_share > 0:
+        for tree in scene.trees:
+            if rng.random() < cfg.bare_tree_share:
+                tree.bare = True
+                tree.colour = _jitter(rng, (112, 100, 88, 110), 0.12)
     return scene
 
 
@@ -238,8 +266,13 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
             if kind == "residential" and rng_share(rng, cfg.paved_yard_share):
                 ground = _jitter(rng, CONCRETE if rng.random() < 0.5 else PARKING, 0.1)
             scene.ground.append(Painted(part, _jitter(rng, ground, 0.08), 14 if ground in (GRASS, SOIL) else 6))  # type: ignore[arg-type]
-            if kind == "park":
+            if kind == "park" and rng_share(rng, cfg.court_share):
+                _add_court(rng, scene, part)
+                _add_trees_in(rng, scene, part.difference(part.buffer(-3.0)), density=0.01)
+            elif kind == "park":
                 _add_trees_in(rng, scene, part, density=rng.uniform(0.004, 0.012))
+            elif kind == "lot" and cfg.lot_stalls:
+                _add_stalls(cfg, rng, scene, part)
             else:
                 _add_buildings(cfg, rng, scene, part, kind, driveways, block, sidewalk)
                 if kind == "residential":
@@ -257,21 +290,28 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
             if rng.random() < density:
                 c = p + left * max(sidewalk, 2.0) * rng.uniform(*cfg.street_tree_setback)
                 scene.trees.append(_tree(rng, c[0], c[1], rng.uniform(*cfg.street_tree_radius), cfg.crown_lobes))
+                if cfg.tree_pits:
+                    pit = _centred_rect(c, d, rng.uniform(1.2, 1.8), rng.uniform(1.1, 1.5)).intersection(block)
+                    scene.ground.append(Painted(pit, _jitter(rng, (88, 76, 62, 110), 0.12), 16))
 
     # Parked cars along the curb, on the road side.
     occupancy = rng.uniform(*cfg.parked_car_occupancy)
     for p, d, left in _frontage(ring, lambda: cfg.parked_car_spacing * rng.uniform(0.95, 1.15)):
         if rng.random() < occupancy:
             centre = p - left * rng.uniform(1.15, 1.5)
-            car = _car(rng, centre, d)
+            car = _car(rng, centre, d, cfg.car_detail)
             if roadway.contains(car.body):
                 scene.cars.append(car)
 
 
-def _car(rng: np.random.Generator, centre: np.ndarray, direction: np.ndarray) -> Car:
+def _car(rng: np.random.Generator, centre: np.ndarray, direction: np.ndarray, detail: bool = False) -> Car:
     length, width = rng.uniform(4.2, 5.2), rng.uniform(1.75, 2.0)
     if rng.random() < 0.06:  # vans and trucks
         length, width = rng.uniform(6.0, 9.0), rng.uniform(2.2, 2.5)
+    if detail:
+        weights = np.array([w for _, w in CAR_PHOTO_COLOURS])
+        colour = _jitter(rng, CAR_PHOTO_COLOURS[int(rng.choice(len(weights), p=weights / weights.sum()))][0], 0.06)
+        return Car(_centred_rect(centre, direction, length, width), colour, _centred_rect(centre, direction, length * 0.5, width * 0.8), True)
     colour = _jitter(rng, CAR_COLOURS[rng.integers(len(CAR_COLOURS))], 0.05)
     cabin_colour_centre = centre + direction * rng.uniform(-0.3, 0.1) * length
     return Car(_centred_rect(centre, direction, length, width), colour, _centred_rect(cabin_colour_centre, direction, length * 0.5, width * 0.8))
@@ -388,7 +428,7 @@ def _yard(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, yard: dict[s
         paving = paving.intersection(block) if block is not None else paving.intersection(area)
         yard["paved"].append(Painted(paving, _jitter(rng, DRIVEWAYS[int(rng.integers(len(DRIVEWAYS)))], 0.08), 5))
         if setback > 5.5 and rng.random() < 0.4:
-            scene.cars.append(_car(rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left))
+            scene.cars.append(_car(rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left, cfg.car_detail))
 
 
 def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon, kind: str, keep_clear: list[Polygon],
@@ -416,7 +456,7 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
         t = rng.uniform(0.5, 3.0)
         while t < length:
             w = rng.uniform(15, 40) if wide else rng.uniform(*cfg.house_width)
-            depth = rng.uniform(15, 35) if wide else rng.uniform(10, 24)
+            depth = rng.uniform(15, 35) if wide else rng.uniform(*cfg.house_depth)
             setback = rng.uniform(8, 25) if wide else rng.uniform(*cfg.house_setback)
             t0, fw = t, min(w, length - t)
             footprint = _rect(a + d * t + left * setback, d, left, fw, depth)
@@ -429,7 +469,7 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
             if cfg.building_share < 1 and rng.random() >= cfg.building_share:
                 continue
             placed.append(footprint)
-            roof = _roof(rng, cfg.roof_palette)
+            roof = _roof(rng, cfg.roof_palette) if cfg.roof_palette != "tar" else _jitter(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))], 0.1)
             height = rng.uniform(8, 40) if wide else rng.uniform(*cfg.house_height)
             if rng_share(rng, cfg.tower_share):
                 height = rng.uniform(*cfg.tower_height)
@@ -440,6 +480,8 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
                 c = np.array(footprint.centroid.coords[0]) + rng.uniform(-0.2, 0.2, 2) * min(w, depth)
                 building.detail = _centred_rect(c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35))
                 building.detail_colour = _jitter(rng, roof, 0.3)  # type: ignore[arg-type]
+            if not building.facets and rng_share(rng, cfg.flat_roof_detail):
+                _roof_details(rng, building, d, scene.sun)
             scene.buildings.append(building)
             if not wide:
                 _yard(cfg, rng, scene, yard, a + d * t0, d, left, fw, gap, setback, depth, front, block, area)
@@ -458,10 +500,27 @@ def _add_markings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> N
         for piece in pieces:
             if piece.length < 6:
                 continue
+            if s.width >= 18 and s.kind in ("avenue", "boulevard") and rng_share(rng, cfg.bus_lane_share):
+                _bus_or_bike_lane(rng, scene, s, piece)
             _lane_lines(cfg, rng, scene, s, piece)
             for at_end in (False, True):
                 if s.kind not in ("highway", "ramp") and rng.random() < cfg.crosswalk_share and piece.length > 20:
                     _crosswalk(rng, scene, piece, s.width, at_end)
+
+
+def _bus_or_bike_lane(rng: np.random.Generator, scene: Scene, street, piece: LineString) -> None:
+    """A red bus lane (3.4 m) or a green bike lane (1.8 m, white edge lines) on one or both
+    sides, just beyond the parking lane (2.5 m from the curb): paint, not a boundary."""
+    bus = rng.random() < 0.6
+    width, colour = (3.4, (150, 72, 62, 80)) if bus else (1.8, (72, 128, 84, 90))
+    sides = (-1, 1) if rng.random() < 0.4 else (int(rng.choice([-1, 1])),)
+    for side in sides:
+        for line in _offset(piece, side * (street.width / 2 - 2.5 - width / 2)):
+            scene.markings.append(Painted(line.buffer(width / 2, cap_style="flat"), _jitter(rng, colour, 0.1), 5))
+            if not bus:
+                for edge in (-1, 1):
+                    for e in _offset(line, edge * width / 2):
+                        scene.markings.append(Painted(e.buffer(0.08, cap_style="flat"), WHITE_PAINT, 3))
 
 
 def _offset(line: LineString, distance: float) -> list[LineString]:
@@ -543,6 +602,162 @@ def _add_moving_cars(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -
             d = (q - p) / np.linalg.norm(q - p)
             side = rng.choice([-1, 1]) * (s.median / 2 + rng.uniform(1.8, max(2.0, s.width / 2 - s.median / 2 - 3.0)))
             centre = p + np.array([-d[1], d[0]]) * side
-            car = _car(rng, centre, d if side > 0 else -d)
+            car = _car(rng, centre, d if side > 0 else -d, cfg.car_detail)
             if roadway.contains(car.body) and not any(car.body.intersects(c.body) for c in scene.cars[-30:]):
                 scene.cars.append(car)
+
+
+def _roof_details(rng: np.random.Generator, b: Building, d: np.ndarray, sun: tuple[float, float]) -> None:
+    """A flat roof as photographed: a parapet rim, a light well or two, rooftop units and a water
+    tank on the taller ones, each item with its short shadow on the roof (``flat_roof_detail``)."""
+    roof = b.roof
+    b.parapet = _scaled_colour(roof, 1.3 if rng.random() < 0.5 else 0.72)
+    b.parapet_width = float(rng.uniform(0.3, 0.6))
+    inner = b.footprint.buffer(-1.2)
+    if inner.is_empty:
+        return
+    minx, miny, maxx, maxy = inner.bounds
+    sun_v = np.asarray(sun, float)
+
+    def spot():
+        for _ in range(6):
+            p = rng.uniform((minx, miny), (maxx, maxy))
+            if inner.contains(shapely.Point(p)):
+                return p
+        return None
+
+    for _ in range(int(rng.integers(0, 4))):  # patches of newer or older roofing
+        p = spot()
+        if p is not None:
+            patch = _centred_rect(p, d, rng.uniform(3.0, 12.0), rng.uniform(3.0, 10.0)).intersection(inner)
+            b.roof_items.append((patch, _scaled_colour(roof, rng.uniform(0.75, 1.25))))
+    if rng.random() < 0.45:  # light well / courtyard: a small dark shaft
+        p = spot()
+        if p is not None:
+            well = _centred_rect(p, d, rng.uniform(2.0, 4.5), rng.uniform(1.5, 3.5)).intersection(inner)
+            b.roof_items.append((well, _jitter(rng, (34, 34, 36, 30), 0.15)))
+    for _ in range(int(rng.poisson(min(b.footprint.area / 120.0, 6.0)))):
+        p = spot()
+        if p is None:
+            continue
+        unit = _centred_rect(p, d, rng.uniform(0.8, 3.0), rng.uniform(0.8, 2.2))
+        tall = rng.uniform(0.6, 2.0)
+        b.roof_items.append((shapely.affinity.translate(unit, *(sun_v * tall)).intersection(b.footprint), _scaled_colour(roof, 0.5)))
+        b.roof_items.append((unit, _jitter(rng, (188, 190, 192, 170) if rng.random() < 0.7 else (120, 122, 126, 110), 0.1)))
+    if b.height > 14 and rng.random() < 0.3:  # a timber water tank on its stand
+        p = spot()
+        if p is not None:
+            r = rng.uniform(1.4, 2.4)
+            tank = shapely.Point(p).buffer(r, quad_segs=6)
+            b.roof_items.append((shapely.affinity.translate(tank, *(sun_v * 5.0)).intersection(b.footprint), _scaled_colour(roof, 0.45)))
+            b.roof_items.append((tank, _jitter(rng, (118, 100, 82, 100), 0.12)))
+            b.roof_items.append((shapely.Point(p).buffer(r * 0.55, quad_segs=6), _jitter(rng, (96, 82, 68, 80), 0.1)))
+
+
+def _scaled_colour(colour: Colour, factor: float) -> Colour:
+    return tuple(int(np.clip(c * factor, 0, 255)) for c in colour)  # type: ignore[return-value]
+
+
+def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:
+    """Asphalt patches of another shade, dark tar seams and cracks and manhole covers on the
+    roadway (``road_wear_per_km``), painted first so lane paint lies on them and curbs clip them."""
+    road = scene.road
+    for s in scene.network.streets:
+        line = s.centreline
+        for t in rng.uniform(0, line.length, rng.poisson(line.length / 1000 * cfg.road_wear_per_km)):
+            p = np.array(line.interpolate(t).coords[0])
+            q = np.array(line.interpolate(min(t + 1.0, line.length)).coords[0])
+            if np.linalg.norm(q - p) < 1e-6:
+                continue
+            d = (q - p) / np.linalg.norm(q - p)
+            n = np.array([-d[1], d[0]])
+            off = rng.uniform(-0.5, 0.5) * s.width
+            u = rng.random()
+            if u < 0.35:  # a patch of newer or older asphalt (a utility cut, a resurfaced lane)
+                patch = _centred_rect(p + n * off, d, rng.uniform(2.0, 25.0), rng.uniform(1.0, max(1.2, s.width / 2)))
+                scene.markings.append(Painted(patch, _scaled_colour(road, rng.uniform(0.7, 1.3)), int(rng.integers(3, 8))))
+            elif u < 0.8:  # a crack or tar seam: a thin dark wandering line
+                pts = [p + n * off]
+                heading = d * rng.choice([-1, 1]) if rng.random() < 0.6 else n
+                for _ in range(int(rng.integers(3, 12))):
+                    heading = heading + rng.normal(0, 0.35, 2)
+                    heading /= np.linalg.norm(heading)
+                    pts.append(pts[-1] + heading * rng.uniform(0.8, 3.0))
+                seam = LineString(pts).buffer(rng.uniform(0.03, 0.08), cap_style="flat")
+                scene.markings.append(Painted(seam, _scaled_colour(road, rng.uniform(0.65, 0.85)), 2))
+            elif u < 0.9:  # a long seam between paving passes
+                seam = _centred_rect(p + n * off, d, rng.uniform(15.0, 60.0), rng.uniform(0.1, 0.25))
+                scene.markings.append(Painted(seam, _scaled_colour(road, rng.uniform(0.45, 0.7)), 2))
+            else:  # a manhole cover
+                scene.markings.append(Painted(shapely.Point(p + n * off).buffer(0.35, quad_segs=4), _scaled_colour(road, rng.uniform(0.5, 0.8)), 3))
+
+
+def _axes(area: Polygon) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Centre, long and short unit axes and their lengths of ``area``'s minimum rotated rectangle."""
+    box = np.asarray(area.minimum_rotated_rectangle.exterior.coords)[:4]
+    e1, e2 = box[1] - box[0], box[2] - box[1]
+    if np.linalg.norm(e1) < np.linalg.norm(e2):
+        e1, e2 = e2, e1
+    c = box.mean(axis=0)
+    return c, e1 / np.linalg.norm(e1), e2 / np.linalg.norm(e2), float(np.linalg.norm(e1)), float(np.linalg.norm(e2))
+
+
+def _add_court(rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
+    """A schoolyard or park as a sports field or a grid of courts: paving, turf or red/green
+    courts and their white lines (outline, halfway line, centre circle, boxes). Painted, never a
+    road boundary."""
+    scene.ground.append(Painted(area, _jitter(rng, (128, 124, 118, 110) if rng.random() < 0.6 else PARKING, 0.08), 8))
+    c, u, v, lu, lv = _axes(area)
+    margin = rng.uniform(2.0, 6.0)
+    lu, lv = lu - 2 * margin, lv - 2 * margin
+    if lu < 12 or lv < 8:
+        return
+    if rng.random() < 0.4 and lu > 50 and lv > 30:  # one turf field
+        courts = [(c, min(lu, 105.0), min(lv, 68.0), COURTS[0])]
+    else:  # a grid of basketball / handball courts, one surface colour for the yard
+        length, width = rng.uniform(24.0, 30.0), rng.uniform(13.0, 16.0)
+        colour = COURTS[int(rng.integers(1, len(COURTS)))]
+        nu, nv = max(1, int(lu // (length + 2.0))), max(1, int(lv // (width + 2.0)))
+        courts = [(c + u * (i - (nu - 1) / 2) * (length + 2.0) + v * (j - (nv - 1) / 2) * (width + 2.0), length, width, colour)
+                  for i in range(nu) for j in range(nv)]
+    for centre, length, width, colour in courts:
+        court = _centred_rect(centre, u, length, width).intersection(area)
+        if court.is_empty or court.area < 50:
+            continue
+        scene.ground.append(Painted(court, _jitter(rng, colour, 0.08), 7))
+        inset = _centred_rect(centre, u, length - 1.0, width - 1.0)
+        lines = [inset.exterior, LineString([centre - v * (width / 2 - 0.5), centre + v * (width / 2 - 0.5)]),
+                 shapely.Point(centre).buffer(min(width, length) * 0.13).exterior]
+        for side in (-1, 1):  # goal boxes or keys at both ends
+            end = centre + u * side * (length / 2 - 0.5)
+            lines.append(LineString([end - v * width * 0.2, end - v * width * 0.2 - u * side * length * 0.14,
+                                     end + v * width * 0.2 - u * side * length * 0.14, end + v * width * 0.2]))
+        for line in lines:
+            scene.ground.append(Painted(line.buffer(0.07).intersection(area), WHITE_PAINT, 3))
+
+
+def _add_stalls(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
+    """A parking lot of painted stalls in double rows along the lot's long axis, cars in some of
+    them (``lot_stalls``). The lot's outline and its paint are not road boundaries."""
+    c, u, v, lu, lv = _axes(area)
+    inner = area.buffer(-1.0)
+    if inner.is_empty:
+        return
+    shapely.prepare(inner)
+    occupancy = rng.uniform(0.3, 0.95)
+    stall, depth, aisle = rng.uniform(2.5, 2.8), 5.0, rng.uniform(6.5, 7.5)
+    lines, cars = [], []
+    for r0 in np.arange(-lv / 2 + 1.0, lv / 2 - depth, 2 * depth + aisle):
+        for s0 in np.arange(-lu / 2 + 1.0, lu / 2 - stall, stall):
+            for row in (r0, r0 + depth) if r0 + 2 * depth < lv / 2 else (r0,):
+                base = c + u * s0 + v * row
+                lines.append(LineString([base, base + v * depth]))
+                if rng.random() < occupancy:
+                    cars.append((base + u * stall / 2 + v * depth / 2, v))
+    for line in lines:
+        if inner.contains(line):
+            scene.ground.append(Painted(line.buffer(0.06, cap_style="flat"), WHITE_PAINT, 3))
+    for centre, d in cars:
+        car = _car(rng, centre, d, cfg.car_detail)
+        if inner.contains(car.body):
+            scene.cars.append(car)
