@@ -63,3 +63,28 @@ def test_the_gate_is_nonzero_exactly_within_radius_of_a_curb(top, width, radius)
     distance = np.minimum(np.abs(rows - (top - 0.5)), np.abs(rows - (top + width - 0.5)))  # to the nearest curb line
     expected = distance < radius + 0.5
     assert np.array_equal(gate[:, 100] > 0, expected)
+
+
+def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_the_surface(tmp_path):
+    import torch
+
+    from csboundary.errors import InputError
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from helpers import shipped_parts
+
+    fpn_path, afanet_path = shipped_parts(tmp_path)
+    make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", surface_strong=0.5, surface_both_sides=0.7, surface_gate_px=8)
+    predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
+    assert predictor.gate.radius_px == 8.0 and predictor.surface.both_sides == 0.7
+    # the gate alone needs the surface channel: it is carried with the check off
+    gated = load_predictor(tmp_path / "b.pt", "cpu", surface_check=0, engine="torch")
+    assert not gated.surface.active and gated.gate.active
+    assert gated.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
+    assert not load_predictor(tmp_path / "b.pt", "cpu", surface_gate=0, engine="torch").gate.active
+    shipped = load_checkpoint(fpn_path, ("fpn",))
+    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}
+    save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
+    with pytest.raises(InputError, match="surface head"):
+        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_gate_px=8)
