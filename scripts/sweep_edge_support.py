@@ -78,7 +78,7 @@ def main() -> None:
         return [float(v) for v in arg.split(",")] if arg else [float(bundle_value)]
 
     support = predictor.support
-    grid = [(e, t, s, n, g, f, r, w, j, m, a) for e in values(args.edge_threshold, predictor.edge_threshold)
+    grid = [(e, t, s, n, g, f, r, w, j, m, a, gr, b) for e in values(args.edge_threshold, predictor.edge_threshold)
             for t in values(args.vertex_threshold, predictor.vertices.threshold) for s in values(args.support, support.min_support)
             for n in values(args.length, support.max_length_px) for g in values(args.gap, support.max_gap_px)
             for f in values(args.fill, predictor.fill.min_length_px)

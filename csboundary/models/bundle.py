@@ -32,7 +32,7 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
     resampled to it)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet", "bundle"))
-    keys = ("code_version", "code_version_at_start", "train_config", "step", "validation")
+    keys = ("code_version", "code_version_at_start", "train_config", "step", "validation", "interpolation")
     if afanet["kind"] == "bundle":  # a bundle's AfANet, with the provenance that bundle recorded for it
         afanet = {"afanet": afanet["afanet"], "afanet_config": afanet["afanet_config"], **afanet["provenance"]["afanet"]}
     provenance = {name: {k: payload.get(k) for k in keys} for name, payload in (("fpn", fpn), ("afanet", afanet))}
