@@ -22,9 +22,9 @@ from csboundary.models.onnx_engine import WINDOW
 
 # the styles of the shipped FPN's training mix (csboundary/weights/fpn-config.json): calibration
 # sees each once, so no activation range is set by one kind of city alone
-CALIBRATION_STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential", "leafy")
+CALIBRATION_STYLES = ("classic", "grid", "downtown", "suburb", "rural", "irregular", "residential", "leafy", "dense")
 CALIBRATION_SEED = 0  # training-split city of each style; the windows are the same on every machine
-QUANTIZATION_VERSION = 1  # in the cached file's name: bump when the calibration or the settings change
+QUANTIZATION_VERSION = 2  # in the cached file's name: bump when the calibration or the settings change
 
 
 def calibration_windows(styles: tuple[str, ...] | None = None, seed: int = CALIBRATION_SEED) -> list[np.ndarray]:

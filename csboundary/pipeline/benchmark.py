@@ -83,9 +83,9 @@ def _baseline(method: str):
 METHODS = [
     Method("OrientationRefine", "orientation-refine", "segmentation", _baseline("orientation-refine"), ["baselines/orientation-refine-train.log"]),
     # Sat2Graph's vertices and iCurb's segmentation input come from csBoundary's FPN: its training counts too
-    Method("Sat2Graph", "sat2graph", "graph generation", _baseline("sat2graph"), ["fpn-train.log", "baselines/sat2graph-train.log"]),
-    Method("Enhanced-iCurb", "icurb", "iterative", _baseline("icurb"), ["fpn-train.log", "baselines/icurb-train.log"]),
-    Method("csBoundary", "csboundary", "graph generation (ours)", _csboundary, ["fpn-train.log", "afanet-train.log"]),
+    Method("Sat2Graph", "sat2graph", "graph generation", _baseline("sat2graph"), ["start-fpn-train.log", "start-surface-train.log", "fpn-train.log", "baselines/sat2graph-train.log"]),
+    Method("Enhanced-iCurb", "icurb", "iterative", _baseline("icurb"), ["start-fpn-train.log", "start-surface-train.log", "fpn-train.log", "baselines/icurb-train.log"]),
+    Method("csBoundary", "csboundary", "graph generation (ours)", _csboundary, ["start-fpn-train.log", "start-surface-train.log", "fpn-train.log", "afanet-train.log"]),
     Method("csBoundary (ablation budget)", "ablation-full", "ablation", _ablation("ablation-full"), ["ablation/fpn-first-train.log", "ablation/afanet-ablation-full-train.log"], "ablation"),
     Method("csBoundary w/o global feature", "no-global", "ablation", _ablation("no-global"), ["ablation/fpn-first-train.log", "ablation/afanet-no-global-train.log"], "ablation"),
     Method("csBoundary w/o local feature", "no-local", "ablation", _ablation("no-local"), ["ablation/fpn-first-train.log", "ablation/afanet-no-local-train.log"], "ablation"),
