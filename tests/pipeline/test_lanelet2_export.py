@@ -44,7 +44,21 @@ def test_the_demo_city_round_trips_through_lanelet2(demo):
             assert line[0].id == line[len(line) - 1].id  # a loop is a closed linestring, not two points that coincide
         assert float(line.attributes["confidence"]) == pytest.approx(row.confidence_mean, abs=1e-4)
     assert worst < 0.01  # metres
-    assert closed >= 1
+
+
+def test_a_closed_boundary_is_a_closed_linestring(tmp_path):
+    # a traffic island: four vertices joined in a ring, in UTM metres
+    from rasterio.transform import Affine
+
+    ring = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 30.0], [0.0, 30.0]])
+    graph = BoundaryGraph(ring, [[0, 1], [1, 2], [2, 3], [3, 0]])
+    graph.transform, graph.crs = Affine(0.5, 0, 583000.0, 0, -0.5, 4507000.0), "EPSG:32618"
+    write_lanelet2(graph, tmp_path / "m.osm")
+    projector = projector_for(read_origin(tmp_path / "map_projector_info.yaml"))
+    borders = [ls for ls in lanelet2.io.load(str(tmp_path / "m.osm"), projector).lineStringLayer if ls.attributes["type"] == "road_border"]
+    assert len(borders) == 1
+    line = borders[0]
+    assert len(line) == 5 and line[0].id == line[len(line) - 1].id  # closed by its first point, not by a second point on top of it
 
 
 def test_export_lanelet2_writes_the_same_map_from_a_prediction_folder(demo, tmp_path):
