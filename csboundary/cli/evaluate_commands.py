@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
+from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, ConfidenceOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, readable_inputs)
 
 
@@ -78,6 +78,7 @@ def evaluate_model(
     surface_check: SurfaceOption = None,
     surface_gate: GateOption = None,
     min_fragment_length: FragmentOption = None,
+    min_confidence: ConfidenceOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "float32",
@@ -94,7 +95,7 @@ def evaluate_model(
     from csboundary.pipeline.patch import load_predictor
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, engine=engine, precision=precision)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
     scores = evaluate_city(city, predictor, seed, batch_size=batch_size, progress=not quiet)
     for item in scores.values():
         item["inputs"]["pred"] = f"{weights or 'shipped weights'} on {city}"
@@ -119,6 +120,7 @@ def evaluate_set_cmd(
     surface_check: SurfaceOption = None,
     surface_gate: GateOption = None,
     min_fragment_length: FragmentOption = None,
+    min_confidence: ConfidenceOption = None,
     engine: EngineOption = "auto",
     precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
@@ -133,7 +135,7 @@ def evaluate_set_cmd(
     if json_out is not None:
         out_file(json_out, (".json",))
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, engine=engine, precision=precision)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
     result = evaluate_set(set_dir, predictor, seed=seed, progress=not quiet)
     result["weights"] = str(weights or "shipped")
     typer.echo(format_set(result))

@@ -41,6 +41,7 @@ COMMANDS = (  # (name, function)
     ("show", data_commands.show),
     ("train", training_commands.train),
     ("bundle-weights", training_commands.bundle_weights),
+    ("fit-confidence", training_commands.fit_confidence),
 )
 for _name, _command in COMMANDS:
     app.command(_name)(_command)

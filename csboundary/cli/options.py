@@ -55,6 +55,9 @@ FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callba
 JoinOption = Annotated[Optional[float], typer.Option("--join-ends", callback=finite, min=0.0, help=JOIN_HELP)]
 AttachOption = Annotated[Optional[float], typer.Option("--attach-ends", callback=finite, min=0.0, help=ATTACH_HELP)]
 AttachBackedOption = Annotated[Optional[float], typer.Option("--attach-backed", callback=finite, min=0.0, help=ATTACH_BACKED_HELP)]
+CONFIDENCE_HELP = ("Drop the city graph's edges whose confidence (the calibrated probability that an edge is a true boundary) is "
+                   "below this (0 = keep all; docs/confidence.md shows precision and recall against it).")
+ConfidenceOption = Annotated[Optional[float], typer.Option("--min-confidence", callback=finite, min=0.0, max=1.0, help=CONFIDENCE_HELP)]
 FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
 EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
 PrecisionOption = Annotated[str, typer.Option(help=PRECISION_HELP)]

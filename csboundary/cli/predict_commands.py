@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
+from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, ConfidenceOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, readable_inputs)
 
 
@@ -27,6 +27,7 @@ def predict(
     surface_check: SurfaceOption = None,
     surface_gate: GateOption = None,
     min_fragment_length: FragmentOption = None,
+    min_confidence: ConfidenceOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
@@ -54,7 +55,7 @@ def predict(
     from csboundary.pipeline.run import stage_table
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, engine=engine, precision=precision)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
@@ -83,6 +84,7 @@ def predict_patch(
     surface_check: SurfaceOption = None,
     surface_gate: GateOption = None,
     min_fragment_length: FragmentOption = None,
+    min_confidence: ConfidenceOption = None,
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
     engine: EngineOption = "auto",
@@ -98,7 +100,7 @@ def predict_patch(
     from csboundary.pipeline.predict import predict_patch_to_folder
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine, precision=precision)
+                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine, precision=precision)
     graph = predict_patch_to_folder(image, out, predictor, gsd)
     kinds = graph.edge_kinds or []
     typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({kinds.count('corner')} corner, "

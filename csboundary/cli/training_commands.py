@@ -63,3 +63,38 @@ def bundle_weights(
                        attach_max_px=attach_ends, join_attach_px=attach_backed, surface_both_sides=surface_both_sides,
                        surface_gate_px=surface_gate)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
+
+
+def fit_confidence(
+    cities: list[Path] = typer.Argument(..., help="Labelled city directories (synth, make-city, import-masks), or folders of them."),
+    out: Path = typer.Option(..., "--out", help="Bundle to write: the weights with the fitted edge confidence."),
+    weights: Optional[Path] = typer.Option(None, help="Weights bundle whose predictions are scored (default: the shipped one)."),
+    seed: int = typer.Option(0, min=0, help="Seed of the trees' row sampling."),
+    trees: int = typer.Option(200, min=1, max=5000, help="Boosted trees."),
+    depth: int = typer.Option(3, min=1, max=8, help="Depth of each tree."),
+    assume_model_gsd: bool = typer.Option(False, "--assume-model-gsd", help="Imagery without a pixel size is at the model's (imported crops)."),
+    engine: str = typer.Option("auto", help="auto | torch | onnx."),
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
+) -> None:
+    """Fit the edge confidence, the calibrated probability that an edge is a true boundary, on
+    labelled cities predicted with WEIGHTS, and write it into a copy of the bundle
+    (docs/confidence.md). Fit on cities the networks never trained on."""
+    from csboundary.data import city as layout
+    from csboundary.metrics.confidence import confidence_report
+    from csboundary.pipeline.confidence_fit import fit_bundle_confidence
+    from csboundary.pipeline.evaluate_set import set_cities
+    from csboundary.pipeline.patch import load_predictor
+    from csboundary.models.checkpoint import shipped_weights
+
+    out_file(out, (".pt",))
+    found: list[Path] = []
+    for path in cities:
+        found += [path] if layout.is_city_dir(path) else set_cities(path)
+    source = weights or shipped_weights()
+    predictor = load_predictor(source, device, engine=engine)
+    model, per_city = fit_bundle_confidence(found, source, out, predictor, seed=seed, progress=not quiet, n_trees=trees, depth=depth)
+    for c in per_city:
+        r = confidence_report(model.probability(c.evidence), c.truth_share, c.graph.edge_lengths())
+        typer.echo(f"{c.name}: {r['edges']} edges, {r['share_true']:.2f} true, AUC {r['auc']:.3f}, ECE {r['ece']:.3f} (fitted on)")
+    typer.echo(f"{out}: edge confidence of {model.n_trees} trees over {len(model.features)} features, from {len(per_city)} cities")

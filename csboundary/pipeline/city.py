@@ -47,6 +47,8 @@ from csboundary.graph.stitching import (
     stitch_patch_graphs,
     to_mosaic,
 )
+from csboundary.graph.edge_evidence import edge_evidence
+from csboundary.pipeline.edge_confidence import core_sampler, scored_graph
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
 from csboundary.pipeline.run_store import RunStore
 from csboundary.viz.overlay import core_thumbnail
@@ -58,7 +60,7 @@ GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow 
 # values as megabytes): 128 gave a 128-byte cache, so every window decoded its compressed blocks
 # again (an overlapped window read took 30 ms instead of 1-2 ms; tests/pipeline/test_gdal_cache.py).
 GDAL_ENV = {"GDAL_CACHEMAX": GDAL_CACHE_MB * 2**20, "GDAL_DISABLE_READDIR_ON_OPEN": "TRUE"}
-STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching")
+STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching", "confidence")
 DEFAULT_CHANNELS = 2  # keypoint + segmentation: the maps of a window no covering patch has imagery for
 
 
@@ -98,6 +100,7 @@ class CityResult:
     map_bytes_peak: int = 0  # stored patch maps at most (memory or disk)
     patches_without_imagery: int = 0  # windows with no valid pixel: the FPN was not run on them
     work: dict[str, int] = field(default_factory=dict)  # patches predicted / windows connected by this run, and reused
+    evidence: np.ndarray | None = None  # (E, F) edge evidence of ``graph`` (graph/edge_evidence.py), for a model collecting it
 
     @property
     def n_patches(self) -> int:
@@ -227,6 +230,12 @@ def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch
     return attach_ends(graph, ends, attach_px, ATTACH, headings, merge_px=stitch.merge_px)
 
 
+def reads_evidence(model: PatchModel) -> bool:
+    """Whether the run keeps every core's maps to read the edges' evidence from (a model with an
+    edge confidence, or one collecting evidence to fit it)."""
+    return getattr(model, "confidence", None) is not None or bool(getattr(model, "collect_evidence", False))
+
+
 def fpn_batches(grid: PatchGrid, batch_size: int) -> list[list[Index]]:
     """The FPN batches of a run: consecutive patches in row-major order. Fixed by the grid and
     the batch size alone, so a resumed or distributed run feeds the FPN the same batches."""
@@ -322,9 +331,16 @@ class CityRun:
             graph = timed("graph_stitching", city_graph, self.patch_graphs, grid, stitch, crs, getattr(model, "min_fragment_px", 0.0),
                           getattr(model, "attach_px", 0.0))
             stitch_bar.update(1)
+        evidence = None
+        if reads_evidence(model):
+            sample = core_sampler(grid, store.load_core)
+            evidence = timed("confidence", edge_evidence, graph, sample)
+            if getattr(model, "confidence", None) is not None:
+                graph = timed("confidence", scored_graph, graph, model.confidence, sample, getattr(model, "min_confidence", 0.0))
+                evidence = None  # it described the edges before the confidence dropped any
         self.add_seconds(timed.seconds)
         return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,
-                          len(self.job.store.empty_patches()), dict(self.work))
+                          len(self.job.store.empty_patches()), dict(self.work), evidence)
 
 
 def run_here(run: CityRun, drain_workers: int | None = None) -> None:
@@ -381,7 +397,8 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     grid = PatchGrid.for_mosaic(mosaic, grid_config)
-    job = CityJob(mosaic, model, grid, store if store is not None else RunStore(), write_cores, threads, overview_scale)
+    job = CityJob(mosaic, model, grid, store if store is not None else RunStore(), write_cores or reads_evidence(model), threads,
+                  overview_scale)
     run = CityRun(job, batch_size, progress, on_window)
     executor(run)
     return run.finish(stitch, progress)

@@ -32,6 +32,7 @@ from csboundary.graph.surface_gate import SurfaceGateConfig, gated_maps
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
 from csboundary.models.batchnorm_folding import fold_batch_norms
+from csboundary.models.confidence import EdgeConfidence
 from csboundary.models.checkpoint import (
     load_checkpoint,
     load_fpn,
@@ -65,6 +66,9 @@ class PatchPredictor:
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
     precision: str = "float32"  # the FPN's arithmetic, see use_precision
     folded_fpn: torch.nn.Module | None = field(default=None, repr=False)  # the FPN with batch norms folded, for bfloat16
+    confidence: EdgeConfidence | None = None  # the city graph's edge confidence (models/confidence.py; None: scores as found)
+    min_confidence: float = 0.0  # city graph: edges less sure than this are dropped (0 = keep all)
+    collect_evidence: bool = False  # keep the maps the edges' evidence is read from (to fit a confidence)
 
     @property
     def engine(self) -> str:
@@ -139,13 +143,19 @@ class PatchPredictor:
         gate = SurfaceGateConfig(**{field: kind(settings[key]) for key, (field, kind) in GATE_SETTINGS.items() if key in settings})
         if (surface.active or gate.active) and not fpn.config.surface:
             raise InputError(path, "damaged weights file: a surface check or gate is set but the FPN has no surface head")
+        confidence = None
+        if payload.get("confidence") is not None:
+            confidence = EdgeConfidence.from_dict(payload["confidence"], path)
+            if confidence.needs_surface and not fpn.config.surface:
+                raise InputError(path, "damaged weights file: the confidence reads the road surface but the FPN has no surface head")
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
         return cls(fpn, afanet, device, vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
                    edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
                    support=support, crossings=crossings, fill=fill, surface=surface, join=join, gate=gate, pixel_size_m=float(pixel_size),
-                   min_fragment_px=float(settings.get("min_fragment_px", 0.0)), attach_px=float(settings.get("attach_max_px", 0.0)))
+                   min_fragment_px=float(settings.get("min_fragment_px", 0.0)), attach_px=float(settings.get("attach_max_px", 0.0)),
+                   confidence=confidence)
 
     def maps(self, image: np.ndarray) -> np.ndarray:
         return self.patch_maps([None], [image])[0]
@@ -167,8 +177,10 @@ class PatchPredictor:
 
     @property
     def reads_surface(self) -> bool:
-        """Whether the road-surface map is used (check or gate), so carried with the others."""
-        return self.surface.active or self.gate.active
+        """Whether the road-surface map is used (check, gate or the edges' evidence), so carried
+        with the others."""
+        evidence = self.confidence is not None or self.collect_evidence
+        return self.surface.active or self.gate.active or (evidence and self.fpn.config.surface)
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         """Vertices (and corner edges) of a patch's keypoint map, plus, when ``crossings`` is on,
@@ -266,7 +278,7 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
                    attach_ends: float | None = None, attach_backed: float | None = None, surface_gate: float | None = None,
                    max_degree: int | None = None,
                    min_fragment_length: float | None = None, fpn_weights: str | Path | None = None, engine: str = "auto",
-                   precision: str = "float32") -> PatchPredictor:
+                   precision: str = "float32", min_confidence: float | None = None) -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with overrides of its
     inference settings (None keeps the bundle's; ``max_degree`` 0 means no cap), on the chosen
     engine (``auto``: ONNX Runtime on a CPU when installed) and device (``auto``: CUDA if present)."""
@@ -303,6 +315,10 @@ def load_predictor(weights: str | Path | None = None, device: str = "auto", *, e
         predictor.max_degree = max_degree or None
     if min_fragment_length is not None:
         predictor.min_fragment_px = min_fragment_length
+    if min_confidence:
+        if predictor.confidence is None:
+            raise InputError("--min-confidence", "these weights have no edge confidence (csboundary fit-confidence adds one)")
+        predictor.min_confidence = min_confidence
     predictor.use_precision(precision)
     predictor.use_engine(engine, weights, fpn_weights)
     return predictor

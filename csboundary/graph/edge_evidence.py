@@ -1,0 +1,124 @@
+"""What the pipeline knows about each edge of a finished graph: the numbers an edge confidence
+is computed from (:mod:`csboundary.models.confidence`).
+
+The evidence of an edge is its own score (AfANet's probability, or the mean map value along a
+corner or filled edge), its kind, its shape (length, how far it strays from straight), its
+place in the graph (the degree of its ends, the length of the connected piece it belongs to)
+and the FPN's maps along it: the boundary map on the line, and the road surface a few pixels to
+its left and to its right, since a road boundary has roadway on one side only.
+
+The maps are read through ``sample``: a function of (N, 2) pixel points (col, row) in the
+graph's frame returning (N, C) map values in [0, 1] (NaN where unknown). Pure otherwise.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.chains import edge_line
+from csboundary.graph.fragments import fragment_lengths
+
+KINDS = ("normal", "corner", "skeleton", "join", "attach", "seam")  # the kinds of predicted edges (others count as none of these)
+KEYPOINT, BOUNDARY, SURFACE = 0, 1, 2  # channels of the FPN's maps
+SIDE_OFFSET_PX = 6.0  # how far to each side the road surface is read
+STEP_PX = 2.0  # spacing of the points read along an edge
+MAX_DEGREE = 4  # degrees above this count as this
+
+GRAPH_FEATURES = ("score", *(f"kind_{k}" for k in KINDS), "log_length", "sinuosity", "degree_min", "degree_max",
+                  "log_piece_length", "log_piece_edges")
+MAP_FEATURES = ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low",
+                "surface_contrast")
+FEATURES = GRAPH_FEATURES + MAP_FEATURES
+
+Sampler = Callable[[np.ndarray], np.ndarray]
+
+
+def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.ndarray:
+    """(E, len(FEATURES)) evidence of every edge, in the order of :data:`FEATURES`; the map
+    features are NaN without ``sample`` (and the surface ones when the maps have no surface)."""
+    n = graph.n_edges
+    out = np.full((n, len(FEATURES)), np.nan)
+    if n == 0:
+        return out
+    lines = [edge_line(graph, k) for k in range(n)]
+    length = np.array([_length(line) for line in lines])
+    chord = np.array([float(np.linalg.norm(line[-1] - line[0])) for line in lines])
+    kinds = graph.edge_kinds or ["normal"] * n
+    degree = np.minimum(np.bincount(graph.edges.ravel(), minlength=graph.n_vertices), MAX_DEGREE)
+    piece, piece_length = fragment_lengths(graph)
+    piece_edges = np.bincount(piece, minlength=len(piece_length))
+    score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, float)
+    columns = {
+        "score": np.nan_to_num(score, nan=1.0),
+        **{f"kind_{k}": np.array([kind == k for kind in kinds], float) for k in KINDS},
+        "log_length": np.log1p(length),
+        "sinuosity": length / np.maximum(chord, 1.0),
+        "degree_min": degree[graph.edges].min(axis=1).astype(float),
+        "degree_max": degree[graph.edges].max(axis=1).astype(float),
+        "log_piece_length": np.log1p(piece_length[piece]),
+        "log_piece_edges": np.log1p(piece_edges[piece]),
+    }
+    if sample is not None:
+        columns.update(map_evidence(lines, sample))
+    for name, values in columns.items():
+        out[:, FEATURES.index(name)] = values
+    return out
+
+
+def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarray]:
+    """The :data:`MAP_FEATURES` of each polyline: boundary map mean, minimum and 10th
+    percentile on the line, the keypoint map's maximum, and the road surface on the line and
+    :data:`SIDE_OFFSET_PX` to either side (the higher and lower side's mean, and the mean
+    absolute difference of the two sides point by point)."""
+    points, normals, owner = [], [], []
+    for k, line in enumerate(lines):
+        pts, nrm = points_along(line, STEP_PX)
+        points.append(pts)
+        normals.append(nrm)
+        owner.append(np.full(len(pts), k))
+    pts, nrm, owner = np.concatenate(points), np.concatenate(normals), np.concatenate(owner)
+    m = len(pts)
+    values = sample(np.concatenate([pts, pts + SIDE_OFFSET_PX * nrm, pts - SIDE_OFFSET_PX * nrm]))  # one pass over the maps
+    on, left, right = values[:m], values[m : 2 * m], values[2 * m :]
+    n = len(lines)
+    starts = np.searchsorted(owner, np.arange(n))
+    stops = np.append(starts[1:], len(owner))
+    out = {name: np.full(n, np.nan) for name in MAP_FEATURES}
+    has_surface = on.shape[1] > SURFACE
+    for k in range(n):
+        s = slice(starts[k], stops[k])
+        b = on[s, BOUNDARY]
+        out["boundary_mean"][k], out["boundary_min"][k], out["boundary_p10"][k] = np.mean(b), np.min(b), np.percentile(b, 10)
+        out["keypoint_max"][k] = np.max(on[s, KEYPOINT])
+        if has_surface:
+            sides = np.sort([np.mean(left[s, SURFACE]), np.mean(right[s, SURFACE])])
+            out["surface_on"][k] = np.mean(on[s, SURFACE])
+            out["surface_low"][k], out["surface_high"][k] = sides
+            out["surface_contrast"][k] = np.mean(np.abs(left[s, SURFACE] - right[s, SURFACE]))
+    return out
+
+
+def _length(line: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
+
+
+def points_along(line: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``step`` px along a polyline (middles of equal pieces) and the unit normal
+    of the segment each lies on (left of the direction of travel in image axes; (0, 0) on a
+    zero-length line)."""
+    seg = np.diff(line, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    total = float(seg_len.sum())
+    if total <= 0:
+        return line[:1].astype(float), np.zeros((1, 2))
+    m = max(1, int(np.ceil(total / step)))
+    at = (np.arange(m) + 0.5) * (total / m)
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    which = np.clip(np.searchsorted(cum, at, side="right") - 1, 0, len(seg) - 1)
+    t = (at - cum[which]) / np.maximum(seg_len[which], 1e-12)
+    pts = line[which] + t[:, None] * seg[which]
+    direction = seg[which] / np.maximum(seg_len[which], 1e-12)[:, None]
+    return pts, np.stack([direction[:, 1], -direction[:, 0]], axis=1)

@@ -1,0 +1,75 @@
+"""Fitting a bundle's edge confidence on labelled cities (``csboundary fit-confidence``).
+
+Each city is predicted exactly as ``predict`` predicts it, with the maps of every core kept; each
+edge of the city graph gets its evidence (:mod:`csboundary.graph.edge_evidence`) and its label,
+true when at least half its length lies within 5 px of the city's ground truth
+(:func:`csboundary.metrics.confidence.edge_truth`). The confidence model is fitted on all cities
+(:func:`csboundary.models.confidence.fit_edge_confidence`, cities held out together for its
+calibration) and written into a copy of the bundle with its provenance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from csboundary.data import city as layout
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
+from csboundary.metrics.confidence import TRUE_SHARE, edge_truth
+from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint
+from csboundary.models.confidence import EdgeConfidence, fit_edge_confidence
+from csboundary.pipeline.evaluate_set import predicted_city
+from csboundary.pipeline.patch import PatchPredictor
+
+
+@dataclass
+class CityEdges:
+    """The edges of one predicted city: evidence, share of length on the ground truth, length."""
+
+    name: str
+    graph: BoundaryGraph
+    evidence: np.ndarray
+    truth_share: np.ndarray
+
+    @property
+    def positive(self) -> np.ndarray:
+        return self.truth_share >= TRUE_SHARE
+
+
+def city_edges(city_dir: str | Path, predictor: PatchPredictor, assume_model_gsd: bool = False) -> CityEdges:
+    """Predict a labelled city (without any confidence of the bundle's) and label its edges."""
+    confidence, collect = predictor.confidence, predictor.collect_evidence
+    predictor.confidence, predictor.collect_evidence = None, True
+    try:
+        result, lines = predicted_city(city_dir, predictor, assume_model_gsd=assume_model_gsd)
+    finally:
+        predictor.confidence, predictor.collect_evidence = confidence, collect
+    gt = BoundaryGraph.from_world_lines(list(lines), result.grid.transform)
+    return CityEdges(Path(city_dir).name, result.graph, result.evidence, edge_truth(result.graph, gt))
+
+
+def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predictor: PatchPredictor, seed: int = 0,
+                          progress: bool = True, n_trees: int = 200, depth: int = 3) -> tuple[EdgeConfidence, list[CityEdges]]:
+    """Fit the confidence on ``cities`` with ``predictor`` (the bundle ``weights``) and write the
+    bundle with it to ``out``; returns the model and each city's labelled edges."""
+    payload = load_checkpoint(weights, ("bundle",))
+    per_city = [city_edges(c, predictor) for c in tqdm(cities, desc="predict cities", unit="city", disable=not progress)]
+    per_city = [c for c in per_city if c.graph.n_edges]
+    if not per_city:
+        raise ValueError("no city gave any edge to learn from")
+    features = tuple(f for f in FEATURES if not (f.startswith("surface") and not predictor.fpn.config.surface))
+    evidence = np.concatenate([c.evidence for c in per_city])
+    positive = np.concatenate([c.positive for c in per_city])
+    groups = np.concatenate([np.full(c.graph.n_edges, k) for k, c in enumerate(per_city)])
+    provenance = {"weights": str(weights), "weights_sha256": file_sha256(weights), "seed": seed, "code_version": code_version(),
+                  "cities": [{"dir": str(c), "ground_truth_sha256": file_sha256(layout.ground_truth_path(c))} for c in cities],
+                  "map_features": [f for f in features if f in MAP_FEATURES]}
+    model = fit_edge_confidence(evidence, positive, groups, features, n_trees=n_trees, depth=depth, seed=seed, provenance=provenance)
+    payload = {k: v for k, v in payload.items() if k not in ("format", "kind")}
+    payload["confidence"] = model.to_dict()
+    save_checkpoint(out, "bundle", **payload)
+    return model, per_city
