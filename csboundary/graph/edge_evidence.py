@@ -3,7 +3,8 @@ is computed from (:mod:`csboundary.models.confidence`).
 
 The evidence of an edge is its own score (AfANet's probability, or the mean map value along a
 corner or filled edge), its kind, its shape (length, how far it strays from straight), its
-place in the graph (the degree of its ends, the length of the connected piece it belongs to)
+place in the graph (the degree of its ends, the length of the connected piece and of the merged
+boundary it belongs to, and how straight that boundary runs)
 and the FPN's maps along it: the boundary map on the line, and the road surface a few pixels to
 its left and to its right, since a road boundary has roadway on one side only.
 
@@ -18,19 +19,21 @@ from typing import Callable
 import numpy as np
 
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.graph.chains import edge_line
+from csboundary.graph.chains import edge_line, merge_chains
 from csboundary.graph.fragments import fragment_lengths
 
 KINDS = ("normal", "corner", "skeleton", "join", "attach", "seam")  # the kinds of predicted edges (others count as none of these)
 KEYPOINT, BOUNDARY, SURFACE = 0, 1, 2  # channels of the FPN's maps
 SIDE_OFFSET_PX = 6.0  # how far to each side the road surface is read
+FAR_OFFSET_PX = 16.0  # ... and farther out, past a sidewalk (2.4 m at 0.15 m)
+RIDGE_OFFSET_PX = 3.0  # the boundary map here beside the line: a sharp ridge falls off, a smear does not
 STEP_PX = 2.0  # spacing of the points read along an edge
 MAX_DEGREE = 4  # degrees above this count as this
 
 GRAPH_FEATURES = ("score", *(f"kind_{k}" for k in KINDS), "log_length", "sinuosity", "degree_min", "degree_max",
-                  "log_piece_length", "log_piece_edges")
+                  "log_piece_length", "log_piece_edges", "log_chain_length", "chain_sinuosity")
 MAP_FEATURES = ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low",
-                "surface_contrast")
+                "surface_contrast", "boundary_ridge", "surface_far_high", "surface_far_low")
 FEATURES = GRAPH_FEATURES + MAP_FEATURES
 
 Sampler = Callable[[np.ndarray], np.ndarray]
@@ -50,6 +53,10 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     degree = np.minimum(np.bincount(graph.edges.ravel(), minlength=graph.n_vertices), MAX_DEGREE)
     piece, piece_length = fragment_lengths(graph)
     piece_edges = np.bincount(piece, minlength=len(piece_length))
+    chain_length, chain_chord = np.zeros(n), np.zeros(n)
+    for chain in merge_chains(graph):  # the boundary (run through degree-2 vertices) each edge is part of
+        chain_length[chain.edges] = _length(chain.polyline)
+        chain_chord[chain.edges] = float(np.linalg.norm(chain.polyline[-1] - chain.polyline[0]))
     score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, float)
     columns = {
         "score": np.nan_to_num(score, nan=1.0),
@@ -60,6 +67,8 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
         "degree_max": degree[graph.edges].max(axis=1).astype(float),
         "log_piece_length": np.log1p(piece_length[piece]),
         "log_piece_edges": np.log1p(piece_edges[piece]),
+        "log_chain_length": np.log1p(chain_length),
+        "chain_sinuosity": np.minimum(chain_length / np.maximum(chain_chord, 1.0), 10.0),  # a closed loop counts as 10
     }
     if sample is not None:
         columns.update(map_evidence(lines, sample))
@@ -70,9 +79,10 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
 
 def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarray]:
     """The :data:`MAP_FEATURES` of each polyline: boundary map mean, minimum and 10th
-    percentile on the line, the keypoint map's maximum, and the road surface on the line and
+    percentile on the line, how much it stands above its value :data:`RIDGE_OFFSET_PX` to
+    either side, the keypoint map's maximum, and the road surface on the line and
     :data:`SIDE_OFFSET_PX` to either side (the higher and lower side's mean, and the mean
-    absolute difference of the two sides point by point)."""
+    absolute difference of the two sides point by point) and :data:`FAR_OFFSET_PX` out."""
     points, normals, owner = [], [], []
     for k, line in enumerate(lines):
         pts, nrm = points_along(line, STEP_PX)
@@ -81,8 +91,9 @@ def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarr
         owner.append(np.full(len(pts), k))
     pts, nrm, owner = np.concatenate(points), np.concatenate(normals), np.concatenate(owner)
     m = len(pts)
-    values = sample(np.concatenate([pts, pts + SIDE_OFFSET_PX * nrm, pts - SIDE_OFFSET_PX * nrm]))  # one pass over the maps
-    on, left, right = values[:m], values[m : 2 * m], values[2 * m :]
+    offsets = (0.0, SIDE_OFFSET_PX, -SIDE_OFFSET_PX, FAR_OFFSET_PX, -FAR_OFFSET_PX, RIDGE_OFFSET_PX, -RIDGE_OFFSET_PX)
+    values = sample(np.concatenate([pts + d * nrm for d in offsets]))  # one pass over the maps
+    on, left, right, far_left, far_right, ridge_left, ridge_right = (values[k * m : (k + 1) * m] for k in range(len(offsets)))
     n = len(lines)
     starts = np.searchsorted(owner, np.arange(n))
     stops = np.append(starts[1:], len(owner))
@@ -93,11 +104,13 @@ def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarr
         b = on[s, BOUNDARY]
         out["boundary_mean"][k], out["boundary_min"][k], out["boundary_p10"][k] = np.mean(b), np.min(b), np.percentile(b, 10)
         out["keypoint_max"][k] = np.max(on[s, KEYPOINT])
+        out["boundary_ridge"][k] = np.mean(b - np.maximum(ridge_left[s, BOUNDARY], ridge_right[s, BOUNDARY]))
         if has_surface:
             sides = np.sort([np.mean(left[s, SURFACE]), np.mean(right[s, SURFACE])])
             out["surface_on"][k] = np.mean(on[s, SURFACE])
             out["surface_low"][k], out["surface_high"][k] = sides
             out["surface_contrast"][k] = np.mean(np.abs(left[s, SURFACE] - right[s, SURFACE]))
+            out["surface_far_low"][k], out["surface_far_high"][k] = np.sort([np.mean(far_left[s, SURFACE]), np.mean(far_right[s, SURFACE])])
     return out
 
 

@@ -24,6 +24,7 @@ from csboundary.metrics.apls import (
     symmetric_apls,
 )
 from csboundary.metrics.config import MetricConfig
+from csboundary.metrics.confidence import confidence_report, edge_truth
 from csboundary.metrics.pixel import rasterize, relaxed_scores
 from csboundary.metrics.sampling import Segments, common_origin, flatten, resample
 from csboundary.metrics.tlts import TltsResult, tlts_from_pairs
@@ -97,11 +98,17 @@ def tlts(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricCo
 def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", grid=None, apls: str = "paper", seed: int = 0,
              config: MetricConfig = MetricConfig(), extent: tuple[float, float, float, float] | None = None) -> dict:
     """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``);
-    at city scale, ``extent`` (the imagery's pixel rectangle) clips both graphs first."""
+    at city scale, ``extent`` (the imagery's pixel rectangle) clips both graphs first. When the
+    prediction's edges carry scores, ``confidence`` says how well they tell true edges from
+    false ones (:func:`csboundary.metrics.confidence.confidence_report`, whole graphs)."""
     if scale == "city":
-        return evaluate_city(pred, gt, apls=apls, seed=seed, config=config, extent=extent)
-    if scale == "patch":
+        result = evaluate_city(pred, gt, apls=apls, seed=seed, config=config, extent=extent)
+    elif scale == "patch":
         if grid is None:
             raise ValueError("patch scale needs the city's PatchGrid")
-        return evaluate_patches(pred, gt, grid, apls=apls, seed=seed, config=config)
-    raise ValueError(f"scale must be 'city' or 'patch', got {scale!r}")
+        result = evaluate_patches(pred, gt, grid, apls=apls, seed=seed, config=config)
+    else:
+        raise ValueError(f"scale must be 'city' or 'patch', got {scale!r}")
+    if pred.edge_scores is not None and np.isfinite(np.asarray(pred.edge_scores, float)).any():
+        result["confidence"] = confidence_report(pred.edge_scores, edge_truth(pred, gt), pred.edge_lengths())
+    return result

@@ -38,7 +38,17 @@ def format_table(result: dict) -> str:
     lines.append(f"{'TLTS':12s}{_num(m['tlts']):>10s}   too long {_num(m['tlts_too_long'])}, too short {_num(m['tlts_too_short'])}, "
                  f"infeasible {_num(m['tlts_infeasible'])}")
     lines.append(f"{c['pairs']} sampled pairs (phi {result['config']['phi']:g}, snap < {result['config']['snap_radius']:g} px)")
+    if "confidence" in result:
+        lines.append(format_confidence(result["confidence"]))
     return "\n".join(lines)
+
+
+def format_confidence(report: dict) -> str:
+    """:func:`csboundary.metrics.confidence.confidence_report` in two lines."""
+    review = ", ".join(f"{float(share):.0%} -> {_num(r['false_length'], 2)} of false length ({_num(r['false_edges'], 2)} of false edges)"
+                       for share, r in report["review"].items())
+    return (f"confidence: {report['edges']} edges ({_num(report['share_true'], 2)} true), AUC {_num(report['auc'], 3)}, "
+            f"ECE {_num(report['ece'], 3)}\nreviewing the least sure {review}")
 
 
 def format_rows(results: dict[str, dict]) -> str:
