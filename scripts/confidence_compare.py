@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.graph.edge_evidence import FEATURES
-from csboundary.metrics.confidence import TRUE_SHARE, confidence_report, roc_auc
+from csboundary.metrics.confidence import TRUE_SHARE, confidence_report, precision_recall_by_threshold, roc_auc
 from csboundary.models.confidence import fit_edge_confidence
 
 FEATURE_SETS = {
@@ -47,16 +47,27 @@ def main() -> None:
     parser.add_argument("folder", type=Path)
     parser.add_argument("--features", default="all", help=f"{', '.join(FEATURE_SETS)} or a comma-separated list")
     parser.add_argument("--trees", type=int, default=200)
-    parser.add_argument("--depth", type=int, default=3)
+    parser.add_argument("--depth", type=int, default=2)
     parser.add_argument("--rate", type=float, default=0.05)
+    parser.add_argument("--tree-share", type=float, default=0.5, help="share on the ground truth the trees learn (calibration: 0.5)")
+    parser.add_argument("--bundle", type=Path, default=None, help="score this bundle's confidence instead of fitting one")
     parser.add_argument("--brief", action="store_true", help="pooled sets only")
+    parser.add_argument("--curves", action="store_true", help="also the pooled sets' precision and kept true length against --min-confidence")
+    parser.add_argument("--bootstrap", type=int, default=0, help="95 %% intervals of the real sets' AUC and ECE from this many resamples of cities (edges for one city)")
     parser.add_argument("--single", action="store_true", help="also each feature's own AUC on the real sets")
     args = parser.parse_args()
     d = str(args.folder)
     fit = load(sorted(glob.glob(f"{d}/fit-*.npz")))
     features = FEATURE_SETS.get(args.features) or tuple(args.features.split(","))
-    model = fit_edge_confidence(fit["evidence"], fit["truth_share"] >= TRUE_SHARE, fit["group"], features, n_trees=args.trees,
-                                depth=args.depth, learning_rate=args.rate)
+    if args.bundle:
+        from csboundary.models.checkpoint import load_checkpoint
+        from csboundary.models.confidence import EdgeConfidence
+
+        model = EdgeConfidence.from_dict(load_checkpoint(args.bundle, ("bundle",))["confidence"], args.bundle)
+        args.features, args.trees = f"{args.bundle}'s", model.n_trees
+    else:
+        model = fit_edge_confidence(fit["evidence"], fit["truth_share"] >= TRUE_SHARE, fit["group"], features, n_trees=args.trees,
+                                    depth=args.depth, learning_rate=args.rate, tree_positive=fit["truth_share"] >= args.tree_share)
     sets = {"fit (in sample)": sorted(glob.glob(f"{d}/fit-*.npz"))}
     for f in sorted(glob.glob(f"{d}/test-*.npz")):
         sets[Path(f).stem] = [f]
@@ -71,6 +82,25 @@ def main() -> None:
         data = load(files)
         print(row(name + " raw", data["evidence"][:, FEATURES.index("score")], data))
         print(row(name + " model", model.probability(data["evidence"]), data))
+        if args.curves and name.startswith(("ottawa", "nyc", "synthetic")):
+            rows = precision_recall_by_threshold(model.probability(data["evidence"]), data["truth_share"], data["length"])
+            print("   P       " + " ".join(f"{r['min_confidence']:5.1f}" for r in rows))
+            print("   prec    " + " ".join(f"{r['precision']:5.2f}" for r in rows))
+            print("   kept tl " + " ".join(f"{r['true_length_kept']:5.2f}" for r in rows))
+        if args.bootstrap and name.startswith(("ottawa", "nyc")):
+            rng = np.random.default_rng(0)
+            p, groups = model.probability(data["evidence"]), data["group"]
+            ids = np.unique(groups)
+            stats = []
+            for _ in range(args.bootstrap):
+                if len(ids) > 1:
+                    pick = np.concatenate([np.flatnonzero(groups == g) for g in rng.choice(ids, len(ids))])
+                else:
+                    pick = rng.integers(0, len(p), len(p))
+                r = confidence_report(p[pick], data["truth_share"][pick], data["length"][pick])
+                stats.append((r["auc"], r["ece"]))
+            lo, hi = np.nanpercentile(np.array(stats), [2.5, 97.5], axis=0)
+            print(f"   95 % interval: AUC [{lo[0]:.3f}, {hi[0]:.3f}], ECE [{lo[1]:.3f}, {hi[1]:.3f}]")
         if args.single and name.startswith(("ottawa", "nyc", "synthetic")):
             positive = data["truth_share"] >= TRUE_SHARE
             print("   " + ", ".join(f"{f} {roc_auc(data['evidence'][:, i], positive):.2f}" for i, f in enumerate(FEATURES)))

@@ -71,7 +71,7 @@ def fit_confidence(
     weights: Optional[Path] = typer.Option(None, help="Weights bundle whose predictions are scored (default: the shipped one)."),
     seed: int = typer.Option(0, min=0, help="Seed of the trees' row sampling."),
     trees: int = typer.Option(200, min=1, max=5000, help="Boosted trees."),
-    depth: int = typer.Option(3, min=1, max=8, help="Depth of each tree."),
+    depth: int = typer.Option(2, min=1, max=8, help="Depth of each tree."),
     assume_model_gsd: bool = typer.Option(False, "--assume-model-gsd", help="Imagery without a pixel size is at the model's (imported crops)."),
     engine: str = typer.Option("auto", help="auto | torch | onnx."),
     device: DeviceOption = "auto",

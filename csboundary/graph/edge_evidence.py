@@ -34,6 +34,8 @@ GRAPH_FEATURES = ("score", *(f"kind_{k}" for k in KINDS), "log_length", "sinuosi
                   "log_piece_length", "log_piece_edges", "log_chain_length", "chain_sinuosity")
 MAP_FEATURES = ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low",
                 "surface_contrast", "boundary_ridge", "surface_far_high", "surface_far_low")
+CHAIN_FEATURES = ("boundary_mean", "surface_contrast", "surface_high", "boundary_ridge")  # also averaged over the edge's boundary
+MAP_FEATURES = MAP_FEATURES + tuple(f"chain_{f}" for f in CHAIN_FEATURES)
 FEATURES = GRAPH_FEATURES + MAP_FEATURES
 
 Sampler = Callable[[np.ndarray], np.ndarray]
@@ -53,8 +55,9 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     degree = np.minimum(np.bincount(graph.edges.ravel(), minlength=graph.n_vertices), MAX_DEGREE)
     piece, piece_length = fragment_lengths(graph)
     piece_edges = np.bincount(piece, minlength=len(piece_length))
-    chain_length, chain_chord = np.zeros(n), np.zeros(n)
-    for chain in merge_chains(graph):  # the boundary (run through degree-2 vertices) each edge is part of
+    chain_length, chain_chord, chain_of = np.zeros(n), np.zeros(n), np.zeros(n, np.int64)
+    for c, chain in enumerate(merge_chains(graph)):  # the boundary (run through degree-2 vertices) each edge is part of
+        chain_of[chain.edges] = c
         chain_length[chain.edges] = _length(chain.polyline)
         chain_chord[chain.edges] = float(np.linalg.norm(chain.polyline[-1] - chain.polyline[0]))
     score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, float)
@@ -72,6 +75,11 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     }
     if sample is not None:
         columns.update(map_evidence(lines, sample))
+        for name in (f for f in CHAIN_FEATURES if not np.isnan(columns[f]).all()):  # a short edge borrows the evidence of
+            # the boundary it is part of (length-weighted); not the surface's when the maps have none
+            weight = np.maximum(length, 1e-6)
+            total = np.bincount(chain_of, weights=np.nan_to_num(columns[name]) * weight)
+            columns[f"chain_{name}"] = total[chain_of] / np.bincount(chain_of, weights=weight)[chain_of]
     for name, values in columns.items():
         out[:, FEATURES.index(name)] = values
     return out

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.errors import InputError
-from csboundary.graph.edge_evidence import FEATURES
+from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
 
 VERSION = 1
 TIE_BREAK = 1e-3  # inside a flat step of the isotonic map, edges are still ordered by the trees' raw output
@@ -82,12 +82,10 @@ class EdgeConfidence:
 
     @property
     def needs_surface(self) -> bool:
-        return any(f.startswith("surface") for f in self.features)
+        return any("surface" in f for f in self.features)
 
     @property
     def needs_maps(self) -> bool:
-        from csboundary.graph.edge_evidence import MAP_FEATURES
-
         return any(f in MAP_FEATURES for f in self.features)
 
     def to_dict(self) -> dict:
@@ -141,10 +139,13 @@ class EdgeConfidence:
 
 
 def fit_edge_confidence(evidence: np.ndarray, positive: np.ndarray, groups: np.ndarray, features: tuple[str, ...] = FEATURES,
-                        n_trees: int = 200, depth: int = 3, learning_rate: float = 0.05, folds: int = 5, seed: int = 0,
-                        provenance: dict | None = None) -> EdgeConfidence:
+                        n_trees: int = 200, depth: int = 2, learning_rate: float = 0.05, folds: int = 5, seed: int = 0,
+                        provenance: dict | None = None, tree_positive: np.ndarray | None = None) -> EdgeConfidence:
     """Fit trees on all edges and the isotonic map on out-of-fold raw outputs, with the groups
-    (cities) held out together so that calibration sees edges of cities the trees never saw."""
+    (cities) held out together so that calibration sees edges of cities the trees never saw.
+    The isotonic map always targets ``positive``; the trees target ``tree_positive`` when given
+    (e.g. edges mostly on the ground truth: ranking by that ordered the Ottawa crops' edges
+    better, docs/confidence.md)."""
     try:
         from sklearn.ensemble import GradientBoostingClassifier
         from sklearn.isotonic import IsotonicRegression
@@ -153,6 +154,7 @@ def fit_edge_confidence(evidence: np.ndarray, positive: np.ndarray, groups: np.n
         raise InputError("fit-confidence", "needs scikit-learn: pip install 'csboundary[fit]'") from exc
     x = np.asarray(evidence, float)[:, [FEATURES.index(f) for f in features]]
     y = np.asarray(positive, bool).astype(int)
+    target = y if tree_positive is None else np.asarray(tree_positive, bool).astype(int)
     groups = np.asarray(groups)
 
     def trees() -> GradientBoostingClassifier:
@@ -161,9 +163,9 @@ def fit_edge_confidence(evidence: np.ndarray, positive: np.ndarray, groups: np.n
 
     out_of_fold = np.zeros(len(y))
     for train, test in GroupKFold(n_splits=min(folds, len(np.unique(groups)))).split(x, y, groups):
-        out_of_fold[test] = trees().fit(x[train], y[train]).decision_function(x[test])
+        out_of_fold[test] = trees().fit(x[train], target[train]).decision_function(x[test])
     iso = IsotonicRegression(y_min=0.0, y_max=1.0, out_of_bounds="clip").fit(out_of_fold, y)
-    model = trees().fit(x, y)
+    model = trees().fit(x, target)
     return from_sklearn(model, features, iso.X_thresholds_, iso.y_thresholds_,
                         dict(provenance or {}, edges=int(len(y)), share_true=float(y.mean()), n_trees=n_trees, depth=depth,
                              learning_rate=learning_rate, seed=seed, folds=folds))

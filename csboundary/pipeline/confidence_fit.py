@@ -26,6 +26,9 @@ from csboundary.pipeline.evaluate_set import predicted_city
 from csboundary.pipeline.patch import PatchPredictor
 
 
+TREE_SHARE = 0.7  # the trees learn to rank edges mostly on the ground truth; the calibration then targets TRUE_SHARE
+
+
 @dataclass
 class CityEdges:
     """The edges of one predicted city: evidence, share of length on the ground truth, length."""
@@ -53,7 +56,7 @@ def city_edges(city_dir: str | Path, predictor: PatchPredictor, assume_model_gsd
 
 
 def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predictor: PatchPredictor, seed: int = 0,
-                          progress: bool = True, n_trees: int = 200, depth: int = 3) -> tuple[EdgeConfidence, list[CityEdges]]:
+                          progress: bool = True, n_trees: int = 200, depth: int = 2) -> tuple[EdgeConfidence, list[CityEdges]]:
     """Fit the confidence on ``cities`` with ``predictor`` (the bundle ``weights``) and write the
     bundle with it to ``out``; returns the model and each city's labelled edges."""
     payload = load_checkpoint(weights, ("bundle",))
@@ -61,14 +64,17 @@ def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predicto
     per_city = [c for c in per_city if c.graph.n_edges]
     if not per_city:
         raise ValueError("no city gave any edge to learn from")
-    features = tuple(f for f in FEATURES if not (f.startswith("surface") and not predictor.fpn.config.surface))
+    features = tuple(f for f in FEATURES if not ("surface" in f and not predictor.fpn.config.surface))
     evidence = np.concatenate([c.evidence for c in per_city])
     positive = np.concatenate([c.positive for c in per_city])
     groups = np.concatenate([np.full(c.graph.n_edges, k) for k, c in enumerate(per_city)])
     provenance = {"weights": str(weights), "weights_sha256": file_sha256(weights), "seed": seed, "code_version": code_version(),
                   "cities": [{"dir": str(c), "ground_truth_sha256": file_sha256(layout.ground_truth_path(c))} for c in cities],
                   "map_features": [f for f in features if f in MAP_FEATURES]}
-    model = fit_edge_confidence(evidence, positive, groups, features, n_trees=n_trees, depth=depth, seed=seed, provenance=provenance)
+    mostly_true = np.concatenate([c.truth_share >= TREE_SHARE for c in per_city])
+    provenance["tree_share"] = TREE_SHARE
+    model = fit_edge_confidence(evidence, positive, groups, features, n_trees=n_trees, depth=depth, seed=seed, provenance=provenance,
+                                tree_positive=mostly_true)
     payload = {k: v for k, v in payload.items() if k not in ("format", "kind")}
     payload["confidence"] = model.to_dict()
     save_checkpoint(out, "bundle", **payload)

@@ -6,7 +6,8 @@ AfANet edges (kind ``normal``, score = symmetric adjacency probability) and, whe
 the boundary both missed, from the segmentation skeleton (kind ``skeleton``, score = mean
 boundary probability along it; graph/skeleton_fill.py); with an FPN that maps the road surface
 and the surface check on, edges with no roadway beside them are then dropped
-(graph/surface_check.py).
+(graph/surface_check.py). With a bundle that has an edge confidence, the city graph's scores are
+then replaced by it (pipeline/edge_confidence.py).
 """
 
 from __future__ import annotations
@@ -32,13 +33,13 @@ from csboundary.graph.surface_gate import SurfaceGateConfig, gated_maps
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
 from csboundary.models.batchnorm_folding import fold_batch_norms
-from csboundary.models.confidence import EdgeConfidence
 from csboundary.models.checkpoint import (
     load_checkpoint,
     load_fpn,
     restore_model,
     shipped_weights,
 )
+from csboundary.models.confidence import EdgeConfidence
 from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN, SURFACE
 from csboundary.models.device import bfloat16_hardware

@@ -68,3 +68,4 @@ def test_points_along_are_evenly_spaced_with_left_normals():
     points, normals = points_along(np.array([[0.0, 0.0], [10.0, 0.0]]), 2.0)
     np.testing.assert_allclose(points[:, 0], [1, 3, 5, 7, 9])
     np.testing.assert_allclose(normals, [[0.0, -1.0]] * 5)  # image rows grow downwards: left of east is up
+
