@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import QuietOption, finite, no_file_at, out_dir, out_file, parse_numbers, parse_tiles
+from csboundary.cli.options import QuietOption, finite, no_file_at, positive, out_dir, out_file, parse_numbers, parse_tiles
 
 
 def synth(
@@ -68,8 +68,8 @@ def import_topo_boundary_cmd(
 def import_masks_cmd(
     source: Path = typer.Argument(..., help="Folder of images and their label masks."),
     out: Path = typer.Option(..., "--out", help="Folder for one city per image, plus set.json listing them."),
-    gsd: Optional[float] = typer.Option(None, callback=finite, help="Pixel size of the images in metres (needed when they carry no georeference)."),
-    target_gsd: float = typer.Option(0.152, callback=finite, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
+    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size of the images in metres (needed when they carry no georeference)."),
+    target_gsd: float = typer.Option(0.152, callback=positive, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
     image_pattern: str = typer.Option("{id}_image.png", help="Image file names; {id} is the part shared with the mask."),
     mask_pattern: str = typer.Option("{id}_edge.png", help="Mask file names."),
     kind: str = typer.Option("edge", help="edge: the mask marks road-edge lines | surface: it marks the road surface."),

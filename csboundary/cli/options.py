@@ -39,6 +39,14 @@ def finite(value: float | None) -> float | None:
     return value
 
 
+def positive(value: float | None) -> float | None:
+    """A pixel size: finite and above zero (0 would divide every length by zero)."""
+    value = finite(value)
+    if value is not None and value <= 0:
+        raise typer.BadParameter(f"must be a positive pixel size, got {value}")
+    return value
+
+
 # Options several commands take, declared once (``name: WeightsOption = None``).
 WeightsOption = Annotated[Optional[Path], typer.Option(help=WEIGHTS_HELP)]
 EdgeThresholdOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP)]

@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 
 from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, ConfidenceOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
-                                    QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, readable_inputs)
+                                    QuietOption, WeightsOption, finite, positive, out_dir, out_file, parse_numbers, readable_inputs)
 
 
 def predict(
@@ -31,7 +31,7 @@ def predict(
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
-    gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of imagery without a CRS (needed then)."),
+    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of imagery without a CRS (needed then)."),
     restart: bool = typer.Option(False, "--restart", help="Discard the unfinished run in --out instead of resuming it."),
     scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
     workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
@@ -86,7 +86,7 @@ def predict_patch(
     min_fragment_length: FragmentOption = None,
     min_confidence: ConfidenceOption = None,
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
-    gsd: Optional[float] = typer.Option(None, callback=finite, min=0.0, help="Pixel size in metres of an image without a CRS."),
+    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of an image without a CRS."),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "float32",
     device: DeviceOption = "auto",
@@ -156,6 +156,9 @@ def apply_review(
     from csboundary.pipeline.review import apply_review as merge
 
     done = merge(prediction, edits)
+    if "already_applied" in done:
+        typer.echo(f"{prediction}: {edits} was already applied on {done['already_applied'].get('time', '?')}; nothing changed")
+        return
     typer.echo(f"{prediction}: {len(done['deleted_edges'])} deleted, {len(done['accepted_edges'])} accepted, "
                f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added: "
                f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}")

@@ -93,7 +93,8 @@ def fit_confidence(
         found += [path] if layout.is_city_dir(path) else set_cities(path)
     source = weights or shipped_weights()
     predictor = load_predictor(source, device, engine=engine)
-    model, per_city = fit_bundle_confidence(found, source, out, predictor, seed=seed, progress=not quiet, n_trees=trees, depth=depth)
+    model, per_city = fit_bundle_confidence(found, source, out, predictor, seed=seed, progress=not quiet, n_trees=trees, depth=depth,
+                                             assume_model_gsd=assume_model_gsd)
     for c in per_city:
         r = confidence_report(model.probability(c.evidence), c.truth_share, c.graph.edge_lengths())
         typer.echo(f"{c.name}: {r['edges']} edges, {r['share_true']:.2f} true, AUC {r['auc']:.3f}, ECE {r['ece']:.3f} (fitted on)")

@@ -3,12 +3,18 @@
 The review page exports its edits as a GeoJSON FeatureCollection in the graph's CRS; each
 feature's ``action`` property says what a person did:
 
-* ``delete`` (``edge``: the edge's index in graph.json): the edge goes;
-* ``accept`` (``edge``): the edge stays and is recorded as checked;
+* ``delete`` (``edge``: the edge's index in graph.json, LineString geometry: the edge as the
+  page drew it): the edge goes;
+* ``accept`` (``edge``, its geometry): the edge stays and is recorded as checked;
 * ``move`` (``vertex``: its index, Point geometry): the vertex moves, and so do the ends of
   the edges at it;
 * ``add`` (LineString geometry): a new edge, kind ``manual``, score 1; its ends join existing
   vertices within ``snap_px`` pixels, else become new vertices.
+
+Nothing is taken on trust: an edge's index must come with that edge's geometry (its two ends
+within ``match_px``), and every coordinate must be a pair of finite numbers inside ``extent``
+(the imagery, in graph pixels), so edits meant for another graph, in another CRS or damaged in
+transit are refused (:class:`EditError`) instead of changing the wrong edge.
 
 :func:`apply_edits` is pure: it returns the new graph and a record of what changed, with the
 old and new edge indices of every edge that was kept.
@@ -22,6 +28,7 @@ import numpy as np
 
 from csboundary.data.windows import world_to_pixel
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.chains import edge_line
 
 ACTIONS = ("delete", "accept", "move", "add")
 MANUAL = "manual"
@@ -44,10 +51,19 @@ class ReviewRecord:
                 "edge_index_map": {str(k): v for k, v in self.kept.items()}}
 
 
-def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0) -> tuple[BoundaryGraph, ReviewRecord]:
-    """``graph`` with the edits of ``features`` (GeoJSON features in the graph's CRS)."""
+EXTENT_MARGIN_PX = 100.0  # edits may reach this far beyond the imagery
+
+
+def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0, extent: tuple[float, float, float, float] | None = None,
+                match_px: float = 1.0) -> tuple[BoundaryGraph, ReviewRecord]:
+    """``graph`` with the edits of ``features`` (GeoJSON features in the graph's CRS).
+    ``extent`` (col0, row0, col1, row1 in graph pixels; default: the graph's vertices, 1000 px
+    around) is where edits may lie, :data:`EXTENT_MARGIN_PX` beyond it."""
     if graph.transform is None:
         raise EditError("the graph has no transform: world coordinates of the edits cannot be placed")
+    if extent is None:
+        low, high = (graph.vertices.min(axis=0), graph.vertices.max(axis=0)) if graph.n_vertices else (np.zeros(2), np.zeros(2))
+        extent = (low[0] - 1000, low[1] - 1000, high[0] + 1000, high[1] + 1000)
     vertices = graph.vertices.copy()
     n_edges = graph.n_edges
     kinds = list(graph.edge_kinds or ["normal"] * n_edges)
@@ -59,40 +75,71 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
     deleted, accepted, moved = set(), set(), []
     added: list[np.ndarray] = []
 
-    def pixel(xy) -> np.ndarray:
-        x, y = np.asarray(xy, float)[..., 0], np.asarray(xy, float)[..., 1]
-        cols, rows = world_to_pixel(graph.transform, x, y)
-        return np.stack([cols, rows], axis=-1)
+    def pixels(coordinates, what: str, points: bool = True) -> np.ndarray:
+        """(N, 2) graph pixels of GeoJSON positions (a Point's one position when not ``points``)."""
+        rows = coordinates if points else [coordinates]
+        try:
+            if not isinstance(rows, list) or not all(isinstance(p, list) and len(p) >= 2 for p in rows):
+                raise ValueError
+            xy = np.array([[float(p[0]), float(p[1])] for p in rows if not any(isinstance(v, bool) for v in p[:2])], float)
+            if len(xy) != len(rows):
+                raise ValueError
+        except (TypeError, ValueError):
+            raise EditError(f"{what}: coordinates are not two numbers per position") from None
+        if not np.isfinite(xy).all():
+            raise EditError(f"{what}: coordinates are not finite")
+        cols, rows_px = world_to_pixel(graph.transform, xy[:, 0], xy[:, 1])
+        px = np.stack([np.asarray(cols, float), np.asarray(rows_px, float)], axis=-1)
+        m = EXTENT_MARGIN_PX
+        inside = (px[:, 0] >= extent[0] - m) & (px[:, 0] <= extent[2] + m) & (px[:, 1] >= extent[1] - m) & (px[:, 1] <= extent[3] + m)
+        if not (np.isfinite(px).all() and inside.all()):
+            crs = f" ({graph.crs})" if graph.crs else ""
+            raise EditError(f"{what}: coordinates lie outside the imagery: are they in the prediction's CRS{crs}?")
+        return px
 
-    def edge_index(props: dict, what: str) -> int:
+    def edge_index(props: dict, geometry: dict, what: str) -> int:
         k = props.get("edge")
-        if not isinstance(k, int) or not 0 <= k < n_edges:
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < n_edges:
             raise EditError(f"{what}: edge {k!r} is not an edge of the graph (0..{n_edges - 1})")
+        if geometry.get("type") != "LineString":
+            raise EditError(f"{what}: no geometry of edge {k} to check it against (export the edits from the review page)")
+        line = pixels(geometry.get("coordinates"), what)
+        if len(line) < 2:
+            raise EditError(f"{what}: the geometry of edge {k} needs at least 2 positions")
+        ends = edge_line(graph, k)[[0, -1]]
+        gap = min(np.abs(line[[0, -1]] - ends).max(), np.abs(line[[-1, 0]] - ends).max())
+        if gap > match_px:
+            raise EditError(f"{what}: its geometry does not match edge {k} (ends {gap:.1f} px apart): "
+                            "the edits were made on another graph")
         return k
 
     for number, feature in enumerate(features):
+        if not isinstance(feature, dict):
+            raise EditError(f"edit {number}: not a GeoJSON feature")
         props = feature.get("properties") or {}
-        action = props.get("action")
         geometry = feature.get("geometry") or {}
+        if not isinstance(props, dict) or not isinstance(geometry, dict):
+            raise EditError(f"edit {number}: properties and geometry must be objects")
+        action = props.get("action")
         what = f"edit {number} ({action})"
         if action == "delete":
-            deleted.add(edge_index(props, what))
+            deleted.add(edge_index(props, geometry, what))
         elif action == "accept":
-            accepted.add(edge_index(props, what))
+            accepted.add(edge_index(props, geometry, what))
         elif action == "move":
             i = props.get("vertex")
-            if not isinstance(i, int) or not 0 <= i < len(vertices):
+            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(vertices):
                 raise EditError(f"{what}: vertex {i!r} is not a vertex of the graph")
             if geometry.get("type") != "Point":
                 raise EditError(f"{what}: needs a Point geometry")
-            vertices[i] = pixel(geometry["coordinates"][:2])
+            vertices[i] = pixels(geometry.get("coordinates"), what, points=False)[0]
             moved.append(i)
         elif action == "add":
-            if geometry.get("type") != "LineString" or len(geometry.get("coordinates", [])) < 2:
-                raise EditError(f"{what}: needs a LineString of at least 2 points")
-            line = pixel(np.asarray(geometry["coordinates"], float)[:, :2])
-            if not np.isfinite(line).all():
-                raise EditError(f"{what}: coordinates are not finite")
+            if geometry.get("type") != "LineString":
+                raise EditError(f"{what}: needs a LineString geometry")
+            line = pixels(geometry.get("coordinates"), what)
+            if len(line) < 2:
+                raise EditError(f"{what}: needs a LineString of at least 2 positions")
             added.append(line)
         else:
             raise EditError(f"{what}: unknown action (one of {', '.join(ACTIONS)})")

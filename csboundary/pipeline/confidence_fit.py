@@ -56,11 +56,13 @@ def city_edges(city_dir: str | Path, predictor: PatchPredictor, assume_model_gsd
 
 
 def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predictor: PatchPredictor, seed: int = 0,
-                          progress: bool = True, n_trees: int = 200, depth: int = 2) -> tuple[EdgeConfidence, list[CityEdges]]:
+                          progress: bool = True, n_trees: int = 200, depth: int = 2,
+                          assume_model_gsd: bool = False) -> tuple[EdgeConfidence, list[CityEdges]]:
     """Fit the confidence on ``cities`` with ``predictor`` (the bundle ``weights``) and write the
-    bundle with it to ``out``; returns the model and each city's labelled edges."""
+    bundle with it to ``out``; returns the model and each city's labelled edges.
+    ``assume_model_gsd``: imagery without a pixel size is at the model's (imported crops)."""
     payload = load_checkpoint(weights, ("bundle",))
-    per_city = [city_edges(c, predictor) for c in tqdm(cities, desc="predict cities", unit="city", disable=not progress)]
+    per_city = [city_edges(c, predictor, assume_model_gsd) for c in tqdm(cities, desc="predict cities", unit="city", disable=not progress)]
     per_city = [c for c in per_city if c.graph.n_edges]
     if not per_city:
         raise ValueError("no city gave any edge to learn from")

@@ -3,6 +3,7 @@ edits merged back into every output (the CLI's ``review`` and ``apply-review``).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from pathlib import Path
@@ -49,37 +50,82 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
     ground_truth = ground_truth or city_ground_truth(inputs)
     with Mosaic.open(inputs) as mosaic:
         lines = list(read_ground_truth(ground_truth, mosaic.crs).geometry) if ground_truth is not None else []
-        page = write_review_page(graph, mosaic, out or prediction / "review", lines, progress=progress)
+        page = write_review_page(graph, mosaic, out or prediction / "review", lines, progress=progress,
+                                 fingerprint=graph_fingerprint(prediction))
     return {"page": page, "edges": graph.n_edges, "ground_truth": ground_truth if lines else None}
+
+
+def graph_fingerprint(prediction: Path) -> str:
+    """sha256 of the prediction's graph.json: the review page writes it into the edits it
+    exports, so edits are applied only to the graph they were made on."""
+    return hashlib.sha256((prediction / "graph.json").read_bytes()).hexdigest()
+
+
+def imagery_extent(prediction: Path) -> tuple[float, float, float, float] | None:
+    """The imagery's extent in graph pixels (from summary.json), or None when not recorded."""
+    try:
+        width, height = json.loads((prediction / "summary.json").read_text())["mosaic_px"]
+        return (0.0, 0.0, float(width), float(height))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def apply_review(prediction: Path, edits: Path) -> dict:
     """Merge ``edits`` (the page's GeoJSON export) into the prediction's graph.json, GeoPackage,
-    GeoJSON and map.osm (when present), and append the record to ``review.json``."""
+    GeoJSON and map.osm (when present), and append the record to ``review.json``. Edits made on
+    another version of graph.json are refused; a file applied before changes nothing (the
+    result then has ``already_applied``: that earlier record)."""
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     try:
-        collection = json.loads(edits.read_text())
+        raw = edits.read_bytes()
+        collection = json.loads(raw)
         features = collection["features"]
+        if not isinstance(features, list):
+            raise TypeError
     except FileNotFoundError as exc:
         raise InputError(edits, "file not found") from exc
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(edits, "not a GeoJSON FeatureCollection of edits") from exc
-    crs = (collection.get("properties") or {}).get("crs")
+    edits_sha = hashlib.sha256(raw).hexdigest()
+    log_path = prediction / REVIEW_LOG
+    log = read_log(log_path)
+    earlier = [entry for entry in log["reviews"] if entry.get("edits_sha256") == edits_sha]
+    if earlier:
+        return {"already_applied": earlier[-1], "log": log_path}
+    props = collection.get("properties") if isinstance(collection.get("properties"), dict) else {}
+    crs = props.get("crs")
     if crs is not None and graph.crs is not None and crs != graph.crs:
         raise InputError(edits, f"edits are in {crs}, the prediction in {graph.crs}")
+    before = graph_fingerprint(prediction)
+    made_on = props.get("graph_sha256")
+    if made_on is not None and made_on != before:
+        raise InputError(edits, "made on another version of graph.json (its fingerprint differs): "
+                                "write the review page again (csboundary review) and redo the edits there")
     try:
-        updated, record = apply_edits(graph, features)
+        updated, record = apply_edits(graph, features, extent=imagery_extent(prediction))
     except EditError as exc:
         raise InputError(edits, str(exc)) from exc
     write_graph_outputs(updated, prediction)
     if (prediction / LANELET2_MAP).exists():
         info = prediction / PROJECTOR_INFO
         write_lanelet2(updated, prediction / LANELET2_MAP, read_origin(info) if info.exists() else None)
-    entry = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "edits": str(edits), "edges_before": graph.n_edges,
-             "edges_after": updated.n_edges, **record.to_dict()}
-    log_path = prediction / REVIEW_LOG
-    log = json.loads(log_path.read_text()) if log_path.exists() else {"reviews": []}
+    entry = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "edits": str(edits), "edits_sha256": edits_sha, "graph_sha256_before": before,
+             "graph_sha256_after": graph_fingerprint(prediction), "edges_before": graph.n_edges, "edges_after": updated.n_edges,
+             **record.to_dict()}
     log["reviews"].append(entry)
     with atomic_path(log_path) as tmp:
         tmp.write_text(json.dumps(log, indent=1) + "\n")
     return {**entry, "log": log_path}
+
+
+def read_log(path: Path) -> dict:
+    """The prediction's review log (``{"reviews": [...]}``; empty when there is none)."""
+    if not path.exists():
+        return {"reviews": []}
+    try:
+        log = json.loads(path.read_text())
+        if not isinstance(log, dict) or not isinstance(log.get("reviews"), list):
+            raise ValueError
+    except ValueError as exc:
+        raise InputError(path, "damaged review log (not {\"reviews\": [...]}): move it aside to continue") from exc
+    return log

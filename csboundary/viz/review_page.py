@@ -94,8 +94,10 @@ def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=()
             "transform": list(mosaic.transform)[:6], "vertices": np.round(vertices, 3).tolist(), "edges": edges, "ground_truth": gt}
 
 
-def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, ground_truth=(), progress: bool = True) -> Path:
-    """The review folder ``out`` (``index.html``, ``data.js``, the scripts, ``tiles/``)."""
+def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, ground_truth=(), progress: bool = True,
+                      fingerprint: str | None = None) -> Path:
+    """The review folder ``out`` (``index.html``, ``data.js``, the scripts, ``tiles/``);
+    ``fingerprint`` (of the graph's file) goes into every edits file the page exports."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tiles = out / "tiles"
@@ -103,6 +105,7 @@ def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, gro
         shutil.rmtree(tiles)
     levels = write_pyramid(mosaic, tiles, progress)
     data = page_data(graph, mosaic, levels, ground_truth)
+    data["graph_sha256"] = fingerprint
     with atomic_path(out / "data.js") as tmp:
         tmp.write_text("window.REVIEW_DATA = " + json.dumps(data, separators=(",", ":")) + ";\n")
     static = resources.files("csboundary") / "viz" / "static"

@@ -322,6 +322,20 @@ def test_nan_and_inf_options_are_usage_errors(world, tmp_path):
     one_error(predict(world, world["tif"], out=tmp_path / "o", extra=("--gsd", "inf")), "--gsd")
 
 
+@pytest.mark.parametrize("command", ["predict", "predict-patch"])
+def test_a_pixel_size_of_zero_is_a_usage_error(world, tmp_path, command):
+    done = run_cli(command, str(world["tif"]), "--out", str(tmp_path / "o"), "--weights", str(world["bundle"]), "--gsd", "0")
+    one_error(done, "--gsd", "positive pixel size")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_training_config_must_name_its_training_data(tmp_path):
+    (tmp_path / "empty.json").write_text("{}")
+    done = run_cli("train", "fpn", "--config", str(tmp_path / "empty.json"), "--out", str(tmp_path / "run"))
+    one_error(done, "empty.json", "names no training data", "worlds")
+    assert not (tmp_path / "run" / "train.log").exists()
+
+
 @pytest.mark.parametrize("command", [["predict", "{missing}", "--out", "{out}"], ["predict-patch", "{missing}", "--out", "{out}"],
                                      ["evaluate-model", "{missing}"]])
 def test_a_missing_input_is_reported_before_pytorch_loads(tmp_path, command):

@@ -102,8 +102,9 @@ def _square() -> BoundaryGraph:
 
 def test_edits_by_hand():
     features = [
-        {"properties": {"action": "delete", "edge": 0}, "geometry": None},
-        {"properties": {"action": "accept", "edge": 1}, "geometry": None},
+        {"properties": {"action": "delete", "edge": 0}, "geometry": {"type": "LineString", "coordinates": [[100.0, 200.0], [105.0, 200.0]]}},
+        {"properties": {"action": "accept", "edge": 1},  # drawn from its other end: the pair is checked either way round
+         "geometry": {"type": "LineString", "coordinates": [[105.0, 195.0], [106.0, 197.5], [105.0, 200.0]]}},
         {"properties": {"action": "move", "vertex": 2}, "geometry": {"type": "Point", "coordinates": [105.0, 194.0]}},  # pixel (10, 12)
         {"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[100.2, 200.0], [90.0, 190.0]]}},
     ]

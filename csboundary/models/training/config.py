@@ -65,8 +65,17 @@ class TrainConfig(Config):
 
     @classmethod
     def from_file(cls, path: str | Path) -> "TrainConfig":
+        """A config file, which must name its training data: ``{}`` would otherwise silently
+        train on the default synthetic city."""
         data = json.loads(Path(path).read_text())
+        if not isinstance(data, dict):
+            raise ValueError("not a JSON object of settings")
+        if not any(key in data for key in TRAINING_DATA):
+            raise ValueError(f"names no training data: give one of {', '.join(TRAINING_DATA)} (see configs/)")
         return cls.from_dict(data)
+
+
+TRAINING_DATA = ("train_city", "worlds", "extra_train_cities")  # the keys that say what a config trains on
 
 
 def training_pixel_size(config: dict) -> float | None:

@@ -198,7 +198,7 @@
     [...state.accepted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "accept", edge: id }, geometry: edgeGeometry(id) }));
     [...state.moved.keys()].sort((a, b) => a - b).forEach((i) => features.push({ type: "Feature", properties: { action: "move", vertex: i }, geometry: { type: "Point", coordinates: world(pos(i)) } }));
     state.added.forEach((line) => features.push({ type: "Feature", properties: { action: "add" }, geometry: { type: "LineString", coordinates: line.map(world) } }));
-    const text = JSON.stringify({ type: "FeatureCollection", properties: { crs: D.crs, tool: "csboundary review" }, features }, null, 1);
+    const text = JSON.stringify({ type: "FeatureCollection", properties: { crs: D.crs, graph_sha256: D.graph_sha256, tool: "csboundary review" }, features }, null, 1);
     document.getElementById("export-text").value = text;
     const link = document.getElementById("download");
     link.href = URL.createObjectURL(new Blob([text], { type: "application/geo+json" }));
