@@ -126,7 +126,11 @@ def export_lanelet2(
         if not (-90 <= lat <= 90 and -180 <= lon <= 180):
             raise typer.BadParameter(f"{origin!r} is not a latitude,longitude", param_hint="--origin")
         at = (lat, lon)
-    written = write_lanelet2(BoundaryGraph.read_json(source), out, at)
+    from csboundary.pipeline.outputs import check_finite_geometry
+
+    graph = BoundaryGraph.read_json(source)
+    check_finite_geometry(graph, source)
+    written = write_lanelet2(graph, out, at)
     typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
                f"in {written['projector_info']}")
 

@@ -23,7 +23,7 @@ import numpy as np
 from csboundary.data.atomic import atomic_path
 from csboundary.errors import InputError
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.pipeline.outputs import graph_frames
+from csboundary.pipeline.outputs import check_finite_geometry, graph_frames
 
 ROAD_BORDER = "road_border"
 PROJECTOR_INFO = "map_projector_info.yaml"
@@ -66,6 +66,7 @@ def write_lanelet2(graph: BoundaryGraph, path: str | Path, origin: tuple[float, 
     path = Path(path)
     if graph.crs is None:
         raise InputError(path, "a Lanelet2 map needs georeferenced boundaries (the prediction has no CRS)")
+    check_finite_geometry(graph, path)
     frame = graph_frames(graph)[0]
     to_lonlat = to_wgs84(graph.crs)
     if origin is None:  # the middle of the boundaries (of the frame's corner when there are none)
@@ -82,7 +83,14 @@ def write_lanelet2(graph: BoundaryGraph, path: str | Path, origin: tuple[float, 
     for row in frame.itertuples():
         coords = np.asarray(row.geometry.coords)[:, :2]
         lon, lat = to_lonlat(coords[:, 0], coords[:, 1])
-        local = local_xy(projector, lon, lat)
+        try:
+            local = local_xy(projector, lon, lat)
+        except Exception as exc:  # lanelet2 / pyproj raise their own types for points its zone cannot hold
+            raise InputError(path, f"the boundaries (near {float(lat[0]):.4f}, {float(lon[0]):.4f}) lie too far from the origin "
+                                   f"{origin[0]:.4f}, {origin[1]:.4f} for a UTM projector: give an --origin near them") from exc
+        if not np.isfinite(local).all():
+            raise InputError(path, f"the boundaries lie too far from the origin {origin[0]:.4f}, {origin[1]:.4f} for a UTM projector: "
+                                   "give an --origin near them")
         closed = len(coords) > 2 and np.allclose(coords[0], coords[-1], rtol=0, atol=1e-9)
         points = []
         for x, y in (local[:-1] if closed else local):

@@ -27,6 +27,7 @@ from csboundary.data.atomic import atomic_path
 from csboundary.data.ground_truth import LAYER as BOUNDARIES_LAYER
 from csboundary.data.units import GroundUnits, ground_units
 from csboundary.data.windows import pixel_to_world
+from csboundary.errors import InputError
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import edge_line, merge_chains
 
@@ -50,6 +51,16 @@ def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "
         _write_layer(boundaries, tmp["geojson"], stem, "GeoJSON")  # the layer name is in the file: never the temporary's
         graph.write_json(tmp["graph_json"])
     return paths
+
+
+def check_finite_geometry(graph: BoundaryGraph, source) -> None:
+    """InputError naming ``source`` when a vertex or polyline point is not a finite number: a
+    NaN would become a null geometry in the files written from the graph."""
+    bad = not np.isfinite(graph.vertices).all()
+    if not bad and graph.edge_polylines is not None:
+        bad = any(line is not None and not np.isfinite(np.asarray(line, float)).all() for line in graph.edge_polylines)
+    if bad:
+        raise InputError(source, "the graph has a vertex or edge point that is not a finite number")
 
 
 def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:

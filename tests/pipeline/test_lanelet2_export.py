@@ -76,3 +76,22 @@ def test_a_map_without_crs_is_refused(tmp_path):
     with pytest.raises(Exception, match="needs georeferenced"):
         write_lanelet2(graph, tmp_path / "m.osm")
     assert not (tmp_path / "m.osm").exists()
+
+
+def test_an_origin_far_from_the_boundaries_is_one_line(demo, tmp_path):
+    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "far.osm"), "--origin", "-40.7,106.0")
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "too far from the origin" in lines[0]
+    assert not (tmp_path / "far.osm").exists()
+
+
+def test_a_graph_with_a_nan_vertex_is_one_line(demo, tmp_path):
+    graph = BoundaryGraph.read_json(demo / "graph.json")
+    graph.vertices[0] = np.nan
+    graph.write_json(tmp_path / "graph.json")
+    done = run_cli("export-lanelet2", str(tmp_path / "graph.json"), "--out", str(tmp_path / "m.osm"))
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "graph.json" in lines[0] and "not a finite number" in lines[0]
+    assert not (tmp_path / "m.osm").exists()
