@@ -80,6 +80,18 @@ def read_source(path: str | Path) -> Source:
     return Source(path, lines=read_ground_truth(path))
 
 
+def check_degrees(lines, path) -> None:
+    """Coordinates of a geographic CRS (GeoJSON without a ``crs`` member is WGS 84) must be
+    longitudes and latitudes; pixels or metres read as degrees would score as if nothing matched."""
+    if lines.crs is None or not lines.crs.is_geographic or not len(lines):
+        return
+    x0, y0, x1, y1 = lines.total_bounds
+    if not (np.isfinite([x0, y0, x1, y1]).all() and -90 <= y0 and y1 <= 90 and -180 <= x0 and x1 <= 360):
+        worst = y1 if abs(y1) > 90 else (y0 if abs(y0) > 90 else (x1 if abs(x1) > 180 else x0))
+        raise InputError(path, f"coordinates out of range for {lines.crs.to_string()} (degrees; {worst:g} found): pixels need "
+                               "--pixels, projected coordinates need the file's CRS")
+
+
 def frame_from_raster(path: str | Path) -> Frame:
     """The pixel frame of a city directory, a GeoTIFF, several tiles or a directory of tiles."""
     from csboundary.data.raster import Mosaic
@@ -154,6 +166,10 @@ def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
 def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False) -> tuple[BoundaryGraph, BoundaryGraph, Frame]:
     """Read both inputs, put them in one frame and check that they can be compared."""
     pred_src, gt_src = read_source(pred_path), read_source(gt_path)
+    if not pixels:
+        for src in (pred_src, gt_src):
+            if src.lines is not None:
+                check_degrees(src.lines, src.path)
     frame = resolve_frame(pred_src, gt_src, raster, gsd, pixels)
     pred, gt = to_frame(pred_src, frame), to_frame(gt_src, frame)
     for graph, path in ((pred, pred_src.path), (gt, gt_src.path)):

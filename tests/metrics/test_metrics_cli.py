@@ -87,6 +87,11 @@ def test_pixel_geojson_needs_and_honours_pixels_flag(tmp_path):
     assert (m["precision@2"], m["recall@2"], m["precision@5"], m["recall@5"]) == (0.0, 0.0, 1.0, 1.0)
     # GeoJSON without a crs member is WGS 84 by definition: pixels must be declared
     assert "--pixels" in error_line(run("evaluate", str(pred), str(gt)))
+    # pixels beyond any latitude, read as degrees, are refused in one line instead of scoring 0
+    far = geojson(tmp_path / "far.geojson", [500.5])
+    line = error_line(run("evaluate", str(far), str(gt)))
+    assert "far.geojson" in line and "out of range" in line and "--pixels" in line
+    assert run("evaluate", str(far), str(geojson(tmp_path / "gt2.geojson", [500.5])), "--pixels").returncode == 0
 
 
 def test_missing_file_is_one_line_naming_it(city, tmp_path):
