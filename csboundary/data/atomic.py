@@ -7,6 +7,7 @@ every writer writes to a hidden temporary sibling and renames it into place on s
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import shutil
@@ -33,9 +34,31 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, final)
+    except OSError as exc:
+        full = disk_full_error(exc, final)
+        if full is not None:
+            raise full from exc
+        raise
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+FREE_BYTES_LOW = 2**20  # less than this free after a failed write: the disk is full
+
+
+def disk_full_error(exc: BaseException, path: str | Path) -> OSError | None:
+    """The error to show when writing ``path`` failed on a full disk: ENOSPC naming the folder
+    (numpy, GDAL and others report a short write in their own words, naming no file); None when
+    the failure was something else."""
+    folder = Path(path).parent
+    full = isinstance(exc, OSError) and (exc.errno == errno.ENOSPC or ("requested" in str(exc) and "written" in str(exc)))
+    if not full:
+        try:
+            full = shutil.disk_usage(folder).free < FREE_BYTES_LOW
+        except OSError:
+            return None
+    return OSError(errno.ENOSPC, "no space left on device", str(folder)) if full else None
 
 
 def check_output_dir(path: str | Path, create: bool = False, inputs: Sequence[str | Path] = ()) -> Path:

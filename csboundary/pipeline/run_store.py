@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 from rasterio.transform import Affine
 
+from csboundary.data.atomic import disk_full_error
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.pipeline.float16 import to_float16
@@ -68,6 +69,11 @@ def _atomic_save(path: Path, write) -> None:
         with open(tmp, "wb") as f:
             write(f)
         os.replace(tmp, path)
+    except OSError as exc:
+        full = disk_full_error(exc, path)
+        if full is not None:
+            raise full from exc
+        raise
     finally:
         tmp.unlink(missing_ok=True)
 
