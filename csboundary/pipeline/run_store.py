@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import warnings
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -37,7 +38,7 @@ import numpy as np
 from rasterio.transform import Affine
 
 from csboundary.data.atomic import disk_full_error
-from csboundary.errors import InputError
+from csboundary.errors import InputError, InputWarning
 from csboundary.graph import BoundaryGraph
 from csboundary.pipeline.float16 import to_float16
 
@@ -78,6 +79,11 @@ def _atomic_save(path: Path, write) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def _holds_work(root: Path) -> bool:
+    """Whether a store has any patch's maps or window's graph stored."""
+    return any(not n.startswith(".") for sub in ("maps", "graphs") if (root / sub).is_dir() for n in os.listdir(root / sub))
+
+
 class RunStore:
     """Per-patch maps, graphs and stitched cores of one run, on disk under ``root`` or in memory."""
 
@@ -116,18 +122,54 @@ class RunStore:
         if path.exists():
             try:
                 old = json.loads(path.read_text())
-            except (OSError, ValueError):
-                old = {}
+                if not isinstance(old, dict):
+                    raise ValueError
+            except (OSError, ValueError, UnicodeDecodeError):
+                raise RunMismatch(root.parent, f"holds an unfinished run whose {MANIFEST} is damaged; "
+                                               "rerun with --restart to discard it, or choose another --out") from None
             differs = [k for k in [*manifest, *(k for k in old if k not in manifest)] if old.get(k) != manifest.get(k)]
-            if differs:
+            if differs and not _holds_work(root):  # a run that failed before any work (e.g. on a damaged input) blocks nothing
+                warnings.warn(f"{root.parent}: discarding an unfinished run with other {', '.join(differs)} that had done no work",
+                              InputWarning)
+                shutil.rmtree(root)
+            elif differs:
                 raise RunMismatch(root.parent, f"holds an unfinished run with other {', '.join(differs)}; "
                                                "rerun with --restart to discard it, or choose another --out")
         elif root.exists():
             shutil.rmtree(root)  # no manifest: a store whose creation was interrupted
+        resumed = path.exists()
         store = cls(root, write_behind)
-        if not path.exists():
+        if resumed:
+            for problem in store.verify():
+                warnings.warn(problem, InputWarning)
+        else:
             _atomic_save(path, lambda f: f.write((json.dumps(manifest, indent=1) + "\n").encode()))
         return store
+
+    def verify(self) -> list[str]:
+        """Check every stored file of a resumed run can be read back (header, size, graph
+        arrays); a damaged one is removed, so its work is done again, and said in the returned
+        lines. A damaged core also takes its window's graph: the window is connected again and
+        the core written anew."""
+        problems = []
+        for folder in ("maps", "images", "thumbs", "cores", "graphs"):
+            for entry in sorted(os.scandir(self.root / folder), key=lambda e: e.name):
+                if entry.name.startswith(".") or entry.name.endswith(".empty"):
+                    continue
+                try:
+                    if folder == "graphs":
+                        with np.load(entry.path, allow_pickle=False) as arrays:
+                            graph_from_arrays(arrays)
+                    else:
+                        np.load(entry.path, mmap_mode="r", allow_pickle=False)
+                    continue
+                except Exception:  # numpy, zipfile and the graph reader each raise their own types for a damaged file
+                    pass
+                os.unlink(entry.path)
+                problems.append(f"{entry.path}: damaged in the run store; it will be computed again")
+                if folder == "cores":
+                    (self.root / "graphs" / f"{entry.name.rsplit('.', 1)[0]}.npz").unlink(missing_ok=True)
+        return problems
 
     @property
     def channels(self) -> int | None:

@@ -48,16 +48,21 @@ def _graphs(out: Path) -> list[str]:
     return [p.name for p in folder.iterdir() if p.suffix == ".npz" and not p.name.startswith(".")] if folder.exists() else []
 
 
-def test_a_run_killed_with_sigkill_resumes_to_the_same_graph(city, reference, tmp_path):
-    out = tmp_path / "pred"
+def killed_run(city: Path, out: Path, windows: int = 3) -> None:
+    """``predict`` killed with SIGKILL once ``windows`` windows have their graphs stored."""
     job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), *COMMON],
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 300
-    while len(_graphs(out)) < 3:
+    while len(_graphs(out)) < windows:
         assert job.poll() is None and time.time() < deadline, "the run ended before it could be killed"
         time.sleep(0.05)
     os.kill(job.pid, signal.SIGKILL)
     job.wait()
+
+
+def test_a_run_killed_with_sigkill_resumes_to_the_same_graph(city, reference, tmp_path):
+    out = tmp_path / "pred"
+    killed_run(city, out)
     assert not (out / "graph.json").exists() and not (out / "summary.json").exists()
     done_before = len(_graphs(out))
 
@@ -82,8 +87,38 @@ def test_a_changed_setting_or_input_is_refused_and_restart_discards(city, tmp_pa
     assert done.returncode == 0, done.stderr
 
 
+def test_damaged_store_entries_are_computed_again(city, reference, tmp_path):
+    out = tmp_path / "pred"
+    killed_run(city, out, windows=2)
+    store = out / STORE_DIR
+    maps = sorted(p for p in (store / "maps").iterdir() if p.suffix == ".npy" and not p.name.startswith("."))
+    graph = sorted(p for p in (store / "graphs").iterdir() if p.suffix == ".npz" and not p.name.startswith("."))[0]
+    with open(maps[-1], "r+b") as f:  # a maps file cut short, as a full disk or a crash leaves it
+        f.truncate(maps[-1].stat().st_size // 2)
+    graph.write_text("not a graph")
+    again = run_cli("predict", str(city), "--out", str(out), *COMMON, timeout=600)
+    assert again.returncode == 0, again.stderr
+    warned = [line for line in again.stderr.splitlines() if "damaged in the run store" in line]
+    assert len(warned) == 2 and all(line.startswith("warning: ") for line in warned), again.stderr
+    assert (out / "graph.json").read_bytes() == (reference / "graph.json").read_bytes()
+
+
+def test_a_damaged_manifest_is_one_line_with_the_way_out(tmp_path):
+    RunStore.open(tmp_path / "out" / "s", {"inputs": [], "settings": {}})
+    (tmp_path / "out" / "s" / "manifest.json").write_text("{trunc")
+    with pytest.raises(RunMismatch, match="damaged.*--restart"):
+        RunStore.open(tmp_path / "out" / "s", {"inputs": [], "settings": {}})
+
+
+def test_a_run_that_did_no_work_blocks_nothing(tmp_path):
+    RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 10, 1]], "settings": {}})  # e.g. the input was damaged: nothing stored
+    with pytest.warns(UserWarning, match="had done no work"):
+        store = RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 11, 2]], "settings": {}})  # the input fixed
+    assert json.loads((store.root / "manifest.json").read_text())["inputs"] == [["a.tif", 11, 2]]
+
+
 def test_the_manifest_names_what_differs(tmp_path):
-    RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 10, 1]], "settings": {"w": "x"}})
+    RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 10, 1]], "settings": {"w": "x"}}).save_maps((0, 0), None)
     with pytest.raises(RunMismatch, match="other inputs"):
         RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 11, 1]], "settings": {"w": "x"}})
     with pytest.raises(RunMismatch, match="other settings"):
