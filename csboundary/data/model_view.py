@@ -107,6 +107,13 @@ class ResampledMosaic(Mosaic):
         pixels[:, ~mask] = 0
         return WindowRead(window, pixels, mask)
 
+    def may_have_data(self, window: PixelWindow) -> bool:
+        fx, fy = self.factor
+        pad = 2 + int(math.ceil(max(fx, fy)))
+        c0, r0 = int(math.floor(window.col_off * fx)) - pad, int(math.floor(window.row_off * fy)) - pad
+        c1, r1 = int(math.ceil(window.col_end * fx)) + pad, int(math.ceil(window.row_end * fy)) + pad
+        return self.source.may_have_data(PixelWindow(c0, r0, c1 - c0, r1 - r0))
+
     def close(self) -> None:
         self.source.close()
 
@@ -123,6 +130,9 @@ class StretchedMosaic(Mosaic):
         pixels = self.stretch.apply(raw.data)
         pixels[:, ~raw.valid] = 0
         return WindowRead(raw.window, pixels, raw.valid)
+
+    def may_have_data(self, window: PixelWindow) -> bool:
+        return self.source.may_have_data(window)
 
     def close(self) -> None:
         self.source.close()

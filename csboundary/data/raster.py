@@ -25,7 +25,7 @@ import numpy as np
 import rasterio
 from affine import Affine
 from rasterio.enums import ColorInterp, MaskFlags
-from rasterio.errors import NodataShadowWarning, NotGeoreferencedWarning, RasterioIOError
+from rasterio.errors import NodataShadowWarning, NotGeoreferencedWarning, RasterBlockError, RasterioIOError
 from rasterio.windows import Window
 
 from csboundary.data.windows import PixelWindow, pixel_to_world, window_from_bounds, world_to_pixel
@@ -131,6 +131,35 @@ def area_reduced(data: np.ndarray, valid: np.ndarray, width: int, height: int) -
     return pixels.reshape(len(data), height, width), kept.reshape(height, width)
 
 
+MAX_COVERAGE_BLOCKS = 10**6  # a file with more blocks than this is not checked block by block (taken as covered)
+
+
+def written_blocks(ds) -> tuple[np.ndarray, tuple[int, int]] | None:
+    """Which blocks of a tiled or striped GeoTIFF were ever written, from the block byte counts
+    (no pixel is read): ((rows, cols) bool, block shape), or None when that cannot be known (not
+    a GeoTIFF, too many blocks). A block of any band that was written counts."""
+    if ds.driver != "GTiff":
+        return None
+    block_rows, block_cols = ds.block_shapes[0]
+    rows, cols = -(-ds.height // block_rows), -(-ds.width // block_cols)
+    if rows * cols > MAX_COVERAGE_BLOCKS:
+        return None
+    bands = [1] if ds.interleaving is None or ds.interleaving.name == "pixel" else list(range(1, ds.count + 1))
+    out = np.zeros((rows, cols), bool)
+    for i in range(rows):
+        for j in range(cols):
+            for band in bands:
+                try:
+                    if ds.block_size(band, i, j) > 0:
+                        out[i, j] = True
+                        break
+                except RasterBlockError:  # offset 0: a block never written (a sparse file)
+                    continue
+                except Exception:  # anything else: do not guess
+                    return None
+    return out, (block_rows, block_cols)
+
+
 class Mosaic:
     """Several aligned raster tiles behaving as one north-up image with one affine transform."""
 
@@ -143,6 +172,7 @@ class Mosaic:
         self._handles: OrderedDict[Path, rasterio.DatasetReader] = OrderedDict()  # least recently used first
         self._lock = threading.RLock()  # a prefetching thread and the main thread share the open files
         self.max_open = MAX_OPEN_FILES
+        self._coverage: dict[Path, tuple | None] = {}  # written blocks per tile, found on first use
         self._boxes = np.array([[t.window.col_off, t.window.row_off, t.window.col_end, t.window.row_end] for t in tiles], dtype=np.int64).reshape(-1, 4)
 
     # -- construction ---------------------------------------------------------------------------
@@ -243,6 +273,8 @@ class Mosaic:
             part = tile.window.intersection(window)
             src = part.relative_to(tile.window)
             dst_rows, dst_cols = part.relative_to(window).slices()
+            if not self._tile_may_have_data(tile, src):  # unwritten blocks of a sparse file: nodata, nothing to read
+                continue
             pixels, mask = self._read_tile(tile, src)
             data[:, dst_rows, dst_cols] = np.where(mask, pixels, data[:, dst_rows, dst_cols])
             valid[dst_rows, dst_cols] |= mask  # where tiles overlap, a later tile's nodata keeps earlier pixels
@@ -275,6 +307,26 @@ class Mosaic:
             return iter(())
         hit = (b[:, 0] < window.col_end) & (b[:, 2] > window.col_off) & (b[:, 1] < window.row_end) & (b[:, 3] > window.row_off)
         return (self.tiles[i] for i in np.flatnonzero(hit))
+
+    def may_have_data(self, window: PixelWindow) -> bool:
+        """False only when no tile holds a written block under ``window``: a sparse GeoTIFF (a
+        city inside its bounding box) leaves the blocks outside the city unwritten, and such a
+        window is known empty without reading (or decompressing) anything. True when unsure."""
+        with self._lock:
+            return any(self._tile_may_have_data(tile, tile.window.intersection(window).relative_to(tile.window))
+                       for tile in self._tiles_in(window))
+
+    def _tile_may_have_data(self, tile: Tile, part: PixelWindow) -> bool:
+        """Whether a written block of ``tile`` lies under ``part`` (tile pixels); True when unsure."""
+        coverage = self._coverage.get(tile.path, ...)
+        if coverage is ...:
+            coverage = self._coverage[tile.path] = written_blocks(self._handle(tile.path))
+        if coverage is None:
+            return True
+        blocks, (block_rows, block_cols) = coverage
+        rows = slice(part.row_off // block_rows, (part.row_end - 1) // block_rows + 1)
+        cols = slice(part.col_off // block_cols, (part.col_end - 1) // block_cols + 1)
+        return bool(blocks[rows, cols].any())
 
     def _read_tile(self, tile: Tile, src: PixelWindow) -> tuple[np.ndarray, np.ndarray]:
         ds = self._handle(tile.path)
@@ -321,6 +373,7 @@ class Mosaic:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state, _lock=threading.RLock())
+        self.__dict__.setdefault("_coverage", {})
 
     def __enter__(self) -> "Mosaic":
         return self

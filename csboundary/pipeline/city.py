@@ -195,6 +195,8 @@ class CityJob:
         patch = self.grid.patch(*index)
         if maps is None:
             maps = timed("map_stitching", self.stitched_maps, index)
+        if not maps.any():  # no imagery under the window or its neighbours: no boundary, nothing to read or connect
+            return to_mosaic(BoundaryGraph(np.zeros((0, 2)), np.zeros((0, 2), np.int64)), patch), maps, dict(timed.seconds)
         image = timed("read", self.store.load_image, index)
         if image is None:  # not kept (a store in memory, or an interrupted run)
             with rasterio.Env(**GDAL_ENV):
@@ -207,7 +209,8 @@ class CityJob:
         """Store a window's graph (and its core's maps for maps.tif); its image is no longer needed."""
         if self.write_cores:
             rows, cols = self.grid.patch(*index).core_local.slices()
-            self.store.save_core(index, np.clip(np.rint(maps[:, rows, cols] * 255), 0, 255).astype(np.uint8))
+            core = maps[:, rows, cols]
+            self.store.save_core(index, np.clip(np.rint(core * 255), 0, 255).astype(np.uint8) if core.any() else None)
         self.store.save_graph(index, graph)
         self.store.drop_image(index)
         _trim_heap()
@@ -333,7 +336,7 @@ class CityRun:
             stitch_bar.update(1)
         evidence = None
         if reads_evidence(model):
-            sample = core_sampler(grid, store.load_core)
+            sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
             evidence = timed("confidence", edge_evidence, graph, sample)
             if getattr(model, "confidence", None) is not None:
                 graph = timed("confidence", scored_graph, graph, model.confidence, sample, getattr(model, "min_confidence", 0.0))

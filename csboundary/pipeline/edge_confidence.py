@@ -20,12 +20,11 @@ from csboundary.graph.edge_evidence import Sampler, edge_evidence
 from csboundary.models.confidence import EdgeConfidence
 
 
-def core_sampler(grid: PatchGrid, load_core) -> Sampler:
+def core_sampler(grid: PatchGrid, load_core, channels: int) -> Sampler:
     """Map values at pixel points of the mosaic (nearest pixel), from ``load_core(index)``:
-    the (C, h, w) uint8 maps of a patch core. Points outside the mosaic read 0, as the maps do
-    where there is no imagery."""
+    the (C, h, w) uint8 maps of a patch core (None: all zero). Points outside the mosaic read
+    0, as the maps do where there is no imagery."""
     size = grid.config.core
-    channels = np.asarray(load_core((0, 0))).shape[0]
 
     def sample(points: np.ndarray) -> np.ndarray:
         col = np.rint(points[:, 0]).astype(np.int64)
@@ -36,8 +35,9 @@ def core_sampler(grid: PatchGrid, load_core) -> Sampler:
         for k in np.unique(key[inside]):
             pick = np.flatnonzero(key == k)
             r, c = int(row[pick[0]] // size), int(col[pick[0]] // size)
-            core = np.asarray(load_core((r, c)))
-            out[pick] = core[:, row[pick] - r * size, col[pick] - c * size].T / 255.0
+            core = load_core((r, c))
+            if core is not None:
+                out[pick] = np.asarray(core)[:channels, row[pick] - r * size, col[pick] - c * size].T / 255.0
         return out
 
     return sample

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import rasterio
 import rasterio.shutil
 from rasterio.windows import Window
@@ -37,7 +38,10 @@ def write_maps_cog(path: str | Path, mosaic: Mosaic, grid: PatchGrid, store: Run
                            BIGTIFF="IF_SAFER") as dst:
             for patch in grid:
                 core = patch.core
-                dst.write(store.load_core(patch.index)[: len(bands)], window=Window(core.col_off, core.row_off, core.width, core.height))
+                values = store.load_core(patch.index)
+                if values is None:  # all zero: no imagery near this core
+                    values = np.zeros((len(bands), core.height, core.width), np.uint8)
+                dst.write(values[: len(bands)], window=Window(core.col_off, core.row_off, core.width, core.height))
             for band, name in enumerate(bands, start=1):
                 dst.set_band_description(band, name)
             dst.update_tags(scale="probability = value / 255")

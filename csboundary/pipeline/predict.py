@@ -4,6 +4,7 @@ outputs out. The command line only parses options and prints what these return."
 from __future__ import annotations
 
 import contextlib
+import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -14,7 +15,7 @@ from csboundary.data.atomic import check_output_dir, staging_folder
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import ModelInput, model_view
-from csboundary.errors import InputError
+from csboundary.errors import InputError, InputWarning
 from csboundary.graph import BoundaryGraph
 from csboundary.models.checkpoint import file_sha256, shipped_weights
 from csboundary.pipeline.city import predict_city
@@ -22,6 +23,22 @@ from csboundary.pipeline.patch import PatchPredictor
 from csboundary.pipeline.run import run_prediction
 from csboundary.viz.labels import draw_patch_labels
 from csboundary.viz.overlay import to_display, write_png
+
+
+SPARSE_SHARE = 0.5  # imagery under fewer than this share of the patches is worth a word before the run
+SECONDS_PER_PATCH = 1.0  # a patch with imagery on a 2-core CPU with ONNX Runtime (docs/scaling.md), for the estimate
+
+
+def warn_if_sparse(grid: PatchGrid, mosaic, inputs: Sequence[str | Path]) -> None:
+    """A warning when the imagery covers little of its extent (a city inside its bounding box):
+    how much, that the rest is skipped, and the time the covered part will take."""
+    if len(grid) < 4:
+        return
+    covered = sum(mosaic.may_have_data(patch.expanded) for patch in grid)
+    if covered < SPARSE_SHARE * len(grid):
+        warnings.warn(f"{inputs[0]}: imagery covers {covered} of {len(grid)} patches ({covered / len(grid):.1%}) of its extent; "
+                      f"the empty ones are skipped without reading (about {covered * SECONDS_PER_PATCH / 60:.0f} min on a 2-core CPU)",
+                      InputWarning)
 
 
 def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: PatchPredictor, *, weights: str | Path | None = None,
@@ -39,8 +56,10 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
     mosaic, _ = open_imagery(inputs)
     view = model_view(mosaic, gsd, predictor.pixel_size_m)
     check_output_dir(out, inputs=inputs)
+    grid = PatchGrid.for_mosaic(view.mosaic)
+    warn_if_sparse(grid, view.mosaic, inputs)
     if on_plan is not None:
-        on_plan(PatchGrid.for_mosaic(view.mosaic), view)
+        on_plan(grid, view)
     if threads and not (scheduler or workers):
         import torch
 

@@ -95,6 +95,7 @@ class RunStore:
         self._maps: dict[Index, np.ndarray | None] = {}
         self._graphs: dict[Index, BoundaryGraph] = {}
         self._memory: dict[tuple[str, Index], np.ndarray] = {}  # thumbnails and cores of a store in memory
+        self._empty_cores: set[Index] = set()  # cores whose maps are all zero, of a store in memory
         self._channels: int | None = None
         if self.root is not None:
             for sub in ("maps", "images", "thumbs", "graphs", "cores"):
@@ -330,15 +331,24 @@ class RunStore:
         with np.load(self.root / "graphs" / f"{_stem(index)}.npz", allow_pickle=False) as arrays:
             return graph_from_arrays(arrays)
 
-    def save_core(self, index: Index, values: np.ndarray) -> None:
-        """The stitched maps of a patch core, uint8 (for ``maps.tif``)."""
-        self._put("cores", index, values)
+    def save_core(self, index: Index, values: np.ndarray | None) -> None:
+        """The stitched maps of a patch core, uint8 (for ``maps.tif`` and the edge confidence);
+        None for a core whose maps are all zero (no imagery near it: a marker, not 3 MB of zeros)."""
+        if values is not None:
+            self._put("cores", index, values)
+        elif self.root is None:
+            self._empty_cores.add(index)
+        else:
+            _atomic_save(self.root / "cores" / f"{_stem(index)}.empty", lambda f: None)
 
-    def load_core(self, index: Index) -> np.ndarray:
+    def load_core(self, index: Index) -> np.ndarray | None:
+        """A core's stored maps, None when they are all zero."""
         core = self._get("cores", index)
-        if core is None:
-            raise KeyError(f"stitched maps of patch {index} are not in the run store")
-        return np.asarray(core)
+        if core is not None:
+            return np.asarray(core)
+        if index in self._empty_cores or (self.root is not None and (self.root / "cores" / f"{_stem(index)}.empty").exists()):
+            return None
+        raise KeyError(f"stitched maps of patch {index} are not in the run store")
 
 
 def graph_arrays(graph: BoundaryGraph) -> dict[str, np.ndarray]:
