@@ -101,6 +101,7 @@ class CityResult:
     patches_without_imagery: int = 0  # windows with no valid pixel: the FPN was not run on them
     work: dict[str, int] = field(default_factory=dict)  # patches predicted / windows connected by this run, and reused
     evidence: np.ndarray | None = None  # (E, F) edge evidence of ``graph`` (graph/edge_evidence.py), for a model collecting it
+    blank: frozenset = frozenset()  # patches known to have no imagery, never read
 
     @property
     def n_patches(self) -> int:
@@ -133,6 +134,15 @@ class CityJob:
     write_cores: bool = False  # keep each core's stitched maps (uint8) for maps.tif
     threads: int | None = None  # torch threads in a worker process (None: leave as is)
     overview_scale: float | None = None  # keep each core reduced by this for overview.png (None: do not)
+    blank: frozenset = frozenset()  # patches known to have no imagery (unwritten blocks of a sparse file): never read
+
+    def find_blank(self) -> frozenset:
+        """The patches whose windows hold no written block of any tile (data/raster.py)."""
+        return frozenset(p.index for p in self.grid if not self.mosaic.may_have_data(p.expanded))
+
+    def load_maps(self, index: Index) -> np.ndarray | None:
+        """A patch's stored maps; None (zeros) for a blank patch, whose maps are never stored."""
+        return None if index in self.blank else self.store.load_maps(index)
 
     def read_batch(self, indices: list[Index]) -> list:
         """The windows of one FPN batch (safe to run in a prefetching thread)."""
@@ -180,7 +190,7 @@ class CityJob:
     def stitched_maps(self, index: Index) -> np.ndarray:
         """The window's maps averaged over every patch covering it (float32)."""
         channels = self.store.channels or DEFAULT_CHANNELS
-        return stitch_window(self.grid, self.grid.patch(*index), self.store.load_maps, channels)
+        return stitch_window(self.grid, self.grid.patch(*index), self.load_maps, channels)
 
     def connect_window(self, index: Index, maps: np.ndarray | None = None) -> tuple[BoundaryGraph, dict[str, float]]:
         """Stitch the window, find its vertices and edges, store its graph (mosaic pixels)."""
@@ -196,7 +206,7 @@ class CityJob:
         if maps is None:
             maps = timed("map_stitching", self.stitched_maps, index)
         if not maps.any():  # no imagery under the window or its neighbours: no boundary, nothing to read or connect
-            return to_mosaic(BoundaryGraph(np.zeros((0, 2)), np.zeros((0, 2), np.int64)), patch), maps, dict(timed.seconds)
+            return empty_graph(patch), maps, dict(timed.seconds)
         image = timed("read", self.store.load_image, index)
         if image is None:  # not kept (a store in memory, or an interrupted run)
             with rasterio.Env(**GDAL_ENV):
@@ -233,6 +243,11 @@ def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch
     return attach_ends(graph, ends, attach_px, ATTACH, headings, merge_px=stitch.merge_px)
 
 
+def empty_graph(patch: Patch) -> BoundaryGraph:
+    """The graph of a window with no imagery around it (mosaic pixels)."""
+    return to_mosaic(BoundaryGraph(np.zeros((0, 2)), np.zeros((0, 2), np.int64)), patch)
+
+
 def reads_evidence(model: PatchModel) -> bool:
     """Whether the run keeps every core's maps to read the edges' evidence from (a model with an
     edge confidence, or one collecting evidence to fit it)."""
@@ -253,19 +268,27 @@ class CityRun:
     def __init__(self, job: CityJob, batch_size: int, progress: bool, on_window: Callable[[Patch, np.ndarray], None] | None = None):
         self.job, self.on_window = job, on_window
         grid, store = job.grid, job.store
+        job.blank = job.find_blank()
         graphs = store.graphs_done()
         self.schedule = WindowSchedule(grid, graphs_done=graphs)
+        # windows with only blank patches around them have no boundary: done before the run, with
+        # nothing stored, so a mostly empty mosaic costs little more than its data
+        self.quiet = frozenset(i for i, around in self.schedule.neighbourhoods.items() if all(q in job.blank for q in around))
+        store.mark_empty_cores(self.quiet)
+        self.schedule.graphs_done |= self.quiet
         # maps a finished window no longer needs were dropped; they count as done
-        self.schedule.maps_done = store.maps_done() | {p.index for p in grid if self.schedule.releasable(p.index)}
+        reused = store.maps_done() | {p.index for p in grid if self.schedule.releasable(p.index)}
+        self.schedule.maps_done = reused | job.blank
         # with a store on disk the patch graphs are read back for the final stitching only, so
         # memory during the run does not grow with the number of patches
         self.patch_graphs = {} if store.root is not None else {i: store.load_graph(i) for i in sorted(graphs)}
+        self.patch_graphs.update({i: empty_graph(grid.patch(*i)) for i in self.quiet})
         self.batches = [b for b in fpn_batches(grid, batch_size) if not set(b) <= self.schedule.maps_done]
         self.seconds: dict[str, float] = defaultdict(float)
-        self.work = {"patches_predicted": 0, "windows_connected": 0, "patches_reused": len(self.schedule.maps_done),
-                     "windows_reused": len(graphs)}
+        self.work = {"patches_predicted": 0, "windows_connected": 0, "patches_reused": len(reused - job.blank),
+                     "windows_reused": len(graphs - self.quiet)}
         self.map_bytes_peak = store.held_map_bytes()
-        self.bar = tqdm(total=len(grid), initial=len(graphs), desc="predict patches", unit="patch", disable=not progress)
+        self.bar = tqdm(total=len(grid), initial=len(graphs | self.quiet), desc="predict patches", unit="patch", disable=not progress)
 
     def add_seconds(self, seconds: dict[str, float]) -> None:
         for k, v in seconds.items():
@@ -326,7 +349,7 @@ class CityRun:
             raise RuntimeError(f"{missing} window(s) have no graph: the run did not finish")
         grid, mosaic, store = self.job.grid, self.job.mosaic, self.job.store
         if store.root is not None:
-            self.patch_graphs = {p.index: store.load_graph(p.index) for p in grid}
+            self.patch_graphs = {p.index: empty_graph(p) if p.index in self.quiet else store.load_graph(p.index) for p in grid}
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         timed = _Timer()
         with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
@@ -343,7 +366,7 @@ class CityRun:
                 evidence = None  # it described the edges before the confidence dropped any
         self.add_seconds(timed.seconds)
         return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,
-                          len(self.job.store.empty_patches()), dict(self.work), evidence)
+                          len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence, self.job.blank)
 
 
 def run_here(run: CityRun, drain_workers: int | None = None) -> None:

@@ -56,6 +56,7 @@ class WindowSchedule:
     def __init__(self, grid: PatchGrid, maps_done: set[Index] = frozenset(), graphs_done: set[Index] = frozenset()):
         self.grid = grid
         self._neighbourhood = {p.index: [p.index, *(q.index for q in grid.neighbours(p))] for p in grid}
+        self.neighbourhoods = self._neighbourhood  # window -> the patches covering it (itself first)
         self.maps_done: set[Index] = set(maps_done)
         self.graphs_done: set[Index] = set(graphs_done)
 

@@ -169,7 +169,8 @@ def render_overlays(mosaic: Mosaic, result: CityResult, ground_truth=(), store: 
 
     predicted = result.graph.to_linestrings(world=True)
     layers = [(predicted, ORANGE)]
-    base = None if store is None else overview_from_thumbs(result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb)
+    base = None if store is None else overview_from_thumbs(result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb,
+                                                           result.blank)
     overview = render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid, layers=layers, base=base)
     busiest = max(result.patch_graphs, key=lambda i: result.patch_graphs[i].edge_lengths().sum(), default=(0, 0))
     detail = render_window(mosaic, result.grid.patch(*busiest).core, ground_truth, layers=layers)

@@ -341,6 +341,10 @@ class RunStore:
         else:
             _atomic_save(self.root / "cores" / f"{_stem(index)}.empty", lambda f: None)
 
+    def mark_empty_cores(self, indices) -> None:
+        """Cores known to be all zero before the run (no imagery around them): nothing is stored."""
+        self._empty_cores |= set(indices)
+
     def load_core(self, index: Index) -> np.ndarray | None:
         """A core's stored maps, None when they are all zero."""
         core = self._get("cores", index)

@@ -115,12 +115,14 @@ def core_thumbnail(read: WindowRead, patch: Patch, scale: float) -> np.ndarray:
     return np.concatenate([pixels, valid[None].astype(pixels.dtype)])
 
 
-def overview_from_thumbs(grid: PatchGrid, scale: float, load) -> WindowRead | None:
+def overview_from_thumbs(grid: PatchGrid, scale: float, load, blank=frozenset()) -> WindowRead | None:
     """The whole mosaic reduced by ``scale`` from every core's :func:`core_thumbnail`
-    (``load(index)``); None if one is missing."""
+    (``load(index)``), the ``blank`` cores (no imagery) left empty; None if one is missing."""
     height, width = max(1, round(grid.height * scale)), max(1, round(grid.width * scale))
     data = valid = None
     for patch in grid:
+        if patch.index in blank:
+            continue
         thumb = load(patch.index)
         if thumb is None:
             return None
@@ -131,6 +133,8 @@ def overview_from_thumbs(grid: PatchGrid, scale: float, load) -> WindowRead | No
         y0, y1 = _reduced_span(patch.core.row_off, patch.core.row_end, scale)
         data[:, y0:y1, x0:x1] = thumb[:-1]
         valid[y0:y1, x0:x1] = thumb[-1] > 0
+    if data is None:  # every core blank: nothing to draw from
+        return None
     return WindowRead(PixelWindow(0, 0, grid.width, grid.height), data, valid)
 
 
