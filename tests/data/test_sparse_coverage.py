@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import rasterio
@@ -55,3 +57,7 @@ def test_predict_warns_of_a_sparse_mosaic_before_it_starts(tmp_path):
     assert done.returncode == 0, done.stderr
     said = [line for line in done.stderr.splitlines() if "imagery covers" in line]
     assert len(said) == 1 and said[0].startswith("warning: ") and "4 of 25 patches" in said[0], done.stderr
+    # only the 4 patches over the data are read and predicted; only the 3 x 3 windows around them are connected
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["work"]["patches_predicted"] == 4 and summary["work"]["windows_connected"] == 9
+    assert summary["patches_without_imagery"] == 21
