@@ -135,9 +135,10 @@ MAX_COVERAGE_BLOCKS = 10**6  # a file with more blocks than this is not checked 
 
 
 def written_blocks(ds) -> tuple[np.ndarray, tuple[int, int]] | None:
-    """Which blocks of a tiled or striped GeoTIFF were ever written, from the block byte counts
-    (no pixel is read): ((rows, cols) bool, block shape), or None when that cannot be known (not
-    a GeoTIFF, too many blocks). A block of any band that was written counts."""
+    """Which blocks of a tiled or striped GeoTIFF were ever written, from the block offsets and
+    byte counts (no pixel is read): ((rows, cols) bool, block shape), or None when that cannot be
+    known (not a GeoTIFF, too many blocks). A block of any band that was written counts. A file
+    cut short (a block reaching past its end) is an InputError, found before any work."""
     if ds.driver != "GTiff":
         return None
     block_rows, block_cols = ds.block_shapes[0]
@@ -146,17 +147,23 @@ def written_blocks(ds) -> tuple[np.ndarray, tuple[int, int]] | None:
         return None
     bands = [1] if ds.interleaving is None or ds.interleaving.name == "pixel" else list(range(1, ds.count + 1))
     out = np.zeros((rows, cols), bool)
+    end = 0
     for i in range(rows):
         for j in range(cols):
             for band in bands:
                 try:
-                    if ds.block_size(band, i, j) > 0:
-                        out[i, j] = True
-                        break
+                    size = ds.block_size(band, i, j)
+                    offset = int(ds.get_tag_item(f"BLOCK_OFFSET_{j}_{i}", "TIFF", bidx=band) or 0)
                 except RasterBlockError:  # offset 0: a block never written (a sparse file)
                     continue
                 except Exception:  # anything else: do not guess
                     return None
+                if size > 0:
+                    out[i, j] = True
+                    end = max(end, offset + size)
+    length = Path(ds.name).stat().st_size if Path(ds.name).exists() else None
+    if length is not None and end > length:
+        raise InputError(ds.name, f"truncated: its pixel blocks reach byte {end:,} of a {length:,}-byte file")
     return out, (block_rows, block_cols)
 
 

@@ -31,11 +31,11 @@ SECONDS_PER_PATCH = 1.0  # a patch with imagery on a 2-core CPU with ONNX Runtim
 
 def warn_if_sparse(grid: PatchGrid, mosaic, inputs: Sequence[str | Path]) -> None:
     """A warning when the imagery covers little of its extent (a city inside its bounding box):
-    how much, that the rest is skipped, and the time the covered part will take."""
-    if len(grid) < 4:
-        return
+    how much, that the rest is skipped, and the time the covered part will take. Finding the
+    coverage reads every tile's block table, so a truncated tile is an InputError here, before
+    the run store exists."""
     covered = sum(mosaic.may_have_data(patch.expanded) for patch in grid)
-    if covered < SPARSE_SHARE * len(grid):
+    if len(grid) >= 4 and covered < SPARSE_SHARE * len(grid):
         warnings.warn(f"{inputs[0]}: imagery covers {covered} of {len(grid)} patches ({covered / len(grid):.1%}) of its extent; "
                       f"the empty ones are skipped without reading (about {covered * SECONDS_PER_PATCH / 60:.0f} min on a 2-core CPU)",
                       InputWarning)

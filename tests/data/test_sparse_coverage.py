@@ -61,3 +61,19 @@ def test_predict_warns_of_a_sparse_mosaic_before_it_starts(tmp_path):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["work"]["patches_predicted"] == 4 and summary["work"]["windows_connected"] == 9
     assert summary["patches_without_imagery"] == 21
+
+
+def test_a_truncated_geotiff_is_refused_before_any_work(tmp_path):
+    from helpers import run_cli
+
+    path = tmp_path / "cut.tif"
+    profile = dict(driver="GTiff", count=4, dtype="uint8", width=2000, height=2000, tiled=True, blockxsize=512, blockysize=512,
+                   compress="deflate", crs="EPSG:32618", transform=from_origin(500000, 4500000, 0.152, 0.152))
+    with rasterio.open(path, "w", **profile) as dst:
+        dst.write(np.random.default_rng(0).integers(0, 255, (4, 2000, 2000), dtype=np.uint8))
+    with open(path, "r+b") as f:
+        f.truncate(path.stat().st_size // 2)
+    done = run_cli("predict", str(path), "--out", str(tmp_path / "out"), "--device", "cpu", "--quiet")
+    lines = [line for line in done.stderr.strip().splitlines() if not line.startswith("warning:")]
+    assert done.returncode == 2 and len(lines) == 1 and "cut.tif" in lines[0] and "truncated" in lines[0], done.stderr
+    assert not (tmp_path / "out").exists()  # no run store left to block the next run once the file is fixed
