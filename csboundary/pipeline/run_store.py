@@ -13,7 +13,11 @@ process (SIGKILL included) and the files themselves are the progress record:
   needs it a patch row later; reading it again from a city of small tiles costs ~4x more);
 * ``thumbs/R_C.npy``: the patch core's pixels reduced for ``overview.png`` (bands + validity), so
   the overview needs no second pass over the imagery;
-* ``cores/R_C.npy``: the stitched maps of the patch core as uint8 (only with ``--write-maps``).
+* ``cores/R_C.npy``: the stitched maps of the patch core as uint8 (with ``--write-maps`` or an
+  edge confidence), or ``cores/R_C.empty`` when they are all zero;
+* ``checksums/<folder>/<name>.crc``: each array file's size and CRC-32, written before the file
+  is renamed into place; a resumed run checks every file against it and computes a damaged one
+  again (:meth:`RunStore.verify`).
 
 Writing a patch's maps (4.8 MB) costs about as much as stitching a window, so a store made with
 ``write_behind`` writes them in a background thread while the next patch is predicted; until a
@@ -31,6 +35,7 @@ import json
 import os
 import shutil
 import warnings
+import zlib
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -64,11 +69,32 @@ def _index(stem: str) -> Index:
     return int(row), int(col)
 
 
-def _atomic_save(path: Path, write) -> None:
+def _checksum_path(path: Path) -> Path:
+    """Where a stored file's size and CRC-32 are kept (``checksums/<folder>/<name>.crc``)."""
+    return path.parent.parent / "checksums" / path.parent.name / f"{path.name}.crc"
+
+
+def _file_crc(path: Path) -> tuple[int, int]:
+    """(size in bytes, CRC-32) of a file."""
+    crc, size = 0, 0
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            crc, size = zlib.crc32(chunk, crc), size + len(chunk)
+    return size, crc
+
+
+def _atomic_save(path: Path, write, checksum: bool = False) -> None:
+    """Write ``path`` under a temporary name and rename it; with ``checksum`` its size and CRC
+    are recorded first (checksums/), so a resumed run can tell a damaged file from a good one."""
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
         with open(tmp, "wb") as f:
             write(f)
+        if checksum:
+            size, crc = _file_crc(tmp)
+            record = _checksum_path(path)
+            record.parent.mkdir(parents=True, exist_ok=True)
+            _atomic_save(record, lambda f: f.write(f"{size} {crc}\n".encode()))
         os.replace(tmp, path)
     except OSError as exc:
         full = disk_full_error(exc, path)
@@ -148,16 +174,20 @@ class RunStore:
         return store
 
     def verify(self) -> list[str]:
-        """Check every stored file of a resumed run can be read back (header, size, graph
-        arrays); a damaged one is removed, so its work is done again, and said in the returned
-        lines. A damaged core also takes its window's graph: the window is connected again and
-        the core written anew."""
+        """Check every stored file of a resumed run against the size and CRC-32 recorded when it
+        was written, and that it reads back (header, size, graph arrays); a damaged one is
+        removed, so its work is done again, and said in the returned lines. A damaged core also
+        takes its window's graph: the window is connected again and the core written anew."""
         problems = []
         for folder in ("maps", "images", "thumbs", "cores", "graphs"):
             for entry in sorted(os.scandir(self.root / folder), key=lambda e: e.name):
                 if entry.name.startswith(".") or entry.name.endswith(".empty"):
                     continue
                 try:
+                    record = _checksum_path(Path(entry.path))
+                    size, crc = (int(v) for v in record.read_text().split())
+                    if _file_crc(Path(entry.path)) != (size, crc):
+                        raise ValueError("checksum")
                     if folder == "graphs":
                         with np.load(entry.path, allow_pickle=False) as arrays:
                             graph_from_arrays(arrays)
@@ -167,6 +197,7 @@ class RunStore:
                 except Exception:  # numpy, zipfile and the graph reader each raise their own types for a damaged file
                     pass
                 os.unlink(entry.path)
+                _checksum_path(Path(entry.path)).unlink(missing_ok=True)
                 problems.append(f"{entry.path}: damaged in the run store; it will be computed again")
                 if folder == "cores":
                     (self.root / "graphs" / f"{entry.name.rsplit('.', 1)[0]}.npz").unlink(missing_ok=True)
@@ -226,12 +257,12 @@ class RunStore:
             return
         path = self.root / folder / f"{_stem(index)}.npy"
         if not self.write_behind:
-            _atomic_save(path, lambda f: np.save(f, array, allow_pickle=False))
+            _atomic_save(path, lambda f: np.save(f, array, allow_pickle=False), checksum=True)
             return
         self._settle(MAX_PENDING_WRITES - 1)
         if self._writer is None:
             self._writer = ThreadPoolExecutor(1, thread_name_prefix="csboundary-store-writer")
-        self._pending[folder, index] = (array, self._writer.submit(_atomic_save, path, lambda f: np.save(f, array, allow_pickle=False)))
+        self._pending[folder, index] = (array, self._writer.submit(_atomic_save, path, lambda f: np.save(f, array, allow_pickle=False), True))
 
     def _get(self, folder: str, index: Index) -> np.ndarray | None:
         """A stored array (pending or memory-mapped), None if there is none."""
@@ -256,6 +287,7 @@ class RunStore:
         if entry is not None:
             entry[1].result()  # the write must not recreate the file after it is removed
         (self.root / folder / f"{_stem(index)}.npy").unlink(missing_ok=True)
+        _checksum_path(self.root / folder / f"{_stem(index)}.npy").unlink(missing_ok=True)
 
     def _settle(self, keep: int = 0) -> None:
         """Forget finished background writes, waiting until at most ``keep`` are pending; a
@@ -323,7 +355,7 @@ class RunStore:
         if self.root is None:
             self._graphs[index] = graph
         else:
-            _atomic_save(self.root / "graphs" / f"{_stem(index)}.npz", lambda f: np.savez(f, **graph_arrays(graph)))
+            _atomic_save(self.root / "graphs" / f"{_stem(index)}.npz", lambda f: np.savez(f, **graph_arrays(graph)), checksum=True)
 
     def load_graph(self, index: Index) -> BoundaryGraph:
         if self.root is None:

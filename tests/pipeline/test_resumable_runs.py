@@ -103,6 +103,21 @@ def test_damaged_store_entries_are_computed_again(city, reference, tmp_path):
     assert (out / "graph.json").read_bytes() == (reference / "graph.json").read_bytes()
 
 
+def test_a_flipped_byte_is_found_by_its_checksum(tmp_path):
+    manifest = {"inputs": [], "settings": {}}
+    store = RunStore.open(tmp_path / "s", manifest)
+    store.save_maps((0, 0), np.full((2, 50, 50), 0.25, np.float32))
+    store.save_maps((0, 1), np.full((2, 50, 50), 0.5, np.float32))
+    path = tmp_path / "s" / "maps" / "0_1.npy"
+    raw = bytearray(path.read_bytes())
+    raw[-1] ^= 0x40  # same size, a readable array, one value wrong
+    path.write_bytes(bytes(raw))
+    with pytest.warns(UserWarning, match="0_1.npy: damaged"):
+        again = RunStore.open(tmp_path / "s", manifest)
+    assert again.maps_done() == {(0, 0)}
+    assert float(again.load_maps((0, 0)).max()) == 0.25
+
+
 def test_a_damaged_manifest_is_one_line_with_the_way_out(tmp_path):
     RunStore.open(tmp_path / "out" / "s", {"inputs": [], "settings": {}})
     (tmp_path / "out" / "s" / "manifest.json").write_text("{trunc")
