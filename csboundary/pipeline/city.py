@@ -269,6 +269,10 @@ class CityRun:
         self.job, self.on_window = job, on_window
         grid, store = job.grid, job.store
         job.blank = job.find_blank()
+        if job.write_cores:  # a window whose core an interrupted run did not keep is connected again
+            for index in store.graphs_done():
+                if not store.has_core(index):
+                    store.drop_graph(index)
         graphs = store.graphs_done()
         self.schedule = WindowSchedule(grid, graphs_done=graphs)
         # windows with only blank patches around them have no boundary: done before the run, with

@@ -366,12 +366,28 @@ class RunStore:
     def save_core(self, index: Index, values: np.ndarray | None) -> None:
         """The stitched maps of a patch core, uint8 (for ``maps.tif`` and the edge confidence);
         None for a core whose maps are all zero (no imagery near it: a marker, not 3 MB of zeros)."""
-        if values is not None:
+        if values is not None and self.root is not None:  # in place before the window's graph is: never a graph without its core
+            _atomic_save(self.root / "cores" / f"{_stem(index)}.npy", lambda f: np.save(f, values, allow_pickle=False), checksum=True)
+        elif values is not None:
             self._put("cores", index, values)
         elif self.root is None:
             self._empty_cores.add(index)
         else:
             _atomic_save(self.root / "cores" / f"{_stem(index)}.empty", lambda f: None)
+
+    def has_core(self, index: Index) -> bool:
+        """Whether a core (or its all-zero marker) is stored."""
+        if self.root is None:
+            return ("cores", index) in self._memory or index in self._empty_cores
+        return index in self._empty_cores or any((self.root / "cores" / f"{_stem(index)}{ext}").exists() for ext in (".npy", ".empty"))
+
+    def drop_graph(self, index: Index) -> None:
+        """Forget a window's graph (it will be connected again)."""
+        if self.root is None:
+            self._graphs.pop(index, None)
+        else:
+            (self.root / "graphs" / f"{_stem(index)}.npz").unlink(missing_ok=True)
+            _checksum_path(self.root / "graphs" / f"{_stem(index)}.npz").unlink(missing_ok=True)
 
     def mark_empty_cores(self, indices) -> None:
         """Cores known to be all zero before the run (no imagery around them): nothing is stored."""
