@@ -85,6 +85,11 @@ class PatchGrid:
         self.config = config
         self.n_rows = math.ceil(height / config.core)
         self.n_cols = math.ceil(width / config.core)
+        self._patches: dict[tuple[int, int], Patch] = {}  # made once each: a run asks for every patch many times
+
+    def __getstate__(self) -> dict:
+        """Pickled without the patches made so far (a Dask worker makes its own)."""
+        return {**self.__dict__, "_patches": {}}
 
     @classmethod
     def for_mosaic(cls, mosaic, config: GridConfig = GridConfig()) -> "PatchGrid":
@@ -108,13 +113,17 @@ class PatchGrid:
         return 0 <= row < self.n_rows and 0 <= col < self.n_cols
 
     def patch(self, row: int, col: int) -> Patch:
+        found = self._patches.get((row, col))
+        if found is not None:
+            return found
         if (row, col) not in self:
             raise IndexError(f"patch ({row}, {col}) outside grid of {self.n_rows}x{self.n_cols}")
         c, m = self.config.core, self.config.margin
         c0, r0 = col * c, row * c
         core = PixelWindow(c0, r0, min(c, self.width - c0), min(c, self.height - r0))
         expanded = PixelWindow(c0 - m, r0 - m, c + 2 * m, c + 2 * m)
-        return Patch(row, col, core, expanded, window_transform(self.transform, expanded))
+        patch = self._patches[row, col] = Patch(row, col, core, expanded, window_transform(self.transform, expanded))
+        return patch
 
     def neighbours(self, patch: Patch) -> list[Patch]:
         """The patches whose expanded windows overlap ``patch``'s: the up to 8 adjacent ones, and

@@ -95,12 +95,26 @@ def _inspect(path: Path) -> tuple[object, Affine, int, str, int, int, bool]:
 def _true_alpha(ds) -> bool:
     """Is band 4 a real alpha mask? GDAL labels band 4 of most 4-band files alpha (see
     :func:`_valid_mask`), so the label alone proves nothing; a band 4 holding only 0 and 255 in an
-    overview of the file (an NIR band never does) is taken to be transparency."""
+    overview of the file (an NIR band never does) is taken to be transparency. Remembered per
+    file version: the overview of a huge file takes a second, and a run opens its inputs twice."""
     if ds.count != BANDS or ds.colorinterp[BANDS - 1] != ColorInterp.alpha or ds.width == 0 or ds.height == 0:
         return False
+    try:
+        stat = Path(ds.name).stat()
+        key = (str(Path(ds.name).resolve()), stat.st_size, stat.st_mtime_ns)
+    except OSError:
+        key = None
+    if key is not None and key in _ALPHA_SEEN:
+        return _ALPHA_SEEN[key]
     side = (min(256, ds.height), min(256, ds.width))
     values = np.unique(ds.read(BANDS, out_shape=side, resampling=rasterio.enums.Resampling.nearest))
-    return bool(set(values.tolist()) <= {0, 255} and 255 in values)
+    alpha = bool(set(values.tolist()) <= {0, 255} and 255 in values)
+    if key is not None:
+        _ALPHA_SEEN[key] = alpha
+    return alpha
+
+
+_ALPHA_SEEN: dict[tuple, bool] = {}  # (file, size, mtime) -> whether band 4 is a true alpha mask
 
 
 def _valid_mask(ds, window: Window) -> np.ndarray:
