@@ -118,7 +118,7 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
     n = result.n_patches
     kinds = graph.edge_kinds or []
     return {
-        "inputs": [str(t.path) for t in mosaic.tiles],
+        "inputs": [str(Path(t.path).resolve()) for t in mosaic.tiles],  # absolute: review and apply-review run from anywhere
         "crs": graph.crs,
         "length_unit": f"metre (from {units.unit_name}{', geodesic' if units.geographic else ''})",
         "mosaic_px": [mosaic.width, mosaic.height],

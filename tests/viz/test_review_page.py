@@ -126,3 +126,17 @@ def test_edits_by_hand():
 def test_bad_edits_are_refused(feature, message):
     with pytest.raises(EditError, match=message):
         apply_edits(_square(), [feature])
+
+
+def test_review_works_from_another_folder_than_predict_ran_in(tmp_path):
+    """predict records its inputs as absolute paths, so the review page finds the imagery from anywhere."""
+    city = tmp_path / "work" / "city"
+    assert run_cli("synth", str(city), "--tile-size", "600", "--seed", "2", "--split", "valid", "--quiet").returncode == 0
+    tile = next((city / "tiles").glob("*.tif")).relative_to(tmp_path / "work")
+    done = run_cli("predict", str(tile), "--out", "pred", "--device", "cpu", "--quiet", cwd=tmp_path / "work")
+    assert done.returncode == 0, done.stderr
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    done = run_cli("review", str(tmp_path / "work" / "pred"), cwd=elsewhere)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "work" / "pred" / "review" / "index.html").exists()
