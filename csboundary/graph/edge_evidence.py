@@ -21,6 +21,7 @@ import numpy as np
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import edge_line, merge_chains
 from csboundary.graph.fragments import fragment_lengths
+from csboundary.graph.polyline import points_along, polyline_length
 
 KINDS = ("normal", "corner", "skeleton", "join", "attach", "seam")  # the kinds of predicted edges (others count as none of these)
 KEYPOINT, BOUNDARY, SURFACE = 0, 1, 2  # channels of the FPN's maps
@@ -49,7 +50,7 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     if n == 0:
         return out
     lines = [edge_line(graph, k) for k in range(n)]
-    length = np.array([_length(line) for line in lines])
+    length = np.array([polyline_length(line) for line in lines])
     chord = np.array([float(np.linalg.norm(line[-1] - line[0])) for line in lines])
     kinds = graph.edge_kinds or ["normal"] * n
     degree = np.minimum(np.bincount(graph.edges.ravel(), minlength=graph.n_vertices), MAX_DEGREE)
@@ -58,7 +59,7 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     chain_length, chain_chord, chain_of = np.zeros(n), np.zeros(n), np.zeros(n, np.int64)
     for c, chain in enumerate(merge_chains(graph)):  # the boundary (run through degree-2 vertices) each edge is part of
         chain_of[chain.edges] = c
-        chain_length[chain.edges] = _length(chain.polyline)
+        chain_length[chain.edges] = polyline_length(chain.polyline)
         chain_chord[chain.edges] = float(np.linalg.norm(chain.polyline[-1] - chain.polyline[0]))
     score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, float)
     columns = {
@@ -120,26 +121,3 @@ def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarr
             out["surface_contrast"][k] = np.mean(np.abs(left[s, SURFACE] - right[s, SURFACE]))
             out["surface_far_low"][k], out["surface_far_high"][k] = np.sort([np.mean(far_left[s, SURFACE]), np.mean(far_right[s, SURFACE])])
     return out
-
-
-def _length(line: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-
-
-def points_along(line: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points every ``step`` px along a polyline (middles of equal pieces) and the unit normal
-    of the segment each lies on (left of the direction of travel in image axes; (0, 0) on a
-    zero-length line)."""
-    seg = np.diff(line, axis=0)
-    seg_len = np.linalg.norm(seg, axis=1)
-    total = float(seg_len.sum())
-    if total <= 0:
-        return line[:1].astype(float), np.zeros((1, 2))
-    m = max(1, int(np.ceil(total / step)))
-    at = (np.arange(m) + 0.5) * (total / m)
-    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-    which = np.clip(np.searchsorted(cum, at, side="right") - 1, 0, len(seg) - 1)
-    t = (at - cum[which]) / np.maximum(seg_len[which], 1e-12)
-    pts = line[which] + t[:, None] * seg[which]
-    direction = seg[which] / np.maximum(seg_len[which], 1e-12)[:, None]
-    return pts, np.stack([direction[:, 1], -direction[:, 0]], axis=1)

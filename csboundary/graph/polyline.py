@@ -62,3 +62,22 @@ def dense_samples(points: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarr
     t = (np.arange(counts.sum()) - np.repeat(starts, counts)) / np.repeat(counts, counts)
     samples = points[index] + seg[index] * t[:, None]
     return np.vstack([samples, points[-1:]]), np.concatenate([index, [len(seg) - 1]])
+
+
+def points_along(line: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``step`` px along a polyline (middles of equal pieces) and the unit normal
+    of the segment each lies on (left of the direction of travel in image axes; (0, 0) on a
+    zero-length line)."""
+    line = np.asarray(line, float)
+    seg = np.diff(line, axis=0)
+    cum = arc_lengths(line)
+    seg_len, total = np.diff(cum), float(cum[-1]) if len(cum) else 0.0
+    if total <= 0:
+        return line[:1], np.zeros((1, 2))
+    m = max(1, int(np.ceil(total / step)))
+    at = (np.arange(m) + 0.5) * (total / m)
+    which = np.clip(np.searchsorted(cum, at, side="right") - 1, 0, len(seg) - 1)
+    t = (at - cum[which]) / np.maximum(seg_len[which], 1e-12)
+    pts = line[which] + t[:, None] * seg[which]
+    direction = seg[which] / np.maximum(seg_len[which], 1e-12)[:, None]
+    return pts, np.stack([direction[:, 1], -direction[:, 0]], axis=1)

@@ -24,7 +24,7 @@ from scipy.stats import rankdata
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import edge_line
-from csboundary.graph.edge_evidence import points_along
+from csboundary.graph.polyline import points_along
 
 TRUE_WITHIN_PX = 5.0  # an edge point this close to the ground truth is on it
 TRUE_SHARE = 0.5  # an edge is true when at least this share of its length is on the ground truth

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.edge_evidence import FEATURES, edge_evidence, points_along
+from csboundary.graph.edge_evidence import FEATURES, edge_evidence
+from csboundary.graph.polyline import points_along
 
 
 def array_sampler(maps: np.ndarray):
