@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.errors import InputError
-from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
+from csboundary.graph.edge_evidence import FEATURES
 
 VERSION = 1
 TIE_BREAK = 1e-3  # inside a flat step of the isotonic map, edges are still ordered by the trees' raw output
@@ -83,10 +83,6 @@ class EdgeConfidence:
     @property
     def needs_surface(self) -> bool:
         return any("surface" in f for f in self.features)
-
-    @property
-    def needs_maps(self) -> bool:
-        return any(f in MAP_FEATURES for f in self.features)
 
     def to_dict(self) -> dict:
         """Plain numbers and strings, for a weights bundle."""

@@ -366,7 +366,7 @@ class CityRun:
             sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
             evidence = timed("confidence", edge_evidence, graph, sample)
             if getattr(model, "confidence", None) is not None:
-                graph = timed("confidence", scored_graph, graph, model.confidence, sample, getattr(model, "min_confidence", 0.0))
+                graph = timed("confidence", scored_graph, graph, model.confidence, evidence, getattr(model, "min_confidence", 0.0))
                 evidence = None  # it described the edges before the confidence dropped any
         self.add_seconds(timed.seconds)
         return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,

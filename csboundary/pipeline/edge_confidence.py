@@ -16,7 +16,7 @@ import numpy as np
 
 from csboundary.data.grid import PatchGrid
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.edge_evidence import Sampler, edge_evidence
+from csboundary.graph.edge_evidence import Sampler
 from csboundary.models.confidence import EdgeConfidence
 
 
@@ -43,11 +43,12 @@ def core_sampler(grid: PatchGrid, load_core, channels: int) -> Sampler:
     return sample
 
 
-def scored_graph(graph: BoundaryGraph, confidence: EdgeConfidence, sample: Sampler, min_confidence: float = 0.0) -> BoundaryGraph:
-    """``graph`` with every edge's score replaced by its calibrated confidence, without the
-    edges below ``min_confidence`` (and the vertices only they use)."""
+def scored_graph(graph: BoundaryGraph, confidence: EdgeConfidence, evidence: np.ndarray, min_confidence: float = 0.0) -> BoundaryGraph:
+    """``graph`` with every edge's score replaced by its calibrated confidence (from the edges'
+    ``evidence``, :func:`~csboundary.graph.edge_evidence.edge_evidence`), without the edges
+    below ``min_confidence`` (and the vertices only they use)."""
     if graph.n_edges == 0:
         return graph
-    probability = confidence.probability(edge_evidence(graph, sample if confidence.needs_maps else None))
+    probability = confidence.probability(evidence)
     scored = dataclasses.replace(graph, edge_scores=probability)
     return scored.edge_subgraph(probability >= min_confidence) if min_confidence > 0 else scored
