@@ -16,14 +16,7 @@ import json
 
 import numpy as np
 
-
-def paired_bootstrap(a: np.ndarray, b: np.ndarray, samples: int, seed: int) -> tuple[float, float, float, float]:
-    """(mean of b - a, 2.5 % and 97.5 % quantiles of its bootstrap distribution, share of draws where b > a)."""
-    diff = np.asarray(b, float) - np.asarray(a, float)
-    draws = np.random.default_rng(seed).integers(0, len(diff), size=(samples, len(diff)))
-    means = diff[draws].mean(axis=1)
-    low, high = np.quantile(means, [0.025, 0.975])
-    return float(diff.mean()), float(low), float(high), float((means > 0).mean())
+from csboundary.metrics.compare import paired_bootstrap
 
 
 def per_city(path: str, metric: str) -> dict[str, float]:

@@ -42,6 +42,8 @@ COMMANDS = (  # (name, function)
     ("train", training_commands.train),
     ("bundle-weights", training_commands.bundle_weights),
     ("fit-confidence", training_commands.fit_confidence),
+    ("finetune", training_commands.finetune),
+    ("evaluate-finetune", training_commands.evaluate_finetune),
 )
 for _name, _command in COMMANDS:
     app.command(_name)(_command)

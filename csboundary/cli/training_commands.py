@@ -1,4 +1,5 @@
-"""Commands that make models: training runs and the weights bundle that ships."""
+"""Commands that make models: training runs, the weights bundle that ships, and fine-tuning it on a
+user's own labelled imagery."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import DeviceOption, QuietOption, finite, out_dir, out_file
+from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, finite, out_dir, out_file
 
 
 def train(
@@ -99,3 +100,69 @@ def fit_confidence(
         r = confidence_report(model.probability(c.evidence), c.truth_share, c.graph.edge_lengths())
         typer.echo(f"{c.name}: {r['edges']} edges, {r['share_true']:.2f} true, AUC {r['auc']:.3f}, ECE {r['ece']:.3f} (fitted on)")
     typer.echo(f"{out}: edge confidence of {model.n_trees} trees over {len(model.features)} features, from {len(per_city)} cities")
+
+
+def _budget(**given):
+    """The fine-tuning budget: the options given, the defaults of FinetuneBudget for the rest."""
+    from csboundary.pipeline.finetune import FinetuneBudget
+
+    return FinetuneBudget.from_dict({k: v for k, v in given.items() if v is not None})
+
+
+def finetune(
+    labelled: list[Path] = typer.Argument(..., help="Labelled inputs: city directories (make-city, import-masks), sets of them, "
+                                                   "or reviewed prediction folders (their areas marked complete)."),
+    out: Path = typer.Option(..., "--out", help="Bundle to write: the fine-tuned weights, used as any bundle (predict --weights OUT)."),
+    weights: WeightsOption = None,
+    work: Optional[Path] = typer.Option(None, help="Folder of the training runs; give the same command again to continue a stopped "
+                                                    "run (default: OUT-finetune/ beside OUT)."),
+    fpn_steps: Optional[int] = typer.Option(None, min=1, help="FPN steps (default 1000)."),
+    afanet_steps: Optional[int] = typer.Option(None, min=1, help="AfANet steps (default 500)."),
+    user_share: Optional[float] = typer.Option(None, callback=finite, min=0.05, max=1.0,
+                                               help="Share of training samples from LABELLED (default 0.5); the rest come from synthetic "
+                                                    "cities of the weights' mix."),
+    synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
+    cache: Optional[Path] = typer.Option(None, help="Folder of the synthetic cities (default: in WORK)."),
+    seed: int = typer.Option(0, min=0, help="Seed of the sample draws."),
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
+) -> None:
+    """Fine-tune the weights on your own labelled imagery: the FPN, then AfANet on the tuned
+    FPN's vertices, with synthetic cities mixed in so nothing learnt is forgotten
+    (docs/finetune.md). The default budget takes about 15 minutes on a 2-core CPU."""
+    from csboundary.pipeline.finetune import default_work, finetune as run
+
+    out_file(out, (".pt",))
+    budget = _budget(fpn_steps=fpn_steps, afanet_steps=afanet_steps, user_share=user_share, synthetic_cities=synthetic_cities)
+    done = run(labelled, out, weights=weights, work=work or default_work(out), budget=budget, seed=seed, cache=cache, device=device,
+               progress=not quiet)
+    minutes = sum(done["seconds"].values()) / 60
+    typer.echo(f"{out}: fine-tuned on {len(done['cities'])} labelled cities ({budget.fpn_steps} FPN + {budget.afanet_steps} AfANet steps, "
+               f"{minutes:.1f} min); runs in {done['work']}")
+
+
+def evaluate_finetune(
+    set_dir: Path = typer.Argument(..., help="A set of labelled cities (import-masks output, or a folder of city directories)."),
+    out: Path = typer.Option(..., "--out", help="Folder of the folds' runs, bundles and scores; give it again to continue."),
+    folds: int = typer.Option(2, min=2, help="Folds: each is held out once while the others fine-tune."),
+    weights: WeightsOption = None,
+    fpn_steps: Optional[int] = typer.Option(None, min=1, help="FPN steps per fold (default 1000)."),
+    afanet_steps: Optional[int] = typer.Option(None, min=1, help="AfANet steps per fold (default 500)."),
+    user_share: Optional[float] = typer.Option(None, callback=finite, min=0.05, max=1.0, help="Share of training samples from the set (default 0.5)."),
+    synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12)."),
+    cache: Optional[Path] = typer.Option(None, help="Folder of the synthetic cities (default: in OUT)."),
+    seed: int = typer.Option(0, min=0, help="Seed of the sample draws and of the scores' vertex pairs."),
+    engine: str = typer.Option("auto", help="auto | torch | onnx."),
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
+) -> None:
+    """What fine-tuning on a labelled set is worth: K-fold cross-validation, base against
+    fine-tuned scores on every held-out city, with the 95 % interval of the gain."""
+    from csboundary.pipeline.finetune_cv import evaluate_finetune as run, format_finetune
+
+    out_dir(out, [set_dir])
+    budget = _budget(fpn_steps=fpn_steps, afanet_steps=afanet_steps, user_share=user_share, synthetic_cities=synthetic_cities)
+    result = run(set_dir, out, folds=folds, weights=weights, budget=budget, seed=seed, cache=cache, device=device, engine=engine,
+                 progress=not quiet)
+    typer.echo(format_finetune(result))
+    typer.echo(f"{out / 'evaluate-finetune.json'}: every score")

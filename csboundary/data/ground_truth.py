@@ -17,6 +17,7 @@ from csboundary.errors import InputError
 
 LAYER = "road_boundaries"
 SURFACE_LAYER = "road_surface"  # optional: the roadway as polygons (synthetic cities), the FPN's surface target
+COMPLETE_LAYER = "complete_area"  # optional: polygons where the boundaries are complete; elsewhere labels are unknown
 
 
 def as_linestrings(geometry) -> list[LineString]:
@@ -35,23 +36,38 @@ def as_linestrings(geometry) -> list[LineString]:
     return []
 
 
-def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame, surface: gpd.GeoDataFrame | None = None) -> Path:
+def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame, surface: gpd.GeoDataFrame | None = None,
+                       complete: gpd.GeoDataFrame | None = None) -> Path:
     """Write a GeoDataFrame of boundary LineStrings to a GeoPackage layer, atomically; with
-    ``surface``, the roadway polygons as a second layer (``road_surface``)."""
+    ``surface``, the roadway polygons as a second layer (``road_surface``); with ``complete``,
+    the polygons where the boundaries are complete (``complete_area``)."""
     with atomic_path(path) as tmp:
         frame.to_file(tmp, layer=LAYER, driver="GPKG", engine="pyogrio")
         if surface is not None:
             surface.to_file(tmp, layer=SURFACE_LAYER, driver="GPKG", engine="pyogrio")
+        if complete is not None:
+            complete.to_file(tmp, layer=COMPLETE_LAYER, driver="GPKG", engine="pyogrio")
     return Path(path)
 
 
 def read_road_surface(path: str | Path, crs=None) -> list | None:
     """The roadway polygons of a ground-truth GeoPackage (reprojected to ``crs``), or None when
     it has no ``road_surface`` layer (imported and user cities: only boundaries are known)."""
+    return _read_polygons(path, SURFACE_LAYER, crs)
+
+
+def read_complete_area(path: str | Path, crs=None) -> list | None:
+    """The polygons of a ground-truth GeoPackage where its boundaries are complete (a reviewed
+    prediction's marked areas, reprojected to ``crs``), or None when it has no
+    ``complete_area`` layer: then the labels are complete everywhere."""
+    return _read_polygons(path, COMPLETE_LAYER, crs)
+
+
+def _read_polygons(path: str | Path, layer: str, crs=None) -> list | None:
     try:
-        if SURFACE_LAYER not in [name for name, _ in pyogrio.list_layers(path)]:
+        if layer not in [name for name, _ in pyogrio.list_layers(path)]:
             return None
-        frame = gpd.read_file(path, layer=SURFACE_LAYER, engine="pyogrio")
+        frame = gpd.read_file(path, layer=layer, engine="pyogrio")
     except Exception as exc:  # pyogrio raises several unrelated types for unreadable files
         raise InputError(path, f"not a readable vector file ({type(exc).__name__}: {exc})".splitlines()[0]) from exc
     if crs is not None and frame.crs is not None and frame.crs != crs:

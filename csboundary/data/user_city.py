@@ -27,8 +27,10 @@ from csboundary.errors import InputError, InputWarning
 SOURCE = "user"
 
 
-def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path) -> dict[str, Any]:
-    """Check ``tiles`` and ``ground_truth``, then write the city ``out`` (tiles linked); returns its metadata."""
+def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path, complete=None) -> dict[str, Any]:
+    """Check ``tiles`` and ``ground_truth``, then write the city ``out`` (tiles linked); returns its
+    metadata. ``complete``: a GeoDataFrame of the polygons where the boundaries are complete
+    (labels elsewhere are unknown); None: complete everywhere."""
     with Mosaic.open(tiles) as mosaic:
         paths = [Path(t.path).resolve() for t in mosaic.tiles]
         crs = mosaic.crs
@@ -56,9 +58,11 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     folder.mkdir(parents=True, exist_ok=True)
     for path in paths:
         os.symlink(path, folder / path.name)
-    write_ground_truth(ground_truth_path(out), frame)
+    if complete is not None:
+        complete = complete.to_crs(crs) if complete.crs is not None else complete.set_crs(crs)
+    write_ground_truth(ground_truth_path(out), frame, complete=complete)
     meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "width": size[0], "height": size[1], "tiles": names,
             "tile_sources": [str(p) for p in paths], "ground_truth_source": str(Path(ground_truth).resolve()),
-            "boundaries": len(frame), "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
+            "boundaries": len(frame), **({"complete_areas": len(complete)} if complete is not None else {}), "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
     write_meta(out, meta)
     return meta

@@ -9,7 +9,10 @@ feature's ``action`` property says what a person did:
 * ``move`` (``vertex``: its index, Point geometry): the vertex moves, and so do the ends of
   the edges at it;
 * ``add`` (LineString geometry): a new edge, kind ``manual``, score 1; its ends join existing
-  vertices within ``snap_px`` pixels, else become new vertices.
+  vertices within ``snap_px`` pixels, else become new vertices;
+* ``complete`` (Polygon geometry): the reviewer vouches that inside it every boundary is drawn and
+  every drawn edge is right, so the reviewed graph there is a label (fine-tuning trains on it and
+  treats the rest as unknown). The graph does not change.
 
 Nothing is taken on trust: an edge's index must come with that edge's geometry (its two ends
 within ``match_px``), and every coordinate must be a pair of finite numbers inside ``extent``
@@ -25,12 +28,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from shapely.geometry import Polygon
 
 from csboundary.data.windows import world_to_pixel
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import edge_line
 
-ACTIONS = ("delete", "accept", "move", "add")
+ACTIONS = ("delete", "accept", "move", "add", "complete")
 MANUAL = "manual"
 
 
@@ -45,10 +49,11 @@ class ReviewRecord:
     moved: list[int] = field(default_factory=list)  # vertex indices
     added: list[int] = field(default_factory=list)  # new edge indices
     kept: dict[int, int] = field(default_factory=dict)  # old edge index -> new edge index
+    complete_areas: list[list[list[float]]] = field(default_factory=list)  # closed rings in the graph's CRS
 
     def to_dict(self) -> dict:
         return {"deleted_edges": self.deleted, "accepted_edges": self.accepted, "moved_vertices": self.moved, "added_edges": self.added,
-                "edge_index_map": {str(k): v for k, v in self.kept.items()}}
+                "edge_index_map": {str(k): v for k, v in self.kept.items()}, "complete_areas": self.complete_areas}
 
 
 EXTENT_MARGIN_PX = 100.0  # edits may reach this far beyond the imagery
@@ -74,6 +79,7 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
     edges = [tuple(int(x) for x in e) for e in graph.edges]
     deleted, accepted, moved = set(), set(), []
     added: list[np.ndarray] = []
+    areas: list[list[list[float]]] = []
 
     def pixels(coordinates, what: str, points: bool = True) -> np.ndarray:
         """(N, 2) graph pixels of GeoJSON positions (a Point's one position when not ``points``)."""
@@ -141,6 +147,8 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
             if len(line) < 2:
                 raise EditError(f"{what}: needs a LineString of at least 2 positions")
             added.append(line)
+        elif action == "complete":
+            areas.append(_complete_ring(geometry, what, pixels))
         else:
             raise EditError(f"{what}: unknown action (one of {', '.join(ACTIONS)})")
 
@@ -151,7 +159,7 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
             line[0], line[-1] = vertices[u], vertices[v]
             polylines[k] = line
 
-    record = ReviewRecord(deleted=sorted(deleted), moved=sorted(set(moved)))
+    record = ReviewRecord(deleted=sorted(deleted), moved=sorted(set(moved)), complete_areas=areas)
     new_edges, new_kinds, new_lines, new_scores, new_patches = [], [], [], [], []
     for k in range(n_edges):
         if k in deleted:
@@ -191,3 +199,16 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
                            edge_polylines=new_lines, edge_scores=np.array(new_scores, float),
                            edge_patches=np.array(new_patches, np.int64).reshape(-1, 2), transform=graph.transform, crs=graph.crs)
     return result, record
+
+
+def _complete_ring(geometry: dict, what: str, pixels) -> list[list[float]]:
+    """The outer ring of a ``complete`` edit's Polygon in world coordinates, closed, checked to
+    lie on the imagery (``pixels`` raises otherwise) and to enclose an area."""
+    rings = geometry.get("coordinates") if geometry.get("type") == "Polygon" else None
+    if not isinstance(rings, list) or not rings:
+        raise EditError(f"{what}: needs a Polygon geometry")
+    ring = pixels(rings[0], what)
+    if len(ring) < 3 or not Polygon(ring).is_valid or Polygon(ring).area < 1.0:
+        raise EditError(f"{what}: the polygon needs 3 corners around an area of at least one pixel, without crossing itself")
+    world = [[float(x), float(y)] for x, y in (p[:2] for p in rings[0])]
+    return world if world[0] == world[-1] else [*world, world[0]]

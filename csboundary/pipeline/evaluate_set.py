@@ -97,9 +97,13 @@ def evaluate_set(set_dir: str | Path, model: PatchModel, seed: int = 0, progress
     return {"set": str(set_dir), "cities": len(cities), "mean": mean, "per_city": per_city}
 
 
+def score_value(value) -> float:
+    """A city's score as a set counts it: undefined (None, NaN) is 0."""
+    return 0.0 if value is None or (isinstance(value, float) and math.isnan(value)) else float(value)
+
+
 def _mean(values: list[float]) -> float:
-    finite = [0.0 if v is None or (isinstance(v, float) and math.isnan(v)) else float(v) for v in values]
-    return sum(finite) / len(finite)
+    return sum(map(score_value, values)) / len(values)
 
 
 def format_set(result: dict[str, Any]) -> str:

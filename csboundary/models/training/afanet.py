@@ -13,10 +13,10 @@ from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.augmentation import AugmentConfig, photometric
-from csboundary.models.checkpoint import load_fpn
+from csboundary.models.checkpoint import file_sha256, load_checkpoint, load_fpn, restore_model
 from csboundary.models.maps import predict_mosaic_maps
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
-from csboundary.models.training.data import TrainingCity
+from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.loop import RunLog, optimize, resume_run, run_code_version, seed_everything
 
 
@@ -44,6 +44,7 @@ def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: 
         graph = extract_vertices(tensor[4], vertex_config)
         local = np.concatenate([graph.vertices, added_crossings(graph, tensor[5], CrossingConfig(spacing_px=config.crossing_spacing_px))])
         vertices = local + np.array([window.col_off, window.row_off])
+    vertices = vertices[city.labelled(vertices)]  # a vertex outside a reviewed city's complete area has no known edges
     if len(vertices) > config.max_vertices:
         vertices = vertices[np.sort(rng.choice(len(vertices), config.max_vertices, replace=False))]
     label = city.adjacency(vertices, window)
@@ -72,6 +73,17 @@ def validate_afanet(model: AfANet, samples, device, max_pos_weight: float) -> di
             "val_edge_recall": recall, "val_edge_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
 
 
+def starting_afanet(config: TrainConfig, device: torch.device) -> tuple[AfANet, AfANetConfig]:
+    """The AfANet a run starts from and its config: ``init_afanet``'s (a checkpoint or a bundle,
+    its recorded architecture) when given, else a new one of ``config.afanet``."""
+    if not config.init_afanet:
+        model_config = model_config_with(AfANetConfig, config.afanet)
+        return AfANet(model_config).to(device), model_config
+    payload = load_checkpoint(config.init_afanet, ("afanet", "bundle"))
+    model = restore_model(config.init_afanet, "afanet", payload, lambda c: AfANet(AfANetConfig.from_dict(c)))
+    return model.to(device), model.config
+
+
 def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
@@ -84,8 +96,7 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
         city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)
     del fpn
     augmentation = model_config_with(AugmentConfig, config.augment)
-    model_config = model_config_with(AfANetConfig, config.afanet)
-    model = AfANet(model_config).to(device)
+    model, model_config = starting_afanet(config, device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     vertex_config = VertexConfig(threshold=config.vertex_threshold)
     valid_rng = np.random.default_rng(config.seed + 1)
@@ -93,11 +104,20 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
     rng = np.random.default_rng(config.seed)
     step, history = resume_run(resume, "afanet", model, optimizer, rng)
-    log.write(event="start", model="afanet", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    init = {"init_afanet_sha256": file_sha256(config.init_afanet)} if config.init_afanet else {}
+    log.write(event="start", model="afanet", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()),
+              config=config.to_dict(), **init)
+
+    probabilities = city_probabilities(train_cities, len(config.extra_train_cities), config.extra_share, by_area=False)
 
     def loss_at(step: int):
         stage = "gt" if step < config.gt_steps else "pred"
-        city = train_cities[int(rng.integers(len(train_cities)))] if len(train_cities) > 1 else train_cities[0]
+        if len(train_cities) == 1:
+            city = train_cities[0]
+        elif config.extra_share > 0:
+            city = train_cities[int(rng.choice(len(train_cities), p=probabilities))]
+        else:  # as recorded runs drew their cities
+            city = train_cities[int(rng.integers(len(train_cities)))]
         tensor, vertices, label = _afanet_sample(city, city.random_window(rng, config.window), rng, stage, config, vertex_config, augmentation)
         extras = {"stage": stage, "m": len(vertices)}
         if len(vertices) < 2:  # nothing to connect in this window

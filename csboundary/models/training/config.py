@@ -31,6 +31,7 @@ class TrainConfig(Config):
     validate_every: int = 250
     validation_samples: int = 8
     extra_train_cities: list = field(default_factory=list)  # city directories (imported, from masks, a user's own) trained on beside train_city
+    extra_share: float = 0.0  # share of samples drawn from extra_train_cities (fine-tuning on a user's city); 0 = every city by its area (FPN) or alike (AfANet)
     augment: dict = field(default_factory=lambda: {"enabled": False})  # AugmentConfig overrides; {} = every augmentation at its defaults
     snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
     encoder_lr_scale: float = 1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
@@ -53,6 +54,7 @@ class TrainConfig(Config):
     # afanet
     afanet: dict = field(default_factory=dict)  # AfANetConfig overrides
     fpn_weights: str = ""  # the trained FPN whose maps and vertices AfANet learns from
+    init_afanet: str = ""  # start from this trained AfANet (afanet checkpoint or bundle; its architecture, not ``afanet``): fine-tuning
     window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
     gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
     vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1

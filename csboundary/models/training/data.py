@@ -13,9 +13,10 @@ import numpy as np
 
 from csboundary.config import Config
 from csboundary.data import city as layout
-from csboundary.data.ground_truth import read_ground_truth, read_road_surface
+from csboundary.data.ground_truth import read_complete_area, read_ground_truth, read_road_surface
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
+from csboundary.errors import InputError
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
@@ -75,8 +76,9 @@ class WorldsConfig(Config):
                 for seed in range(self.first_seed, self.first_seed + self.cities)]
 
 
-def _surface_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
-    """The whole city's road surface (H, W) uint8 from its roadway polygons (None: unknown)."""
+def _polygon_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
+    """(H, W) uint8 over the whole city, 1 inside ``polygons`` (roadway, complete area), 0
+    outside; None when the polygons are unknown."""
     if polygons is None:
         return None
     from rasterio.features import rasterize
@@ -86,15 +88,34 @@ def _surface_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
     return rasterize(polygons, out_shape=(mosaic.height, mosaic.width), transform=mosaic.transform, fill=0, default_value=1, dtype="uint8")
 
 
+def city_probabilities(cities: list, extra: int, extra_share: float, by_area: bool) -> np.ndarray:
+    """The probability of drawing each of ``cities`` for a sample, the last ``extra`` of them the
+    extra (user) cities: within each group in proportion to area (``by_area``) or alike, the
+    extra group as a whole ``extra_share`` of the draws (when both groups exist and it is > 0)."""
+    weights = np.array([c.mosaic.width * c.mosaic.height for c in cities], float) if by_area else np.ones(len(cities))
+    if extra_share <= 0 or not 0 < extra < len(cities):
+        return weights / weights.sum()
+    base, user = weights[:-extra], weights[-extra:]
+    return np.concatenate([(1 - extra_share) * base / base.sum(), extra_share * user / user.sum()])
+
+
 class TrainingCity:
-    """A city's imagery and global label geometry, with samplers for both networks."""
+    """A city's imagery and global label geometry, with samplers for both networks.
+
+    A city whose ground truth has a ``complete_area`` layer (a reviewed prediction) is labelled
+    only there: elsewhere every pixel is left out of the FPN's loss, its windows are drawn inside
+    the area, and AfANet learns only from vertices inside it.
+    """
 
     def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig()):
         self.path = Path(city_dir)
         self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
         gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
-        self.surface = _surface_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
+        self.surface = _polygon_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
+        self.complete = _polygon_raster(read_complete_area(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
+        if self.complete is not None and not self.complete.any():
+            raise InputError(city_dir, "its complete area does not cover any of its imagery")
         self.config = config
         self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
 
@@ -109,9 +130,27 @@ class TrainingCity:
         self.close()
 
     def random_window(self, rng: np.random.Generator, size: int) -> PixelWindow:
+        """A ``size`` square anywhere in the city; in a partly labelled city, centred on a pixel of
+        its complete area."""
+        if self.complete is not None:
+            rows, cols = np.nonzero(self.complete[::8, ::8])  # a coarse grid is plenty to pick a centre
+            k = int(rng.integers(len(rows)))
+            col, row = int(cols[k]) * 8 - size // 2, int(rows[k]) * 8 - size // 2
+            return PixelWindow(int(np.clip(col, min(0, self.mosaic.width - size), max(0, self.mosaic.width - size))),
+                               int(np.clip(row, min(0, self.mosaic.height - size), max(0, self.mosaic.height - size))), size, size)
         col = int(rng.integers(0, max(1, self.mosaic.width - size + 1)))
         row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
         return PixelWindow(col, row, size, size)
+
+    def known(self, window: PixelWindow) -> np.ndarray:
+        """(s, s) bool: where the window's labels are known (inside the city and its complete area)."""
+        out = np.zeros((window.height, window.width), bool)
+        part = window.intersection(self.mosaic.window)
+        if part is not None:
+            rows, cols = part.slices()
+            lrows, lcols = part.relative_to(window).slices()
+            out[lrows, lcols] = True if self.complete is None else self.complete[rows, cols].astype(bool)
+        return out
 
     def fpn_sample(self, window: PixelWindow, surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Image (4, s, s) float32 in [0, 1]; targets (2, s, s): keypoint heat, segmentation, with
@@ -120,7 +159,8 @@ class TrainingCity:
         targets = self.labels.network_targets(window)
         if surface:
             targets = np.concatenate([targets, self.surface_target(window)[None]])
-        return unit_bands(read.data), targets, read.valid
+        valid = read.valid if self.complete is None else read.valid & self.known(window)
+        return unit_bands(read.data), targets, valid
 
     def surface_target(self, window: PixelWindow) -> np.ndarray:
         """(s, s) float32 road surface of a window: 1 roadway, 0 not, -1 where unknown (a city
@@ -167,6 +207,16 @@ class TrainingCity:
             lrows, lcols = part.relative_to(window).slices()
             maps[:, lrows, lcols] = self.maps[:2, rows, cols]  # AfANet reads keypoints and boundary, not the surface
         return np.concatenate([unit_bands(read.data), maps])
+
+    def labelled(self, vertices: np.ndarray) -> np.ndarray:
+        """(M,) bool: which vertices (global pixel coordinates) lie where the labels are known."""
+        if self.complete is None:
+            return np.ones(len(vertices), bool)
+        col, row = np.floor(vertices[:, 0]).astype(int), np.floor(vertices[:, 1]).astype(int)
+        inside = (col >= 0) & (row >= 0) & (col < self.mosaic.width) & (row < self.mosaic.height)
+        out = np.zeros(len(vertices), bool)
+        out[inside] = self.complete[row[inside], col[inside]] > 0
+        return out
 
     def adjacency(self, vertices: np.ndarray, window: PixelWindow) -> np.ndarray:
         lab = self.labels

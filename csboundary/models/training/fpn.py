@@ -14,7 +14,7 @@ from csboundary.models.checkpoint import file_sha256, load_checkpoint, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.style_mixing import add_style_mixing
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
-from csboundary.models.training.data import TrainingCity
+from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
 
 
@@ -107,10 +107,10 @@ def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: Tra
     """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
     (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
     otherwise (validation)."""
-    areas = np.array([c.mosaic.width * c.mosaic.height for c in cities], float)
+    probabilities = city_probabilities(cities, len(config.extra_train_cities), config.extra_share, by_area=True)
     images, targets, valids = [], [], []
     for _ in range(config.batch):
-        city = cities[int(rng.choice(len(cities), p=areas / areas.sum()))] if len(cities) > 1 else cities[0]
+        city = cities[int(rng.choice(len(cities), p=probabilities))] if len(cities) > 1 else cities[0]
         if augmentation is not None:
             image, target, valid = city.augmented_fpn_sample(rng, config.crop, augmentation, surface)
         else:

@@ -1,5 +1,6 @@
 // csboundary review page: pan/zoom over an image pyramid, edges coloured by confidence,
-// accept / delete / move / draw, edits exported as GeoJSON in the prediction's CRS.
+// accept / delete / move / draw, areas marked complete (labels for fine-tuning), edits exported as
+// GeoJSON in the prediction's CRS.
 (function () {
   "use strict";
   const D = window.REVIEW_DATA;
@@ -10,7 +11,7 @@
   const gtBox = document.getElementById("show-gt");
   const tiles = new Map();
   const state = { scale: 1, ox: 0, oy: 0, selected: null, deleted: new Set(), accepted: new Set(), moved: new Map(),
-                  added: [], drawing: null, drag: null, frames: 0 };
+                  added: [], areas: [], drawing: null, drawingArea: false, drag: null, frames: 0 };
   const rows = {};
 
   const pos = (i) => state.moved.get(i) || D.vertices[i];
@@ -113,8 +114,19 @@
       if (state.accepted.has(e.id)) stroke(edgeLine(e), "#fff", 6);
       stroke(edgeLine(e), colour(e.score), 4);
     }
+    for (const ring of state.areas) {
+      ctx.beginPath();
+      ring.forEach((p, k) => { const [x, y] = toScreen(p); if (k) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+      ctx.closePath();
+      ctx.fillStyle = "rgba(255, 220, 0, 0.12)";
+      ctx.fill();
+      ctx.strokeStyle = "#fd0";
+      ctx.lineWidth = 2;
+      ctx.stroke();
+    }
     state.added.forEach((line) => stroke(line, "#f0f", 3));
-    if (state.drawing) stroke(state.drawing, "#f0f", 2, [6, 4]);
+    if (state.drawing) stroke(state.drawingArea ? [...state.drawing, state.drawing[0] || []].filter((p) => p.length) : state.drawing,
+                              state.drawingArea ? "#fd0" : "#f0f", 2, [6, 4]);
     if (state.selected !== null) {
       const e = D.edges[state.selected];
       for (const i of [e.u, e.v]) {
@@ -124,7 +136,7 @@
       }
     }
     statusEl.textContent = `${D.edges.length} edges, ${state.deleted.size} deleted, ${state.accepted.size} accepted, ` +
-      `${state.moved.size} vertices moved, ${state.added.length} added`;
+      `${state.moved.size} vertices moved, ${state.added.length} added, ${state.areas.length} areas complete`;
   }
 
   function distanceToLine(p, line) {
@@ -179,14 +191,23 @@
     mark();
     select(null);
   }
-  function startDrawing() {
+  function startDrawing(area) {
     state.drawing = [];
-    document.getElementById("draw").classList.add("on");
+    state.drawingArea = Boolean(area);
+    document.getElementById(area ? "area" : "draw").classList.add("on");
   }
   function finishDrawing(keep) {
-    if (state.drawing && keep && state.drawing.length >= 2) state.added.push(state.drawing);
+    if (state.drawing && keep && state.drawingArea && state.drawing.length >= 3) state.areas.push(state.drawing);
+    else if (state.drawing && keep && !state.drawingArea && state.drawing.length >= 2) state.added.push(state.drawing);
     state.drawing = null;
-    document.getElementById("draw").classList.remove("on");
+    for (const id of ["draw", "area"]) document.getElementById(id).classList.remove("on");
+    render();
+  }
+  function markViewComplete() {  // the part of the imagery on screen
+    const [x0, y0] = toImage(0, 0), [x1, y1] = toImage(canvas.width, canvas.height);
+    const cx0 = Math.max(0, x0), cy0 = Math.max(0, y0), cx1 = Math.min(D.width, x1), cy1 = Math.min(D.height, y1);
+    if (cx1 - cx0 < 1 || cy1 - cy0 < 1) return;
+    state.areas.push([[cx0, cy0], [cx1, cy0], [cx1, cy1], [cx0, cy1]]);
     render();
   }
 
@@ -198,6 +219,7 @@
     [...state.accepted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "accept", edge: id }, geometry: edgeGeometry(id) }));
     [...state.moved.keys()].sort((a, b) => a - b).forEach((i) => features.push({ type: "Feature", properties: { action: "move", vertex: i }, geometry: { type: "Point", coordinates: world(pos(i)) } }));
     state.added.forEach((line) => features.push({ type: "Feature", properties: { action: "add" }, geometry: { type: "LineString", coordinates: line.map(world) } }));
+    state.areas.forEach((ring) => features.push({ type: "Feature", properties: { action: "complete" }, geometry: { type: "Polygon", coordinates: [[...ring, ring[0]].map(world)] } }));
     const text = JSON.stringify({ type: "FeatureCollection", properties: { crs: D.crs, graph_sha256: D.graph_sha256, tool: "csboundary review" }, features }, null, 1);
     document.getElementById("export-text").value = text;
     const link = document.getElementById("download");
@@ -267,13 +289,17 @@
     if (ev.target.tagName === "TEXTAREA") return;
     if (ev.key === "a") accept();
     else if (ev.key === "Delete" || ev.key === "Backspace") remove();
-    else if (ev.key === "d") startDrawing();
+    else if (ev.key === "d") startDrawing(false);
+    else if (ev.key === "c") startDrawing(true);
+    else if (ev.key === "v") markViewComplete();
     else if (ev.key === "Enter") finishDrawing(true);
     else if (ev.key === "Escape") finishDrawing(false);
   });
   document.getElementById("accept").onclick = accept;
   document.getElementById("delete").onclick = remove;
-  document.getElementById("draw").onclick = startDrawing;
+  document.getElementById("draw").onclick = () => startDrawing(false);
+  document.getElementById("area").onclick = () => startDrawing(true);
+  document.getElementById("view-complete").onclick = markViewComplete;
   document.getElementById("finish").onclick = () => finishDrawing(true);
   document.getElementById("export").onclick = exportEdits;
   gtBox.onchange = render;
@@ -293,6 +319,6 @@
     state.oy = before[1] - y / state.scale;
   };
   const pendingTiles = () => [...tiles.values()].filter((img) => !img.complete).length;
-  window.review = { state, select, fit: () => { fit(); render(); }, accept, remove, exportEdits, loadedTiles, pendingTiles, render, drawNow, zoomAt,
+  window.review = { state, select, fit: () => { fit(); render(); }, accept, remove, exportEdits, markViewComplete, loadedTiles, pendingTiles, render, drawNow, zoomAt,
                     edgeCount: () => listEl.children.length };
 })();
