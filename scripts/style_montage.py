@@ -2,7 +2,7 @@
 
     python scripts/style_montage.py --out docs/styles.jpg
 
-Uses (and builds if missing) the test cities of scripts/evaluate_styles.py.
+Uses (and builds if missing) the test cities of experiments/scripts/evaluate_styles.py.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from csboundary.data.ground_truth import read_ground_truth
 from evaluate_styles import STYLES, city_dir
 
 
-# the scored styles, then those only drawn here (not in scripts/evaluate_styles.py's tables yet)
+# the scored styles, then those only drawn here (not in experiments/scripts/evaluate_styles.py's tables yet)
 MONTAGE_STYLES = (*STYLES, *(s for s in ("dense",) if s not in STYLES))
 TILE = {"highway": "tile_r00_c01.tif"}  # the seed-7 highway city's interchange lies in its top-right tile
 

@@ -77,3 +77,38 @@ def test_an_upward_import_is_caught(tmp_path):
 @pytest.mark.parametrize("module, layer", [("csboundary.models.fpn", "models"), ("csboundary", None), ("numpy", None)])
 def test_layer_of(module, layer):
     assert layer_of(module) == layer
+
+
+def module_name(path: Path, root: Path = PACKAGE) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(("csboundary", *(parts[:-1] if parts[-1] == "__init__" else parts)))
+
+
+def import_cycles(root: Path = PACKAGE) -> list[list[str]]:
+    """Groups of modules that import each other in a circle, directly or through others (every
+    import counts, also one inside a function): sorted names of each strongly connected group."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    modules = {module_name(p, root): p for p in sorted(root.rglob("*.py"))}
+    names = sorted(modules)
+    index = {n: i for i, n in enumerate(names)}
+    pairs = [(index[n], index[m]) for n, p in modules.items() for _, m in imports_of(p) if m in index and m != n]
+    rows, cols = zip(*pairs) if pairs else ((), ())
+    graph = csr_matrix(([1] * len(pairs), (rows, cols)), shape=(len(names), len(names)))
+    _, labels = connected_components(graph, directed=True, connection="strong")
+    groups = [[names[i] for i in range(len(names)) if labels[i] == label] for label in set(labels)]
+    return sorted(g for g in groups if len(g) > 1)
+
+
+def test_no_modules_import_each_other_in_a_circle():
+    assert import_cycles() == []
+
+
+def test_a_circle_is_caught(tmp_path):
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "a.py").write_text("from csboundary.models.b import X\n")
+    (tmp_path / "models" / "b.py").write_text("def f():\n    from csboundary.models.c import Y\n")
+    (tmp_path / "models" / "c.py").write_text("import csboundary.models.a\n")
+    (tmp_path / "models" / "d.py").write_text("import csboundary.models.a\n")
+    assert import_cycles(tmp_path) == [["csboundary.models.a", "csboundary.models.b", "csboundary.models.c"]]

@@ -13,7 +13,7 @@ from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, fin
 
 def train(
     model: str = typer.Argument(..., help="fpn | afanet | a baseline: orientation-refine | sat2graph | icurb."),
-    config: Path = typer.Option(..., "--config", help="Training config JSON (see configs/)."),
+    config: Path = typer.Option(..., "--config", help="Training config JSON (configs/shipped: the shipped weights; configs/paper: the paper and its baselines)."),
     out: Path = typer.Option(..., "--out", help="Run folder: checkpoints, train.log."),
     resume: Optional[Path] = typer.Option(None, help="Checkpoint (*-last.pt) to resume from."),
     steps: Optional[int] = typer.Option(None, min=1, help="Override the config's step count."),

@@ -62,7 +62,7 @@ def pixel_scores(pred: BoundaryGraph, gt: BoundaryGraph, taus=MetricConfig().tau
 
 def apls_paper_pairs(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> PairLengths:
     """The paper's sampled ground-truth pairs and what ``pred`` makes of them (seeded): what
-    :func:`apls_paper` averages, kept for diagnosis (scripts/apls_failures.py)."""
+    :func:`apls_paper` averages, kept for diagnosis (experiments/scripts/apls_failures.py)."""
     pred_seg, gt_seg = _segments(pred, gt)
     return paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
 

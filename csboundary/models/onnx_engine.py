@@ -26,18 +26,10 @@ import numpy as np
 import torch
 
 from csboundary.errors import InputError
+from csboundary.models.onnx_session import DEFAULT_LEVEL, WINDOW, open_session
 
-WINDOW = 1100  # the city grid's expanded patch side: the FPN input the export is made for
 OPSET = 17
 EXPORT_VERSION = 3  # bump when the export changes, so cached files are made again (3: AfANet from its views)
-
-
-def onnxruntime_available() -> bool:
-    try:
-        import onnxruntime  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def cache_dir(weights: Path) -> Path:
@@ -87,34 +79,6 @@ def export_afanet(afanet) -> bytes:
         example = afanet.cpu().eval().views(torch.rand(6, WINDOW, WINDOW), torch.rand(8, 2) * WINDOW)
     return _export(_AfANetLogits(afanet), example, (list(AFANET_INPUTS), ["logits"]),
                    {"rois": {0: "m"}, "xy": {0: "m"}, "logits": {0: "m", 1: "m"}})
-
-
-# ONNX Runtime's graph optimisation levels a session may use. "all" adds the NCHWc layout
-# transform on top of "extended"; which is faster depends on the CPU and the network (measured on
-# an AVX-512 Xeon: the shipped FPN 0.29 s with "extended" and 0.41 s with "all", AfANet 39 ms and
-# 28 ms), so onnx_tuning times both once per machine.
-LEVELS = ("all", "extended")
-DEFAULT_LEVEL = "all"  # ONNX Runtime's own default
-
-
-def open_session(model: bytes, threads: int, level: str, name: str):
-    """An ONNX Runtime CPU session for ``model`` on ``threads`` threads at optimisation ``level``."""
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = threads
-    options.log_severity_level = 3
-    options.graph_optimization_level = {"all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
-                                        "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED}[level]
-    # idle pool threads sleep instead of spinning: the city pipeline runs vertex
-    # extraction and AfANet beside the FPN, and spinning threads would take their cores
-    # (measured: 0.57 -> 0.52 s/patch end to end; the FPN alone is as fast either way)
-    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    try:
-        return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
-    except Exception as exc:  # a damaged cache file: one line, not a traceback
-        raise InputError(f"<onnx {name}>", f"ONNX Runtime cannot load the exported network ({str(exc).splitlines()[0]}); "
-                                           "delete the .onnx-cache folder beside the weights") from exc
 
 
 class OnnxNetworks:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from csboundary.models.onnx_engine import WINDOW
+from csboundary.models.onnx_session import WINDOW
 
 # the styles of the shipped FPN's training mix (csboundary/weights/fpn-config.json): calibration
 # sees each once, so no activation range is set by one kind of city alone

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from csboundary.models.device import cpuinfo_value
-from csboundary.models.onnx_engine import LEVELS, open_session
+from csboundary.models.onnx_session import LEVELS, open_session
 
 TIMED_RUNS = 3  # per level, alternated, after one warm-up run each; the fastest run counts
 TUNING_VERTICES = 100  # AfANet's vertex count while timing: a busy window of the test cities

@@ -9,7 +9,7 @@ stitching) and the same metrics; only the :class:`PatchModel` differs. Rows:
   limit) on the same FPN (the first shipped one, kept as ``ablation/fpn-first.pt`` with that
   bundle's inference settings), so the rows compare like with like;
 * OrientationRefine, Sat2Graph, Enhanced-iCurb (Tables I-III): the baselines, each trained by
-  ``csboundary train <method> --config configs/<method>.json``.
+  ``csboundary train <method> --config configs/paper/<method>.json``.
 
 Weights are looked up in ``weights_dir`` (the package's shipped ``weights/``; baselines under
 ``baselines/``, ablation variants under ``ablation/``), each with its ``*-train.log`` beside it

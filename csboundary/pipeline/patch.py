@@ -44,7 +44,8 @@ from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN, SURFACE
 from csboundary.models.device import bfloat16_hardware
 from csboundary.models.maps import PRECISIONS, bands_and_maps, predict_probabilities, unit_bands
-from csboundary.models.onnx_engine import WINDOW, OnnxNetworks, onnxruntime_available
+from csboundary.models.onnx_engine import OnnxNetworks
+from csboundary.models.onnx_session import WINDOW, onnxruntime_available
 
 
 @dataclass

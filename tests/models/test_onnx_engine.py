@@ -11,7 +11,8 @@ pytest.importorskip("onnxruntime")
 
 from csboundary.errors import InputError  # noqa: E402
 from csboundary.models.afanet import adjacency_from_logits  # noqa: E402
-from csboundary.models.onnx_engine import LEVELS, OnnxNetworks  # noqa: E402
+from csboundary.models.onnx_engine import OnnxNetworks  # noqa: E402
+from csboundary.models.onnx_session import LEVELS  # noqa: E402
 from csboundary.pipeline.patch import PatchPredictor  # noqa: E402
 from helpers import run_cli  # noqa: E402
 

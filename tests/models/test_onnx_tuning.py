@@ -10,7 +10,8 @@ import pytest
 pytest.importorskip("onnxruntime")
 
 from csboundary.models import onnx_tuning  # noqa: E402
-from csboundary.models.onnx_engine import LEVELS, OnnxNetworks  # noqa: E402
+from csboundary.models.onnx_engine import OnnxNetworks  # noqa: E402
+from csboundary.models.onnx_session import LEVELS  # noqa: E402
 from csboundary.models.onnx_tuning import fastest_level, machine_key, tuned_levels  # noqa: E402
 
 

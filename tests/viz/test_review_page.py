@@ -93,6 +93,34 @@ def test_delete_the_least_sure_edge_in_the_browser_and_apply_it(reviewed, browse
     assert log["deleted_edges"] == [lowest] and log["edges_after"] == len(graph["edges"]) - 1
 
 
+def test_mark_the_view_complete_in_the_browser_and_apply_it(reviewed, browser, tmp_path):
+    """View complete exports the imagery on screen as a closed Polygon in the prediction's CRS;
+    apply-review records it in review.json, where fine-tuning finds its labels."""
+    from selenium.webdriver.common.by import By
+
+    assert run_cli("review", str(reviewed), "--quiet").returncode == 0  # a fresh page: another test may have changed graph.json
+    browser.get((reviewed / "review" / "index.html").as_uri())
+    _wait(browser, "return window.review && window.review.loadedTiles() > 0")
+    browser.find_element(By.ID, "view-complete").click()
+    browser.find_element(By.ID, "export").click()
+    collection = json.loads(browser.find_element(By.ID, "export-text").get_attribute("value"))
+    [feature] = collection["features"]
+    ring = feature["geometry"]["coordinates"][0]
+    assert feature["properties"] == {"action": "complete"} and feature["geometry"]["type"] == "Polygon"
+    assert len(ring) == 5 and ring[0] == ring[-1]
+    summary = json.loads((reviewed / "summary.json").read_text())
+    graph = BoundaryGraph.read_json(reviewed / "graph.json")
+    width, height = summary["mosaic_px"]
+    t = graph.transform
+    xs, ys = [t.c, t.c + t.a * width], [t.f, t.f + t.e * height]
+    for x, y in ring:  # the whole image fits the view at first: the area is the imagery, clipped to it
+        assert min(xs) - 1e-6 <= x <= max(xs) + 1e-6 and min(ys) - 1e-6 <= y <= max(ys) + 1e-6
+    (tmp_path / "edits.geojson").write_text(json.dumps(collection))
+    done = run_cli("apply-review", str(reviewed), str(tmp_path / "edits.geojson"))
+    assert done.returncode == 0, done.stderr
+    assert json.loads((reviewed / "review.json").read_text())["reviews"][-1]["complete_areas"] == [ring]
+
+
 def _square() -> BoundaryGraph:
     # pixel (col, row) -> world (x, y) = (100 + 0.5 col, 200 - 0.5 row)
     return BoundaryGraph(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]), [[0, 1], [1, 2]], edge_kinds=["normal", "corner"],
@@ -117,7 +145,17 @@ def test_edits_by_hand():
     assert record.kept == {1: 0}
 
 
+def test_a_complete_area_is_recorded_and_changes_nothing():
+    square = [[100.0, 200.0], [104.0, 200.0], [104.0, 196.0], [100.0, 196.0]]  # pixels (0, 0)-(8, 8), given unclosed
+    graph, record = apply_edits(_square(), [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [square]}}])
+    assert record.complete_areas == [[*square, square[0]]]
+    assert graph.n_edges == 2 and np.array_equal(graph.vertices, _square().vertices) and record.kept == {0: 0, 1: 1}
+
+
 @pytest.mark.parametrize("feature, message", [
+    ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[100, 200], [101, 199]]]}}, "3 corners"),
+    ({"properties": {"action": "complete"}, "geometry": {"type": "LineString", "coordinates": [[100, 200], [101, 199]]}}, "Polygon"),
+    ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [5000, 0], [5000, 5000]]]}}, "outside the imagery"),
     ({"properties": {"action": "delete", "edge": 5}}, "not an edge"),
     ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}}, "Point"),
     ({"properties": {"action": "paint"}}, "unknown action"),

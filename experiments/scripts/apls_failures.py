@@ -3,7 +3,7 @@ ends find no predicted vertex within the snap radius (unmatched), whose ends sna
 different connected pieces (disconnected), whose predicted path is more than twice as long (too
 long), and the summed cost of the rest; APLS = 1 - the four shares.
 
-    python scripts/apls_failures.py WEIGHTS SET_OR_CITY...
+    python experiments/scripts/apls_failures.py WEIGHTS SET_OR_CITY...
 
 A SET (``csboundary import-masks``) prints one line per city and the mean. The diagnosis behind
 the seam-mending radius (docs/city-inference.md) and the model card's remarks on suburb.

@@ -1,7 +1,7 @@
 """Experiment: predict labelled cities once and keep each edge's evidence and label, so that edge
 confidence models can be compared without predicting again (docs/confidence.md).
 
-    .venv/bin/python scripts/confidence_evidence.py --out runs/confidence/evidence CITY_OR_SET... [--weights W]
+    .venv/bin/python experiments/scripts/confidence_evidence.py --out runs/confidence/evidence CITY_OR_SET... [--weights W]
 
 Writes one ``<city>.npz`` per city: ``evidence`` (E, F) in the order of
 ``csboundary.graph.edge_evidence.FEATURES``, ``truth_share``, ``length`` (px), ``kinds``.

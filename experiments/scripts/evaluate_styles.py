@@ -1,6 +1,6 @@
 """Score weights bundles on one test city per style (city scale), for the tables of docs/styles.md.
 
-    python scripts/evaluate_styles.py --bundle all=runs/bundles/worlds.pt \
+    python experiments/scripts/evaluate_styles.py --bundle all=runs/bundles/worlds.pt \
         --bundle without-suburb=runs/bundles/loso-suburb.pt --out runs/eval/styles.json
 
 Each test city is ``data/cities/test-<style>-s<seed>-2x2-2000`` (``csboundary synth --style STYLE

@@ -1,8 +1,8 @@
 """Experiment: edge confidence models fitted on the fitting cities' evidence, scored on every set
 (synthetic test cities by style, the Ottawa crops, the dense-urban NYC patch), beside the raw
-edge score they replace. Reads the files scripts/confidence_evidence.py wrote.
+edge score they replace. Reads the files experiments/scripts/confidence_evidence.py wrote.
 
-    .venv/bin/python scripts/confidence_compare.py runs/confidence/evidence [--features all|graph|nomaps...] [--trees 200 --depth 3]
+    .venv/bin/python experiments/scripts/confidence_compare.py runs/confidence/evidence [--features all|graph|nomaps...] [--trees 200 --depth 3]
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Scores on a validation set when the FPN maps are averaged over flips of the input (test-time
 augmentation), with the shipped weights on PyTorch: a lever measured, not shipped (docs/real-imagery.md).
 
-    python scripts/probe_flip_tta.py 2|4   (2: identity + left-right; 4: + up-down + both), on /tmp/ottawa
+    python experiments/scripts/probe_flip_tta.py 2|4   (2: identity + left-right; 4: + up-down + both), on /tmp/ottawa
 """
 
 import sys

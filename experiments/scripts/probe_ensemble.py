@@ -2,7 +2,7 @@
 FPNs' probabilities: a probe of whether averaging differently trained FPNs helps on imagery
 unlike the generator's (docs/real-imagery.md). PyTorch engine; every other setting the bundle's.
 
-    python scripts/probe_ensemble.py WEIGHTS SET_OR_CITY... [--with FPN[,FPN...]] [--views 1..8] [--vertex-threshold T]
+    python experiments/scripts/probe_ensemble.py WEIGHTS SET_OR_CITY... [--with FPN[,FPN...]] [--views 1..8] [--vertex-threshold T]
 """
 
 from __future__ import annotations

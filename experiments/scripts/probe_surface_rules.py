@@ -1,6 +1,6 @@
 """Probe: which edges should the road-surface check judge, and how? (measurement, not a feature)
 
-    .venv/bin/python scripts/probe_surface_rules.py BUNDLE SETS... --rules kinds:skeleton:0.5,hyst:0.5:0.2
+    .venv/bin/python experiments/scripts/probe_surface_rules.py BUNDLE SETS... --rules kinds:skeleton:0.5,hyst:0.5:0.2
 
 BUNDLE has an FPN with a surface head (its own surface check is turned off here). Each rule
 filters every patch graph with the maps' surface channel:

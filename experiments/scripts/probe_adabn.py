@@ -2,7 +2,7 @@
 2016) instead of the training cities': a probe of test-time adaptation to imagery unlike the
 generator's (docs/real-imagery.md).
 
-    python scripts/probe_adabn.py WEIGHTS SET_OR_CITY... [--scope off|encoder|all] [--vertex-threshold T]
+    python experiments/scripts/probe_adabn.py WEIGHTS SET_OR_CITY... [--scope off|encoder|all] [--vertex-threshold T]
 
 The statistics are the window's own, so neighbouring windows of a city are normalised
 differently: a probe for one-window sets such as the Ottawa crops, not a pipeline option.

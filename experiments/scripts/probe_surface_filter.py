@@ -1,6 +1,6 @@
 """Probe: drop patch-graph edges that no predicted road surface borders.
 
-    .venv/bin/python scripts/probe_surface_filter.py HEAD SETS... --rule maxside --thresholds 0,0.3,0.5
+    .venv/bin/python experiments/scripts/probe_surface_filter.py HEAD SETS... --rule maxside --thresholds 0,0.3,0.5
 
 For each edge, points every pixel along its polyline, the surface probability at +-``--offset`` px
 along the normal: ``maxside`` = mean over points of max(left, right); ``contrast`` = mean |left - right|.

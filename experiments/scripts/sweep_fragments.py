@@ -1,7 +1,7 @@
 """Scores of one weights bundle when connected pieces shorter than L px are dropped from the city
 graph, for a grid of L: the measurement behind the bundle's ``min_fragment_px``.
 
-    python scripts/sweep_fragments.py WEIGHTS SET_OR_CITY... [--lengths 0,40,80,120,160,240]
+    python experiments/scripts/sweep_fragments.py WEIGHTS SET_OR_CITY... [--lengths 0,40,80,120,160,240]
 
 Each city is predicted once; each L filters that graph and scores it at city scale (a SET, a
 folder of cities from ``csboundary import-masks``, by the mean over its cities, as evaluate-set).

@@ -1,6 +1,6 @@
 """Store a checkpoint's model weights as float16 (inference loads them back into float32 parameters).
 
-Usage: .venv/bin/python scripts/half_weights.py SRC.pt DST.pt KIND   (KIND: the state dict key, e.g. afanet)
+Usage: .venv/bin/python experiments/scripts/half_weights.py SRC.pt DST.pt KIND   (KIND: the state dict key, e.g. afanet)
 """
 
 import sys

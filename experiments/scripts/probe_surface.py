@@ -1,6 +1,6 @@
 """Probe: can a road-surface head on the frozen shipped FPN see the roadway on real photographs?
 
-    .venv/bin/python scripts/probe_surface.py OUT --cities 12 --steps 800
+    .venv/bin/python experiments/scripts/probe_surface.py OUT --cities 12 --steps 800
 
 Builds synthetic cities of every style (the generator's ``roadway`` polygon is the target),
 trains a small head on the shipped FPN's fused pyramid (FPN frozen), saves it, and writes the

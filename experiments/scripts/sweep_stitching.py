@@ -2,7 +2,7 @@
 behind ``StitchConfig.mend_px`` and ``node_shared`` and the bundle's ``attach_max_px``
 (docs/city-inference.md).
 
-    python scripts/sweep_stitching.py WEIGHTS CITY_OR_SET... --settings "15,8,5,0,0;15,8,5,40,1"
+    python experiments/scripts/sweep_stitching.py WEIGHTS CITY_OR_SET... --settings "15,8,5,0,0;15,8,5,40,1"
 
 Each setting is ``mend_px,border_px,snap_px,attach_px,node_shared`` (a shorter setting keeps the
 defaults of the fields it leaves out). Every city is predicted once; its patch graphs are
