@@ -25,7 +25,8 @@ import torch
 from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.models.maps import unit_bands
-from csboundary.models.onnx_engine import LEVELS, export_fpn, open_session
+from csboundary.models.onnx_engine import export_fpn
+from csboundary.models.onnx_session import LEVELS, open_session
 from csboundary.models.onnx_quantization import quantize_fpn
 from csboundary.pipeline.patch import PatchPredictor
 from csboundary.pipeline.run import peak_rss_mb
