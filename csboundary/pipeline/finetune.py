@@ -40,7 +40,7 @@ class FinetuneBudget(Config):
     afanet_steps: int = 500
     user_share: float = 0.5  # share of samples from the user's cities; the rest from synthetic ones
     synthetic_cities: int = 12  # of the bundle's training mix, 2500 px each
-    fpn_lr: float = 2e-4
+    fpn_lr: float = 1e-4
     afanet_lr: float = 3e-4
     crop: int = 256
     batch: int = 4
