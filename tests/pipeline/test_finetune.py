@@ -153,3 +153,36 @@ def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_tra
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     with pytest.raises(InputError, match="other inputs or settings"):
         finetune([city], tmp_path / "other.pt", **{**kwargs, "budget": FinetuneBudget(fpn_steps=3, afanet_steps=2, synthetic_cities=1)})
+
+
+def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_on_it(tmp_path, monkeypatch):
+    """The folds' bookkeeping, with fine-tuning and scoring stood in for: each held-out city is
+    scored by its own fold's bundle, the means and gains are over all cities, and a finished fold
+    is read back instead of being run again."""
+    import csboundary.pipeline.finetune_cv as cv
+    from csboundary.data.synth.city import synthesize_city as synth
+
+    for name in "abcd":
+        synth(tmp_path / "set" / name, seed=1, split="valid", config=style_config("classic", tile_size=300), progress=False)
+    trained_on = {}
+
+    def fake_finetune(train, out, **kwargs):
+        trained_on[out.parent.name] = sorted(c.name for c in train)
+        return {"seconds": {"fpn": 60.0, "afanet": 30.0}}
+
+    def fake_scores(cities, weights, *args):
+        tuned = "fold-" in str(weights)
+        return {c.name: {"f1@5": 0.5 + (0.1 if tuned else 0.0) + 0.01 * "abcd".index(c.name), "apls": None if c.name == "d" else 0.4}
+                for c in cities}
+
+    monkeypatch.setattr(cv, "finetune", fake_finetune)
+    monkeypatch.setattr(cv, "_scores", fake_scores)
+    result = cv.evaluate_finetune(tmp_path / "set", tmp_path / "cv", folds=2, progress=False)
+    assert trained_on == {"fold-0": ["b", "d"], "fold-1": ["a", "c"]}
+    assert {n: r["fold"] for n, r in result["per_city"].items()} == {"a": 0, "c": 0, "b": 1, "d": 1}
+    f1 = result["summary"]["f1@5"]
+    assert f1["base"] == pytest.approx(0.515) and f1["finetuned"] == pytest.approx(0.615) and f1["difference"] == pytest.approx(0.1)
+    assert result["summary"]["apls"]["base"] == pytest.approx(0.3)  # undefined counts 0, as in evaluate-set
+    assert "1.5 min" in cv.format_finetune(result)
+    monkeypatch.setattr(cv, "finetune", lambda *a, **k: pytest.fail("a finished fold ran again"))
+    assert cv.evaluate_finetune(tmp_path / "set", tmp_path / "cv", folds=2, progress=False)["summary"] == result["summary"]
