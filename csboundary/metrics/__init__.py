@@ -26,7 +26,8 @@ from csboundary.metrics.apls import (
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.confidence import confidence_report, edge_truth
 from csboundary.metrics.pixel import rasterize, relaxed_scores
-from csboundary.metrics.sampling import Segments, common_origin, flatten, resample
+from csboundary.metrics.sampled_graph import resample
+from csboundary.metrics.segments import Segments, common_origin, flatten
 from csboundary.metrics.tlts import TltsResult, tlts_from_pairs
 
 __all__ = [

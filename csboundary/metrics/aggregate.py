@@ -29,7 +29,8 @@ from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.metrics.apls import VARIANTS, apls_from_pairs, paper_pairs, symmetric_apls
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.pixel import rasterize, relaxed_scores
-from csboundary.metrics.sampling import Segments, clip, common_origin, flatten, resample
+from csboundary.metrics.sampled_graph import resample
+from csboundary.metrics.segments import Segments, clip, common_origin, flatten
 from csboundary.metrics.tlts import tlts_from_pairs
 
 

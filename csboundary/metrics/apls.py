@@ -1,7 +1,7 @@
 """Average Path Length Similarity, two named variants (see docs/metrics.md).
 
 ``paper`` (Topo-boundary / csBoundary): one direction, ground truth -> prediction. Pairs of
-sampled vertices are drawn per ground-truth boundary (:func:`~csboundary.metrics.sampling.boundary_pairs`);
+sampled vertices are drawn per ground-truth boundary (:func:`~csboundary.metrics.pairs.boundary_pairs`);
 each endpoint snaps to the nearest predicted *vertex*; a snap of ``snap_radius`` or more, or no
 predicted path, costs 1; otherwise the pair costs ``min(1, |L_gt - L_pred| / L_gt)``. APLS is
 1 minus the mean cost. TLTS reuses exactly these pairs (:class:`PairLengths`).
@@ -23,7 +23,8 @@ from scipy.spatial import cKDTree
 
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.paths import location_distances, pair_distances
-from csboundary.metrics.sampling import SampledGraph, boundary_pairs, component_pairs
+from csboundary.metrics.pairs import boundary_pairs, component_pairs
+from csboundary.metrics.sampled_graph import SampledGraph
 
 VARIANTS = ("paper", "symmetric")
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
-from csboundary.metrics.sampling import Locations, SampledGraph
+from csboundary.metrics.sampled_graph import Locations, SampledGraph
 
 BLOCK = 2048  # batch small components until a block has this many keys
 BUDGET = 1 << 22  # at most this many distance-matrix cells per Dijkstra call (32 MB)

@@ -12,12 +12,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from csboundary.metrics.sampling import RasterTooLarge, Segments, clip
+from csboundary.metrics.limits import MAX_RASTER_PIXELS, RasterTooLarge
+from csboundary.metrics.segments import Segments, clip
 
 DEFAULT_TAUS = (2.0, 5.0, 10.0)
-
-
-MAX_RASTER_PIXELS = 100_000_000  # ~3 GB of int64 work arrays; a 40 km city's boundaries need ~1e7
 
 
 def rasterize(seg: Segments, within: tuple[float, float, float, float] | None = None) -> np.ndarray:

@@ -87,9 +87,9 @@ class SynthConfig(Config):
     gutter_width: tuple[float, float] = (0.4, 0.8)
     edge_line_share: float = 0.0  # streets with white edge lines near the asphalt's edge
     lane_paint_share: float = 1.0  # streets whose lane markings are painted at all
-    road_materials: tuple[str, ...] = ("asphalt",)  # keys of scene.ROAD_MATERIALS, one drawn per city
-    sidewalk_materials: tuple[str, ...] = ("concrete",)  # keys of scene.SIDEWALK_MATERIALS
-    roof_palette: str = "grey"  # keys of scene.ROOF_PALETTES
+    road_materials: tuple[str, ...] = ("asphalt",)  # keys of materials.ROAD_MATERIALS, one drawn per city
+    sidewalk_materials: tuple[str, ...] = ("concrete",)  # keys of materials.SIDEWALK_MATERIALS
+    roof_palette: str = "grey"  # keys of materials.ROOF_PALETTES
     house_height: tuple[float, float] = (6.0, 16.0)
     house_width: tuple[float, float] = (5.0, 14.0)
     house_setback: tuple[float, float] = (0.0, 3.0)
@@ -144,3 +144,9 @@ def city_rng(split: str, seed: int, *stream: int) -> np.random.Generator:
     if seed < 0:
         raise ValueError(f"seed must be >= 0, got {seed}")
     return np.random.default_rng(np.random.SeedSequence([SPLITS.index(split), seed, *stream]))
+
+
+def rng_share(rng: np.random.Generator, share: float) -> bool:
+    """True with probability ``share``; draws nothing when ``share`` is 0, so a switched-off
+    style knob leaves the random stream (and hence the city) unchanged."""
+    return share > 0 and rng.random() < share
