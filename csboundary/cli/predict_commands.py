@@ -156,7 +156,8 @@ def apply_review(
     edits: Path = typer.Argument(..., help="The edits the page exported (edits.geojson)."),
 ) -> None:
     """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
-    GeoJSON and map.osm (when present), and appends what a person changed to review.json."""
+    GeoJSON and map.osm (when present), and appends what a person changed, and the areas marked
+    complete (labels for csboundary finetune), to review.json."""
     from csboundary.pipeline.review import apply_review as merge
 
     done = merge(prediction, edits)
@@ -164,7 +165,8 @@ def apply_review(
         typer.echo(f"{prediction}: {edits} was already applied on {done['already_applied'].get('time', '?')}; nothing changed")
         return
     typer.echo(f"{prediction}: {len(done['deleted_edges'])} deleted, {len(done['accepted_edges'])} accepted, "
-               f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added: "
+               f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added, "
+               f"{len(done['complete_areas'])} areas marked complete: "
                f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}")
 
 

@@ -130,17 +130,22 @@ class TrainingCity:
         self.close()
 
     def random_window(self, rng: np.random.Generator, size: int) -> PixelWindow:
-        """A ``size`` square anywhere in the city; in a partly labelled city, centred on a pixel of
-        its complete area."""
-        if self.complete is not None:
-            rows, cols = np.nonzero(self.complete[::8, ::8])  # a coarse grid is plenty to pick a centre
-            k = int(rng.integers(len(rows)))
-            col, row = int(cols[k]) * 8 - size // 2, int(rows[k]) * 8 - size // 2
-            return PixelWindow(int(np.clip(col, min(0, self.mosaic.width - size), max(0, self.mosaic.width - size))),
-                               int(np.clip(row, min(0, self.mosaic.height - size), max(0, self.mosaic.height - size))), size, size)
-        col = int(rng.integers(0, max(1, self.mosaic.width - size + 1)))
-        row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
+        """A ``size`` square anywhere in the city, all places alike; in a partly labelled city, one
+        whose centre lies in its complete area (drawn the same way and kept when it does, so a city
+        complete everywhere samples as a fully labelled one)."""
+        for _ in range(1 if self.complete is None else 100):
+            col = int(rng.integers(0, max(1, self.mosaic.width - size + 1)))
+            row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
+            if self.complete is None or self._complete_at(col + size // 2, row + size // 2):
+                return PixelWindow(col, row, size, size)
+        rows, cols = np.nonzero(self.complete[::8, ::8])  # a small area: centre the window on one of its pixels
+        k = int(rng.integers(len(rows)))
+        col = int(np.clip(int(cols[k]) * 8 - size // 2, min(0, self.mosaic.width - size), max(0, self.mosaic.width - size)))
+        row = int(np.clip(int(rows[k]) * 8 - size // 2, min(0, self.mosaic.height - size), max(0, self.mosaic.height - size)))
         return PixelWindow(col, row, size, size)
+
+    def _complete_at(self, col: int, row: int) -> bool:
+        return 0 <= row < self.complete.shape[0] and 0 <= col < self.complete.shape[1] and bool(self.complete[row, col])
 
     def known(self, window: PixelWindow) -> np.ndarray:
         """(s, s) bool: where the window's labels are known (inside the city and its complete area)."""
