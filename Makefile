@@ -1,15 +1,16 @@
-# Two entry points: `make demo` (the main job) and `make test`.
+# Two entry points: `make demo` (the main job) and `make test`; `make wheel-check` installs the built
+# wheel alone in a fresh environment and runs the demo outside the checkout (CI runs all three).
 # Both create and reuse a virtual environment in .venv on first use.
 PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test clean
+.PHONY: demo test wheel-check clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/pip install --quiet -c constraints.txt -e '.[test]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -18,5 +19,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/pytest
 
+wheel-check: $(STAMP)
+	rm -rf build/wheel-check && mkdir -p build/wheel-check
+	$(BIN)/pip wheel --quiet --no-deps . -w build/wheel-check/dist
+	$(PYTHON) -m venv build/wheel-check/venv
+	build/wheel-check/venv/bin/pip install --quiet -c constraints.txt build/wheel-check/dist/csboundary-*.whl
+	cd /tmp && $(CURDIR)/build/wheel-check/venv/bin/csboundary demo --out $(CURDIR)/build/wheel-check/demo --device cpu
+
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out build

@@ -54,6 +54,15 @@ def _csboundary(weights_dir: Path, device):
     return PatchPredictor.load(weights_dir / "csboundary-synthetic.pt", device)
 
 
+def _repository_weights(path: Path) -> Path:
+    """A baseline's or ablation's weights: they come with a checkout of the repository, not with
+    the wheel (``predict`` never loads them)."""
+    if not path.exists():
+        raise FileNotFoundError(f"{path} is not in this installation: the benchmark's baseline and ablation weights come with "
+                                "the repository (git clone; csboundary/weights/ablation and baselines), not with the wheel")
+    return path
+
+
 FIRST_FPN = "ablation/fpn-first.pt"  # the FPN Table IV's AfANets were trained on (the first shipped one)
 FIRST_INFERENCE = {"edge_threshold": 0.3, "max_degree": 2}  # that bundle's settings (no edge-support check)
 
@@ -64,7 +73,8 @@ def _ablation(variant: str):
     def load(weights_dir: Path, device):
         from csboundary.pipeline.patch import PatchPredictor
 
-        predictor = PatchPredictor.load(weights_dir / "ablation" / f"afanet-{variant}.pt", device, fpn_weights=weights_dir / FIRST_FPN)
+        predictor = PatchPredictor.load(_repository_weights(weights_dir / "ablation" / f"afanet-{variant}.pt"), device,
+                                       fpn_weights=_repository_weights(weights_dir / FIRST_FPN))
         predictor.edge_threshold, predictor.max_degree = FIRST_INFERENCE["edge_threshold"], FIRST_INFERENCE["max_degree"]
         return predictor
 
@@ -75,7 +85,7 @@ def _baseline(method: str):
     def load(weights_dir: Path, device):
         from csboundary.models.baselines import baseline_module
 
-        return baseline_module(method).Model.load(weights_dir / "baselines" / f"{method}.pt", device)
+        return baseline_module(method).Model.load(_repository_weights(weights_dir / "baselines" / f"{method}.pt"), device)
 
     return load
 
