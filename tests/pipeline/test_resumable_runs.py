@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from csboundary.graph import BoundaryGraph
-from csboundary.pipeline.run_store import STORE_DIR, RunMismatch, RunStore, graph_arrays, graph_from_arrays
+from csboundary.graph.graph_arrays import graph_arrays, graph_from_arrays
+from csboundary.pipeline.run_store import STORE_DIR, RunMismatch, RunStore
 from helpers import run_cli
 
 COMMON = ("--device", "cpu", "--quiet", "--threads", "1")  # one torch thread: the FPN's numbers match a 1-thread worker's
