@@ -112,3 +112,11 @@ def test_a_circle_is_caught(tmp_path):
     (tmp_path / "models" / "c.py").write_text("import csboundary.models.a\n")
     (tmp_path / "models" / "d.py").write_text("import csboundary.models.a\n")
     assert import_cycles(tmp_path) == [["csboundary.models.a", "csboundary.models.b", "csboundary.models.c"]]
+
+
+MAX_MODULE_LINES = 450  # a module longer than this holds more than one job: split it by what it does
+
+
+def test_no_module_is_too_long_to_hold_one_job():
+    long = {str(p.relative_to(PACKAGE)): n for p in PACKAGE.rglob("*.py") if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert long == {}
