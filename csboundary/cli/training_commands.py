@@ -129,7 +129,7 @@ def finetune(
 ) -> None:
     """Fine-tune the weights on your own labelled imagery: the FPN, then AfANet on the tuned
     FPN's vertices, with synthetic cities mixed in so nothing learnt is forgotten
-    (docs/finetune.md). The default budget takes about 15 minutes on a 2-core CPU."""
+    (docs/finetune.md). The default budget takes about 11 minutes on a 2-core CPU."""
     from csboundary.pipeline.finetune import default_work, finetune as run
 
     out_file(out, (".pt",))
