@@ -81,6 +81,16 @@ def load_fpn(source: str | Path | dict, device: torch.device | str = "cpu", path
     return fpn.to(device).eval().to(memory_format=torch.channels_last)
 
 
+def load_afanet(source: str | Path | dict, device: torch.device | str = "cpu", path: str | Path | None = None):
+    """AfANet, in eval mode on ``device``, from an ``afanet`` checkpoint or a bundle (a path, or a
+    payload already loaded from ``path``)."""
+    from csboundary.models.afanet import AfANet, AfANetConfig
+
+    payload = source if isinstance(source, dict) else load_checkpoint(source, ("afanet", "bundle"), map_location=device)
+    where = path if path is not None else ("<weights>" if isinstance(source, dict) else source)
+    return restore_model(where, "afanet", payload, lambda c: AfANet(AfANetConfig.from_dict(c))).to(device).eval()
+
+
 def restore_model(path: str | Path, name: str, payload: dict, build):
     """``build(payload[name + "_config"])`` with ``payload[name]`` loaded into it; a missing field, a
     config the code cannot build or tensors that do not fit it is one InputError naming the file."""

@@ -53,23 +53,24 @@ def default_work(out: Path) -> Path:
     return out.with_name(out.stem + "-finetune")
 
 
-def training_configs(base: dict, cities: list[Path], budget: FinetuneBudget, seed: int, cache: Path) -> tuple[TrainConfig, TrainConfig]:
-    """The FPN and AfANet training configs of a fine-tune of the bundle ``base`` (its payload)
-    on ``cities``: the bundle's own recipe (style mix, losses, surface head) with the budget's
-    steps, rates and user share."""
+def training_configs(base: dict, base_path: Path, cities: list[Path], budget: FinetuneBudget, seed: int,
+                     cache: Path) -> tuple[TrainConfig, TrainConfig]:
+    """The FPN and AfANet training configs of a fine-tune of the bundle ``base`` (its payload,
+    read from ``base_path``, where both networks start) on ``cities``: the bundle's own recipe
+    (style mix, losses, surface head) with the budget's steps, rates and user share."""
     recipe = (base["provenance"].get("fpn") or {}).get("train_config") or {}
     worlds = {**(recipe.get("worlds") or {}), "cities": budget.synthetic_cities}
     worlds.setdefault("tile_size", 2500)
     shared = dict(seed=seed, cache=str(cache), train_city=None, worlds=worlds, valid_city=FINETUNE_VALID,
                   extra_train_cities=[str(c) for c in cities], extra_share=budget.user_share, validation_samples=4)
     fpn = TrainConfig(model="fpn", steps=budget.fpn_steps, lr=budget.fpn_lr, validate_every=max(1, min(100, budget.fpn_steps)),
-                      init_fpn="", surface=bool(base["fpn_config"].get("surface")), crop=budget.crop, batch=budget.batch,
+                      init_fpn=str(base_path.resolve()), surface=bool(base["fpn_config"].get("surface")), crop=budget.crop, batch=budget.batch,
                       augment=recipe.get("augment", {}), hard_negative_weight=float(recipe.get("hard_negative_weight", 0.0)),
                       hard_negative_margin_px=int(recipe.get("hard_negative_margin_px", 6)),
                       pos_weight_keypoint=float(recipe.get("pos_weight_keypoint", 20.0)),
                       pos_weight_segmentation=float(recipe.get("pos_weight_segmentation", 10.0)), **shared)
     afanet_recipe = (base["provenance"].get("afanet") or {}).get("train_config") or {}
-    afanet = TrainConfig(model="afanet", steps=budget.afanet_steps, gt_steps=0, lr=budget.afanet_lr,
+    afanet = TrainConfig(model="afanet", steps=budget.afanet_steps, gt_steps=0, lr=budget.afanet_lr, init_afanet=str(base_path.resolve()),
                          validate_every=max(1, min(200, budget.afanet_steps)),
                          vertex_threshold=float(base["inference"].get("vertex_threshold", 0.5)),  # the vertices it meets at inference
                          window=int(afanet_recipe.get("window", 1100)), max_vertices=int(afanet_recipe.get("max_vertices", 160)),
@@ -113,8 +114,7 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     work = Path(work) if work else default_work(out)
     base = load_checkpoint(base_path, ("bundle",))
     cities = labelled_cities(labelled, work)
-    fpn_config, afanet_config = training_configs(base, cities, budget, seed, Path(cache) if cache else work / "synthetic")
-    fpn_config.init_fpn = afanet_config.init_afanet = str(base_path.resolve())
+    fpn_config, afanet_config = training_configs(base, base_path, cities, budget, seed, Path(cache) if cache else work / "synthetic")
     resolved = resolve_device(device)
     seconds = {}
     start = time.perf_counter()

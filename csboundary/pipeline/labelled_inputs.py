@@ -11,13 +11,14 @@ unknown, not as background.
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
 import geopandas as gpd
+import pyogrio
 from shapely.geometry import Polygon
 
 from csboundary.data import city as layout
+from csboundary.data.ground_truth import LAYER
 from csboundary.data.user_city import make_city
 from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
@@ -41,9 +42,10 @@ def reviewed_city(prediction: Path, out: Path) -> Path:
     if not areas:
         raise InputError(prediction, "no area of it is marked complete: on the review page mark what you reviewed "
                                      "(Area, or View complete), export the edits and run apply-review")
-    crs = json.loads((prediction / "graph.json").read_text()).get("crs")
+    ground_truth = prediction / REVIEWED_GROUND_TRUTH
+    crs = pyogrio.read_info(ground_truth, layer=LAYER)["crs"]  # the graph's, in which the areas were drawn
     complete = gpd.GeoDataFrame(geometry=[Polygon(ring) for ring in areas], crs=crs)
-    make_city(prediction_inputs(prediction), prediction / REVIEWED_GROUND_TRUTH, out, complete=complete)
+    make_city(prediction_inputs(prediction), ground_truth, out, complete=complete)
     return out
 
 

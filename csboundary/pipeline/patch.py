@@ -31,14 +31,9 @@ from csboundary.graph.skeleton_fill import FillConfig, fill_from_skeleton
 from csboundary.graph.surface_check import SurfaceCheckConfig, surface_checked
 from csboundary.graph.surface_gate import SurfaceGateConfig, gated_maps
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
-from csboundary.models.afanet import AfANet, AfANetConfig, adjacency_from_logits
+from csboundary.models.afanet import AfANet, adjacency_from_logits
 from csboundary.models.batchnorm_folding import fold_batch_norms
-from csboundary.models.checkpoint import (
-    load_checkpoint,
-    load_fpn,
-    restore_model,
-    shipped_weights,
-)
+from csboundary.models.checkpoint import load_afanet, load_checkpoint, load_fpn, shipped_weights
 from csboundary.models.confidence import EdgeConfidence
 from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.fpn import FPN, SURFACE
@@ -135,7 +130,7 @@ class PatchPredictor:
             if not source:
                 raise InputError(path, "is an AfANet checkpoint without the FPN it was trained with; give --fpn-weights")
             fpn = load_fpn(source, device)
-        afanet = restore_model(path, "afanet", payload, lambda c: AfANet(AfANetConfig.from_dict(c))).to(device).eval()
+        afanet = load_afanet(payload, device, path)
         settings = inference_settings(payload.get("inference", {}), path)
         support = EdgeSupportConfig(**{k: settings[k] for k in ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level") if k in settings})
         crossings = CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0)))

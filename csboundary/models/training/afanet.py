@@ -13,7 +13,7 @@ from csboundary.graph.crossings import CrossingConfig, added_crossings
 from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
 from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.augmentation import AugmentConfig, photometric
-from csboundary.models.checkpoint import file_sha256, load_checkpoint, load_fpn, restore_model
+from csboundary.models.checkpoint import file_sha256, load_afanet, load_fpn
 from csboundary.models.maps import predict_mosaic_maps
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity, city_probabilities
@@ -79,9 +79,8 @@ def starting_afanet(config: TrainConfig, device: torch.device) -> tuple[AfANet, 
     if not config.init_afanet:
         model_config = model_config_with(AfANetConfig, config.afanet)
         return AfANet(model_config).to(device), model_config
-    payload = load_checkpoint(config.init_afanet, ("afanet", "bundle"))
-    model = restore_model(config.init_afanet, "afanet", payload, lambda c: AfANet(AfANetConfig.from_dict(c)))
-    return model.to(device), model.config
+    model = load_afanet(config.init_afanet, device)
+    return model, model.config
 
 
 def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:

@@ -147,15 +147,20 @@ class TrainingCity:
     def _complete_at(self, col: int, row: int) -> bool:
         return 0 <= row < self.complete.shape[0] and 0 <= col < self.complete.shape[1] and bool(self.complete[row, col])
 
-    def known(self, window: PixelWindow) -> np.ndarray:
-        """(s, s) bool: where the window's labels are known (inside the city and its complete area)."""
-        out = np.zeros((window.height, window.width), bool)
+    def _cut(self, raster: np.ndarray, window: PixelWindow, fill, dtype) -> np.ndarray:
+        """``raster`` (..., H, W) over the whole city, cut to ``window``; ``fill`` outside the city."""
+        out = np.full((*raster.shape[:-2], window.height, window.width), fill, dtype)
         part = window.intersection(self.mosaic.window)
         if part is not None:
             rows, cols = part.slices()
             lrows, lcols = part.relative_to(window).slices()
-            out[lrows, lcols] = True if self.complete is None else self.complete[rows, cols].astype(bool)
+            out[..., lrows, lcols] = raster[..., rows, cols]
         return out
+
+    def known(self, window: PixelWindow) -> np.ndarray:
+        """(s, s) bool: where the window's labels are known (inside the city and its complete area)."""
+        inside = np.broadcast_to(np.True_, (self.mosaic.height, self.mosaic.width)) if self.complete is None else self.complete
+        return self._cut(inside, window, False, bool)
 
     def fpn_sample(self, window: PixelWindow, surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Image (4, s, s) float32 in [0, 1]; targets (2, s, s): keypoint heat, segmentation, with
@@ -170,13 +175,9 @@ class TrainingCity:
     def surface_target(self, window: PixelWindow) -> np.ndarray:
         """(s, s) float32 road surface of a window: 1 roadway, 0 not, -1 where unknown (a city
         without a ``road_surface`` layer, or outside the city)."""
-        out = np.full((window.height, window.width), -1.0, np.float32)
-        part = window.intersection(self.mosaic.window)
-        if self.surface is not None and part is not None:
-            rows, cols = part.slices()
-            lrows, lcols = part.relative_to(window).slices()
-            out[lrows, lcols] = self.surface[rows, cols]
-        return out
+        if self.surface is None:
+            return np.full((window.height, window.width), -1.0, np.float32)
+        return self._cut(self.surface, window, -1.0, np.float32)
 
     def augmented_fpn_sample(self, rng: np.random.Generator, crop: int, config: AugmentConfig,
                              surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -205,12 +206,7 @@ class TrainingCity:
         if self.maps is None:
             raise RuntimeError("predict the city's FPN maps before sampling AfANet inputs")
         read = self.mosaic.read(window)
-        part = window.intersection(self.mosaic.window)
-        maps = np.zeros((2, window.height, window.width), np.float32)
-        if part is not None:
-            rows, cols = part.slices()
-            lrows, lcols = part.relative_to(window).slices()
-            maps[:, lrows, lcols] = self.maps[:2, rows, cols]  # AfANet reads keypoints and boundary, not the surface
+        maps = self._cut(self.maps[:2], window, 0.0, np.float32)  # AfANet reads keypoints and boundary, not the surface
         return np.concatenate([unit_bands(read.data), maps])
 
     def labelled(self, vertices: np.ndarray) -> np.ndarray:
