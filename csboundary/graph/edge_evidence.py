@@ -14,6 +14,7 @@ graph's frame returning (N, C) map values in [0, 1] (NaN where unknown). Pure ot
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Callable
 
 import numpy as np
@@ -42,9 +43,16 @@ FEATURES = GRAPH_FEATURES + MAP_FEATURES
 Sampler = Callable[[np.ndarray], np.ndarray]
 
 
-def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.ndarray:
+def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None, groups: np.ndarray | None = None,
+                  degree: np.ndarray | None = None) -> np.ndarray:
     """(E, len(FEATURES)) evidence of every edge, in the order of :data:`FEATURES`; the map
-    features are NaN without ``sample`` (and the surface ones when the maps have no surface)."""
+    features are NaN without ``sample`` (and the surface ones when the maps have no surface).
+
+    ``groups`` (E,) confines the piece and boundary features to the edges of the same group: the
+    city graph groups edges by the patch core their midpoint lies in, so that an edge's evidence
+    never depends on how far the city extends and a band of the city can be scored on its own
+    (:mod:`csboundary.pipeline.city_blocks`). ``degree`` (V,) gives the vertices' degrees in a
+    larger graph that ``graph`` is part of (default: their degrees in ``graph``)."""
     n = graph.n_edges
     out = np.full((n, len(FEATURES)), np.nan)
     if n == 0:
@@ -53,11 +61,14 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     length = np.array([polyline_length(line) for line in lines])
     chord = np.array([float(np.linalg.norm(line[-1] - line[0])) for line in lines])
     kinds = graph.edge_kinds or ["normal"] * n
-    degree = np.minimum(np.bincount(graph.edges.ravel(), minlength=graph.n_vertices), MAX_DEGREE)
-    piece, piece_length = fragment_lengths(graph)
+    if degree is None:
+        degree = np.bincount(graph.edges.ravel(), minlength=graph.n_vertices)
+    degree = np.minimum(degree, MAX_DEGREE)
+    grouped = _split_by_group(graph, groups)
+    piece, piece_length = fragment_lengths(grouped)
     piece_edges = np.bincount(piece, minlength=len(piece_length))
     chain_length, chain_chord, chain_of = np.zeros(n), np.zeros(n), np.zeros(n, np.int64)
-    for c, chain in enumerate(merge_chains(graph)):  # the boundary (run through degree-2 vertices) each edge is part of
+    for c, chain in enumerate(merge_chains(grouped)):  # the boundary (run through degree-2 vertices) each edge is part of
         chain_of[chain.edges] = c
         chain_length[chain.edges] = polyline_length(chain.polyline)
         chain_chord[chain.edges] = float(np.linalg.norm(chain.polyline[-1] - chain.polyline[0]))
@@ -84,6 +95,20 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None) -> np.nda
     for name, values in columns.items():
         out[:, FEATURES.index(name)] = values
     return out
+
+
+def _split_by_group(graph: BoundaryGraph, groups: np.ndarray | None) -> BoundaryGraph:
+    """``graph`` with every vertex that edges of several groups share split into one vertex per
+    group (same position), so that pieces and chains end where the groups meet."""
+    if groups is None:
+        return graph
+    groups = np.asarray(groups, np.int64).reshape(-1)
+    if len(groups) != graph.n_edges:
+        raise ValueError(f"groups has {len(groups)} entries for {graph.n_edges} edges")
+    pairs = np.stack([np.repeat(groups, 2), graph.edges.ravel()], axis=1)  # (group, vertex) of each edge end
+    _, first, split = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
+    vertices = graph.vertices[graph.edges.ravel()[first]]
+    return dataclasses.replace(graph, vertices=vertices, edges=split.reshape(-1, 2).astype(np.int64), vertex_kinds=None)
 
 
 def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarray]:

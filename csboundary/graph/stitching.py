@@ -51,6 +51,7 @@ from scipy.spatial import cKDTree
 
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.chains import edge_line
 from csboundary.graph.end_attachment import attach_ends, better_edge, dangling_ends
 from csboundary.graph.polyline import (
     arc_lengths,
@@ -106,6 +107,16 @@ def polyline_midpoint(points: np.ndarray) -> np.ndarray:
     k = min(int(np.searchsorted(cum, half, side="right")) - 1, len(steps) - 1)
     t = (half - cum[k]) / steps[k] if steps[k] > 0 else 0.0
     return points[k] + t * (points[k + 1] - points[k])
+
+
+def owner_cores(graph: BoundaryGraph, grid: PatchGrid) -> np.ndarray:
+    """(E, 2) the (row, col) of the patch core holding each edge's midpoint (half its arc length
+    from u to v), clamped to the grid: which core an edge of the city graph belongs to."""
+    mids = np.array([polyline_midpoint(edge_line(graph, k)) for k in range(graph.n_edges)], float).reshape(-1, 2)
+    core = grid.config.core
+    rows = np.clip(np.floor(mids[:, 1] / core), 0, grid.n_rows - 1).astype(np.int64)
+    cols = np.clip(np.floor(mids[:, 0] / core), 0, grid.n_cols - 1).astype(np.int64)
+    return np.stack([rows, cols], axis=1)
 
 
 def border_distance(points: np.ndarray, patch: Patch, grid: PatchGrid) -> np.ndarray:

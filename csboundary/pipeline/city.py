@@ -44,6 +44,7 @@ from csboundary.graph.fragments import drop_short_fragments
 from csboundary.graph.noding import node_shared_points
 from csboundary.graph.stitching import (
     StitchConfig,
+    owner_cores,
     stitch_patch_graphs,
     to_mosaic,
 )
@@ -364,7 +365,8 @@ class CityRun:
         evidence = None
         if reads_evidence(model):
             sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
-            evidence = timed("confidence", edge_evidence, graph, sample)
+            owner = owner_cores(graph, grid)
+            evidence = timed("confidence", edge_evidence, graph, sample, owner[:, 0] * grid.n_cols + owner[:, 1])
             if getattr(model, "confidence", None) is not None:
                 graph = timed("confidence", scored_graph, graph, model.confidence, evidence, getattr(model, "min_confidence", 0.0))
                 evidence = None  # it described the edges before the confidence dropped any

@@ -70,3 +70,17 @@ def test_points_along_are_evenly_spaced_with_left_normals():
     np.testing.assert_allclose(points[:, 0], [1, 3, 5, 7, 9])
     np.testing.assert_allclose(normals, [[0.0, -1.0]] * 5)  # image rows grow downwards: left of east is up
 
+
+
+def test_groups_end_pieces_and_boundaries_where_they_meet():
+    # a straight boundary of three 10 px edges through degree-2 vertices, the last edge in another group
+    vertices = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [30.0, 0.0]])
+    graph = BoundaryGraph(vertices, np.array([[0, 1], [1, 2], [2, 3]]))
+    whole = [dict(zip(FEATURES, row)) for row in edge_evidence(graph)]
+    split = [dict(zip(FEATURES, row)) for row in edge_evidence(graph, groups=np.array([5, 5, 9]))]
+    assert [f["log_piece_length"] for f in whole] == pytest.approx([np.log1p(30.0)] * 3)
+    assert [f["log_piece_length"] for f in split] == pytest.approx([np.log1p(20.0)] * 2 + [np.log1p(10.0)])
+    assert [f["log_chain_length"] for f in split] == pytest.approx([np.log1p(20.0)] * 2 + [np.log1p(10.0)])
+    assert [f["log_piece_edges"] for f in split] == pytest.approx([np.log1p(2)] * 2 + [np.log1p(1)])
+    # the degrees are the graph's: the vertex the groups share still has two edges
+    assert split[1]["degree_max"] == split[2]["degree_max"] == 2
