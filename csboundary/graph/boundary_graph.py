@@ -152,35 +152,12 @@ class BoundaryGraph:
     # -- JSON -----------------------------------------------------------------------------------------
     def to_dict(self) -> dict:
         world = self.world_vertices() if self.transform is not None else None
-        vertices = []
-        for i, p in enumerate(self.vertices):
-            item: dict = {"px": [float(p[0]), float(p[1])]}
-            if world is not None:
-                item["xy"] = [float(world[i, 0]), float(world[i, 1])]
-            if self.vertex_kinds is not None:
-                item["kind"] = self.vertex_kinds[i]
-            vertices.append(item)
-        edges = []
-        for k, (u, v) in enumerate(self.edges):
-            item = {"u": int(u), "v": int(v)}
-            if self.edge_kinds is not None:
-                item["kind"] = self.edge_kinds[k]
-            if self.edge_polylines is not None and self.edge_polylines[k] is not None:
-                item["polyline_px"] = np.asarray(self.edge_polylines[k], dtype=float).round(3).tolist()
-            if self.edge_scores is not None:
-                score = float(self.edge_scores[k])
-                item["score"] = score if np.isfinite(score) else None  # strict JSON has no NaN
-            if self.edge_patches is not None:
-                item["patch"] = [int(x) for x in self.edge_patches[k]]
-            edges.append(item)
-        return {
-            "format": FORMAT,
-            "version": VERSION,
-            "crs": self.crs,
-            "transform": list(self.transform)[:6] if self.transform is not None else None,
-            "vertices": vertices,
-            "edges": edges,
-        }
+        edges = [edge_item(int(u), int(v), None if self.edge_kinds is None else self.edge_kinds[k],
+                           None if self.edge_polylines is None else self.edge_polylines[k],
+                           None if self.edge_scores is None else float(self.edge_scores[k]), self.edge_scores is not None,
+                           None if self.edge_patches is None else self.edge_patches[k])
+                 for k, (u, v) in enumerate(self.edges.tolist())]
+        return {**json_header(self.crs, self.transform), "vertices": vertex_items(self.vertices, world, self.vertex_kinds), "edges": edges}
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "<dict>") -> "BoundaryGraph":
@@ -226,3 +203,36 @@ class BoundaryGraph:
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise InputError(path, f"not JSON ({exc})") from exc
         return cls.from_dict(data, str(path))
+
+
+def json_header(crs: str | None, transform: Affine | None) -> dict:
+    """The fields of a graph.json before its vertices and edges."""
+    return {"format": FORMAT, "version": VERSION, "crs": crs, "transform": list(transform)[:6] if transform is not None else None}
+
+
+def vertex_items(vertices: np.ndarray, world: np.ndarray | None, kinds: Sequence[str] | None) -> list[dict]:
+    """graph.json's entries of vertices (pixels), with their world coordinates and kinds when known."""
+    out = []
+    for i, p in enumerate(np.asarray(vertices, float).reshape(-1, 2).tolist()):
+        item: dict = {"px": p}
+        if world is not None:
+            item["xy"] = [float(world[i, 0]), float(world[i, 1])]
+        if kinds is not None:
+            item["kind"] = kinds[i]
+        out.append(item)
+    return out
+
+
+def edge_item(u: int, v: int, kind: str | None, polyline, score: float | None, scored: bool, patch) -> dict:
+    """graph.json's entry of one edge; ``scored`` says whether the graph has scores (a missing
+    one is written as null: strict JSON has no NaN)."""
+    item: dict = {"u": u, "v": v}
+    if kind is not None:
+        item["kind"] = kind
+    if polyline is not None:
+        item["polyline_px"] = np.asarray(polyline, dtype=float).round(3).tolist()
+    if scored:
+        item["score"] = score if score is not None and np.isfinite(score) else None
+    if patch is not None:
+        item["patch"] = [int(x) for x in patch]
+    return item

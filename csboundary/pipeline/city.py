@@ -39,17 +39,10 @@ from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.end_attachment import ATTACH, attach_ends, dangling_ends
-from csboundary.graph.fragments import drop_short_fragments
-from csboundary.graph.noding import node_shared_points
-from csboundary.graph.stitching import (
-    StitchConfig,
-    owner_cores,
-    stitch_patch_graphs,
-    to_mosaic,
-)
-from csboundary.graph.edge_evidence import edge_evidence
-from csboundary.pipeline.edge_confidence import core_sampler, scored_graph
+from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
+from csboundary.graph.stitching import StitchConfig, to_mosaic
+from csboundary.pipeline.city_blocks import BLOCK, CityGraphRecipe, city_blocks
+from csboundary.pipeline.edge_confidence import core_sampler
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
 from csboundary.pipeline.run_store import RunStore
 from csboundary.viz.overlay import core_thumbnail
@@ -103,6 +96,10 @@ class CityResult:
     work: dict[str, int] = field(default_factory=dict)  # patches predicted / windows connected by this run, and reused
     evidence: np.ndarray | None = None  # (E, F) edge evidence of ``graph`` (graph/edge_evidence.py), for a model collecting it
     blank: frozenset = frozenset()  # patches known to have no imagery, never read
+    outputs_seconds: float = 0.0  # spent in the writer the city graph was handed to, block by block
+    patch_graph_edges: int = 0  # edges of all patch graphs, before stitching
+    close_vertex_pairs: int = 0  # city graph vertices less than 1 px apart (stitching merges them: 0)
+    busiest_core: tuple[int, int] = (0, 0)  # the patch core holding the most city graph length
 
     @property
     def n_patches(self) -> int:
@@ -227,21 +224,36 @@ class CityJob:
         _trim_heap()
 
 
-def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, stitch: StitchConfig, crs: str | None,
-               min_fragment_px: float = 0.0, attach_px: float = 0.0) -> BoundaryGraph:
-    """The city graph of a run's patch graphs (mosaic pixels): stitched, without the connected
-    pieces shorter than ``min_fragment_px``, noded where lines touch, cross or run together
-    (``stitch.node_shared``), then with the dangling ends attached to the line of another piece
-    up to ``attach_px`` ahead of them (both lengths are the model's settings). Noding and
-    attaching come after the short pieces are dropped, so that noise is not kept alive by
-    touching a road (Ottawa crops: F1@5 0.450 noding first, 0.452 after)."""
-    graph = drop_short_fragments(stitch_patch_graphs(patch_graphs, grid, stitch, crs), min_fragment_px)
-    if stitch.node_shared:
-        graph = node_shared_points(graph)
-    if attach_px <= 0:
-        return graph
-    ends, _, headings = dangling_ends(graph)
-    return attach_ends(graph, ends, attach_px, ATTACH, headings, merge_px=stitch.merge_px)
+class CityCollector:
+    """The whole city graph (and its evidence) put together from the pieces of a
+    :class:`~csboundary.graph.graph_stream.GraphStream`, numbered as the files number it."""
+
+    def __init__(self, transform, crs: str | None):
+        self.transform, self.crs = transform, crs
+        self.vertices: list[np.ndarray] = []
+        self.vertex_kinds: list[str] = []
+        self.edges: list = []
+        self.evidence: list[np.ndarray] = []
+
+    def add(self, piece: StreamPiece, evidence: np.ndarray | None = None) -> None:
+        self.vertices.append(piece.vertices)
+        self.vertex_kinds += piece.vertex_kinds or ["vertex"] * len(piece.vertices)
+        self.edges += piece.edges
+        if evidence is not None:
+            self.evidence.append(evidence)
+
+    def result(self) -> tuple[BoundaryGraph, np.ndarray | None]:
+        edges = self.edges
+        graph = BoundaryGraph(
+            np.concatenate(self.vertices).reshape(-1, 2) if self.vertices else np.zeros((0, 2)),
+            np.array([[e.u, e.v] for e in edges], np.int64).reshape(-1, 2),
+            vertex_kinds=list(self.vertex_kinds), edge_kinds=[e.kind or "normal" for e in edges],
+            edge_polylines=[e.polyline for e in edges],
+            edge_scores=np.array([np.nan if e.score is None else e.score for e in edges], float),
+            edge_patches=np.array([e.patch or (-1, -1) for e in edges], np.int64).reshape(-1, 2),
+            transform=self.transform, crs=self.crs,
+        )
+        return graph, np.concatenate(self.evidence) if self.evidence else None
 
 
 def empty_graph(patch: Patch) -> BoundaryGraph:
@@ -347,32 +359,84 @@ class CityRun:
         graph, seconds = self.job.connect_window(index, maps)
         self.graph_finished(index, graph, seconds)
 
-    def finish(self, stitch: StitchConfig, progress: bool) -> CityResult:
+    def finish(self, stitch: StitchConfig, progress: bool, writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
+               keep_graphs: bool = True, block: int = BLOCK, one_pass: bool = False) -> CityResult:
+        """Make the city graph block by block (:mod:`csboundary.pipeline.city_blocks`) and hand
+        each block's vertices and edges, and the boundaries it completes, to ``writer``. With
+        ``keep_graphs`` the result also holds the whole city graph and every patch graph (the
+        evaluation needs them); without, memory stays one block's worth and the result's
+        ``graph`` is empty. ``block`` (patches) and ``one_pass`` are those of
+        :func:`~csboundary.pipeline.city_blocks.city_blocks`."""
         self.bar.close()
         if not self.schedule.done:
             missing = len(self.job.grid) - len(self.schedule.graphs_done)
             raise RuntimeError(f"{missing} window(s) have no graph: the run did not finish")
-        grid, mosaic, store = self.job.grid, self.job.mosaic, self.job.store
-        if store.root is not None:
-            self.patch_graphs = {p.index: empty_graph(p) if p.index in self.quiet else store.load_graph(p.index) for p in grid}
+        grid, mosaic, store, model = self.job.grid, self.job.mosaic, self.job.store, self.job.model
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
-        timed = _Timer()
-        with tqdm(total=1, desc="stitch graphs", disable=not progress) as stitch_bar:
-            model = self.job.model
-            graph = timed("graph_stitching", city_graph, self.patch_graphs, grid, stitch, crs, getattr(model, "min_fragment_px", 0.0),
-                          getattr(model, "attach_px", 0.0))
-            stitch_bar.update(1)
-        evidence = None
-        if reads_evidence(model):
-            sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
-            owner = owner_cores(graph, grid)
-            evidence = timed("confidence", edge_evidence, graph, sample, owner[:, 0] * grid.n_cols + owner[:, 1])
-            if getattr(model, "confidence", None) is not None:
-                graph = timed("confidence", scored_graph, graph, model.confidence, evidence, getattr(model, "min_confidence", 0.0))
-                evidence = None  # it described the edges before the confidence dropped any
-        self.add_seconds(timed.seconds)
-        return CityResult(graph, self.patch_graphs, grid, {s: self.seconds.get(s, 0.0) for s in STAGES}, self.map_bytes_peak,
-                          len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence, self.job.blank)
+        recipe = CityGraphRecipe(stitch, crs, getattr(model, "min_fragment_px", 0.0), getattr(model, "attach_px", 0.0),
+                                 getattr(model, "confidence", None), getattr(model, "min_confidence", 0.0), reads_evidence(model),
+                                 block=block)
+        sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS) if recipe.evidence else None
+        counted: dict[Index, int] = {}
+
+        def load(index: Index) -> BoundaryGraph:
+            if index in self.quiet:
+                graph = empty_graph(grid.patch(*index))
+            else:
+                graph = self.patch_graphs[index] if index in self.patch_graphs else store.load_graph(index)
+            counted.setdefault(index, graph.n_edges)
+            return graph
+
+        stream, whole = GraphStream(), CityCollector(grid.transform, crs) if keep_graphs else None
+        core_length: dict[Index, float] = defaultdict(float)
+        seconds: dict[str, float] = defaultdict(float)
+        reach = 2 * grid.config.core  # no edge reaches farther from its core than its 1100 px window (module city_blocks)
+        span = recipe.block * grid.config.core
+        n_block_rows, n_block_cols = -(-grid.n_rows // recipe.block), -(-grid.n_cols // recipe.block)
+
+        def finished_after(index: Index):
+            def final(points: np.ndarray) -> np.ndarray:
+                row = np.minimum((points[:, 1] + reach) // span, n_block_rows - 1)
+                col = np.minimum((points[:, 0] + reach) // span, n_block_cols - 1)
+                return (row < index[0]) | ((row == index[0]) & (col <= index[1]))
+            return final
+
+        def emit(piece: StreamPiece | None, boundaries: list[StreamBoundary]) -> None:
+            start = time.perf_counter()
+            if writer is not None:
+                writer(piece, boundaries)
+            seconds["outputs"] += time.perf_counter() - start
+
+        n_blocks = n_block_rows * n_block_cols
+        with tqdm(total=n_blocks, desc="stitch graphs", unit="block", disable=not progress or n_blocks < 2) as bar:
+            for block in city_blocks(load, grid, recipe, sample, one_pass):
+                for stage, value in block.seconds.items():
+                    seconds[stage] += value
+                start = time.perf_counter()
+                piece = stream.add(block.graph)
+                boundaries = stream.finish(finished_after(block.index))
+                for (r, c), length in zip(block.cores.tolist(), block.graph.edge_lengths()):
+                    core_length[r, c] += float(length)
+                if whole is not None:
+                    whole.add(piece, block.evidence)
+                if block.index[1] == n_block_cols - 1:
+                    stream.forget_above((block.index[0] + 1) * span - reach)
+                seconds["graph_stitching"] += time.perf_counter() - start
+                emit(piece, boundaries)
+                bar.update(1)
+        emit(None, stream.finish())
+        self.add_seconds({k: v for k, v in seconds.items() if k in STAGES})
+        if keep_graphs and store.root is not None:
+            self.patch_graphs = {p.index: load(p.index) for p in grid}
+        graph, evidence = whole.result() if whole is not None else (CityCollector(grid.transform, crs).result()[0], None)
+        result = CityResult(graph, self.patch_graphs if keep_graphs else {}, grid, {s: self.seconds.get(s, 0.0) for s in STAGES},
+                            self.map_bytes_peak, len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence,
+                            self.job.blank)
+        result.outputs_seconds = seconds["outputs"]
+        result.patch_graph_edges = sum(counted.values())
+        result.close_vertex_pairs = stream.close_pairs
+        result.busiest_core = max(core_length, key=core_length.get, default=(0, 0))
+        return result
 
 
 def run_here(run: CityRun, drain_workers: int | None = None) -> None:
@@ -421,11 +485,14 @@ def run_here(run: CityRun, drain_workers: int | None = None) -> None:
 def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(),
                  batch_size: int = 1, progress: bool = True, on_window: Callable[[Patch, np.ndarray], None] | None = None,
                  store: RunStore | None = None, write_cores: bool = False, executor: Callable[[CityRun], None] = run_here,
-                 threads: int | None = None, overview_scale: float | None = None) -> CityResult:
+                 threads: int | None = None, overview_scale: float | None = None,
+                 writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None, keep_graphs: bool = True,
+                 block: int = BLOCK, one_pass: bool = False) -> CityResult:
     """Predict the whole mosaic. ``on_window(patch, stitched_maps)`` sees every final window
     (in-process runs only); ``store`` (default: in memory) holds the work done, and a store left
     by an interrupted run is resumed; ``executor`` does the work (default: this process; see
-    :func:`csboundary.pipeline.distributed.dask_executor`)."""
+    :func:`csboundary.pipeline.distributed.dask_executor`); ``writer``, ``keep_graphs``,
+    ``block`` and ``one_pass``: see :meth:`CityRun.finish`."""
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     grid = PatchGrid.for_mosaic(mosaic, grid_config)
@@ -433,7 +500,7 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
                   overview_scale)
     run = CityRun(job, batch_size, progress, on_window)
     executor(run)
-    return run.finish(stitch, progress)
+    return run.finish(stitch, progress, writer, keep_graphs, block, one_pass)
 
 
 def patch_scale_graph(result: CityResult) -> BoundaryGraph:

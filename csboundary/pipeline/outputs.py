@@ -14,6 +14,9 @@ same CRS as the GeoPackage, not RFC 7946's WGS 84); ``length_m`` is true metres 
 
 from __future__ import annotations
 
+import json
+import shutil
+import tempfile
 import warnings
 from contextlib import ExitStack
 from pathlib import Path
@@ -26,31 +29,168 @@ from shapely.geometry import LineString
 from csboundary.data.atomic import atomic_path
 from csboundary.data.ground_truth import LAYER as BOUNDARIES_LAYER
 from csboundary.data.units import GroundUnits, ground_units
-from csboundary.data.windows import pixel_to_world
+from csboundary.data.windows import pixel_to_world, world_to_pixel
 from csboundary.errors import InputError
-from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.graph.chains import edge_line, merge_chains
+from csboundary.graph.boundary_graph import BoundaryGraph, edge_item, json_header, vertex_items
+from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
 
 EDGES_LAYER = "edges"
+TRANSFORM_KEY = "csboundary_transform"  # the graph's pixel -> world transform, in the edges layer's metadata
 
 
 def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "boundaries", units: GroundUnits | None = None) -> dict[str, Path]:
-    """Write ``{stem}.gpkg``, ``{stem}.geojson`` and ``graph.json`` into ``out_dir``.
+    """Write ``{stem}.gpkg``, ``{stem}.geojson`` and ``graph.json`` of a whole graph into ``out_dir``.
 
-    All three are written to temporary names first and renamed only once all of them are
-    complete, so an interrupted run leaves either the previous files or none, never a partial
-    one. Returns the paths under the keys ``gpkg``, ``geojson`` and ``graph_json``.
+    The graph goes through :class:`GraphWriter` as one piece, so its vertices are numbered in
+    order of first use, as in a city run's files. All three are written to temporary names first
+    and renamed only once all of them are complete, so an interrupted run leaves either the
+    previous files or none, never a partial one. Returns the paths under the keys ``gpkg``,
+    ``geojson`` and ``graph_json``.
     """
-    boundaries, edges = graph_frames(graph, units)
+    if graph.transform is None:
+        raise ValueError("graph has no transform: world coordinates are unknown")
     out_dir = Path(out_dir)
     paths = {"gpkg": out_dir / f"{stem}.gpkg", "geojson": out_dir / f"{stem}.geojson", "graph_json": out_dir / "graph.json"}
     with ExitStack() as stack:
         tmp = {key: stack.enter_context(atomic_path(path)) for key, path in paths.items()}
-        _write_layer(boundaries, tmp["gpkg"], BOUNDARIES_LAYER, "GPKG")
-        _write_layer(edges, tmp["gpkg"], EDGES_LAYER, "GPKG")
-        _write_layer(boundaries, tmp["geojson"], stem, "GeoJSON")  # the layer name is in the file: never the temporary's
-        graph.write_json(tmp["graph_json"])
+        writer = GraphWriter(tmp, graph.crs, graph.transform, units or graph_units(graph), stem)
+        stack.callback(writer.abort)
+        stream = GraphStream()
+        writer.add(stream.add(graph), [])
+        writer.add(None, stream.finish())
+        writer.close()
     return paths
+
+
+def graph_units(graph: BoundaryGraph) -> GroundUnits:
+    """Ground units of a graph's CRS around its middle (the CRS's own units without one)."""
+    return ground_units(graph.crs, _centre(graph)) or GroundUnits((1.0, 1.0), "unknown")
+
+
+class GraphWriter:
+    """The GeoPackage (``road_boundaries`` and ``edges``), the GeoJSON and graph.json of a graph
+    that arrives in pieces (:class:`~csboundary.graph.graph_stream.GraphStream`): each piece's
+    vertices and edges go into graph.json as they come (the edges through a file beside it, as
+    the vertices come first), each complete boundary and its edges are appended to the
+    GeoPackage and the GeoJSON. Memory holds one piece. ``paths``: ``gpkg``, ``geojson``,
+    ``graph_json``."""
+
+    def __init__(self, paths: dict[str, Path], crs: str | None, transform, units: GroundUnits, stem: str = "boundaries"):
+        if transform is None:
+            raise ValueError("graph has no transform: world coordinates are unknown")
+        self.paths, self.crs, self.transform, self.units, self.stem = paths, crs, transform, units, stem
+        self.boundaries = 0
+        self.counts = {"vertices": 0, "edges": 0, "kinds": {}, "boundary_m": 0.0}
+        self._layers_started = False
+        self._json = open(paths["graph_json"], "w")
+        header = json.dumps({**json_header(crs, transform), "vertices": []})
+        self._json.write(header[:-2])  # up to the open vertex list
+        self._edges_part = tempfile.TemporaryFile("w+", dir=paths["graph_json"].parent)  # gone however the run ends
+        self._scored: bool | None = None
+        self._first_vertex = self._first_edge = True
+
+    def add(self, piece: StreamPiece | None, boundaries: list[StreamBoundary]) -> None:
+        if piece is not None:
+            self._add_piece(piece)
+        if boundaries:
+            frames = boundary_frames(boundaries, self.boundaries, self.crs, self.transform, self.units)
+            self.boundaries += len(boundaries)
+            self._append(*frames)
+
+    def close(self) -> dict:
+        """Finish the files; returns the counts (edges, by kind, boundary metres, boundaries)."""
+        if not self._layers_started:  # no boundary at all: the layers still exist, empty
+            self._append(*boundary_frames([], 0, self.crs, self.transform, self.units))
+        self._edges_part.seek(0)
+        self._json.write("], \"edges\": [")
+        shutil.copyfileobj(self._edges_part, self._json)
+        self._json.write("]}")
+        self.abort()
+        self.counts["boundaries"] = self.boundaries
+        return self.counts
+
+    def abort(self) -> None:
+        """Close the files (the caller removes the unfinished ones)."""
+        self._json.close()
+        self._edges_part.close()
+
+    def _add_piece(self, piece: StreamPiece) -> None:
+        world = np.stack(pixel_to_world(self.transform, piece.vertices[:, 0], piece.vertices[:, 1]), axis=1) if len(piece.vertices) else None
+        self.counts["vertices"] += len(piece.vertices)
+        for item in vertex_items(piece.vertices, world, piece.vertex_kinds):
+            self._json.write(("" if self._first_vertex else ", ") + json.dumps(item))
+            self._first_vertex = False
+        if self._scored is None and piece.edges:
+            self._scored = piece.edges[0].score is not None
+        for e in piece.edges:
+            item = edge_item(e.u, e.v, e.kind, e.polyline, e.score, bool(self._scored), e.patch)
+            self._edges_part.write(("" if self._first_edge else ", ") + json.dumps(item))
+            self._first_edge = False
+            self.counts["edges"] += 1
+            kind = e.kind or "normal"
+            self.counts["kinds"][kind] = self.counts["kinds"].get(kind, 0) + 1
+
+    def _append(self, boundaries: gpd.GeoDataFrame, edges: gpd.GeoDataFrame) -> None:
+        self.counts["boundary_m"] += float(edges["length_m"].sum())
+        append = self._layers_started
+        _write_layer(boundaries, self.paths["gpkg"], BOUNDARIES_LAYER, "GPKG", append)
+        _write_layer(edges, self.paths["gpkg"], EDGES_LAYER, "GPKG", append,
+                     None if append else {TRANSFORM_KEY: ",".join(repr(float(x)) for x in list(self.transform)[:6])})
+        _write_layer(boundaries, self.paths["geojson"], self.stem, "GeoJSON", append)  # the layer name is in the file: never the temporary's
+        self._layers_started = True
+
+
+def read_prediction_graph(source: str | Path, bounds: tuple[float, float, float, float] | None = None) -> BoundaryGraph:
+    """The graph of a prediction (a predict output folder, its graph.json or its GeoPackage).
+
+    Without ``bounds`` it is read from graph.json when there is one. With ``bounds`` (MINX,
+    MINY, MAXX, MAXY in the prediction's CRS) only the edges whose lines meet that box are read,
+    from the GeoPackage's ``edges`` layer through its spatial index, so a district of a city of
+    any size costs memory for the district alone; vertices keep the city's numbers' order but
+    are numbered anew, and their kinds are not in the GeoPackage."""
+    source = Path(source)
+    folder = source if source.is_dir() else source.parent
+    if source.suffix == ".json" or (source.is_dir() and bounds is None and (folder / "graph.json").exists()):
+        if bounds is None:
+            return BoundaryGraph.read_json(source if source.suffix == ".json" else folder / "graph.json")
+        source = folder / "boundaries.gpkg"
+    gpkg = source if source.suffix == ".gpkg" else folder / "boundaries.gpkg"
+    if not gpkg.exists():
+        raise InputError(gpkg, "file not found (a predict output folder holds graph.json and boundaries.gpkg)")
+    try:
+        info = pyogrio.read_info(gpkg, layer=EDGES_LAYER)
+        frame = pyogrio.read_dataframe(gpkg, layer=EDGES_LAYER, bbox=bounds)
+    except Exception as exc:  # pyogrio raises its own types for a file or layer it cannot read
+        raise InputError(gpkg, f"has no readable {EDGES_LAYER} layer ({exc})") from None
+    values = (info.get("layer_metadata") or {}).get(TRANSFORM_KEY)
+    if values is None:
+        raise InputError(gpkg, f"its {EDGES_LAYER} layer does not say its pixel grid (written by an older csboundary)")
+    from affine import Affine
+
+    transform = Affine(*map(float, values.split(",")))
+    frame = frame.sort_values("edge_id", kind="stable")
+    lines = []
+    for geometry in frame.geometry:
+        xy = np.asarray(geometry.coords)[:, :2]
+        cols, rows = world_to_pixel(transform, xy[:, 0], xy[:, 1])
+        lines.append(np.stack([cols, rows], axis=1))
+    ends = frame[["u", "v"]].to_numpy(np.int64).reshape(-1, 2)
+    ids, first = np.unique(ends.ravel(), return_index=True)
+    ids = ids[np.argsort(first, kind="stable")]
+    number = {int(x): k for k, x in enumerate(ids.tolist())}
+    position = {}
+    for (u, v), line in zip(ends.tolist(), lines):
+        position.setdefault(u, line[0])
+        position.setdefault(v, line[-1])
+    crs = info.get("crs")
+    return BoundaryGraph(
+        np.array([position[int(x)] for x in ids], float).reshape(-1, 2),
+        np.array([[number[u], number[v]] for u, v in ends.tolist()], np.int64).reshape(-1, 2),
+        edge_kinds=frame["kind"].astype(str).tolist(), edge_polylines=lines,
+        edge_scores=frame["confidence"].to_numpy(float),
+        edge_patches=frame[["patch_row", "patch_col"]].to_numpy(np.int64).reshape(-1, 2),
+        transform=transform, crs=crs,
+    )
 
 
 def check_finite_geometry(graph: BoundaryGraph, source) -> None:
@@ -64,51 +204,53 @@ def check_finite_geometry(graph: BoundaryGraph, source) -> None:
 
 
 def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
-    """The ``road_boundaries`` and ``edges`` tables of ``graph`` in world coordinates; lengths in
-    metres through ``units`` (default: those of ``graph.crs``, or the CRS's units without one).
+    """The ``road_boundaries`` and ``edges`` tables of a whole graph, as :class:`GraphWriter`
+    writes them (vertices numbered in order of first use)."""
+    if graph.transform is None:
+        raise ValueError("graph has no transform: world coordinates are unknown")
+    stream = GraphStream()
+    stream.add(graph)
+    return boundary_frames(stream.finish(), 0, graph.crs, graph.transform, units or graph_units(graph))
+
+
+def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | None, transform,
+                    units: GroundUnits) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
+    """The ``road_boundaries`` rows of complete boundaries (numbered from ``first_id``) and the
+    ``edges`` rows of their edges (by edge number), in world coordinates; lengths in metres.
 
     Boundary confidence is the length-weighted mean of its edges' scores (a long confident edge
     should outweigh a short doubtful one), ignoring missing (NaN) scores; NaN if none is known.
     """
-    if graph.transform is None:
-        raise ValueError("graph has no transform: world coordinates are unknown")
 
     def world(line: np.ndarray) -> np.ndarray:
-        return np.stack(pixel_to_world(graph.transform, line[:, 0], line[:, 1]), axis=1)
-
-    if units is None:
-        units = ground_units(graph.crs, _centre(graph)) or GroundUnits((1.0, 1.0), "unknown")
-    n = graph.n_edges
-    edge_lines = [world(edge_line(graph, k)) for k in range(n)]
-    length = np.array([units.line_length_m(line) for line in edge_lines], dtype=float)
-    score = np.full(n, np.nan) if graph.edge_scores is None else np.asarray(graph.edge_scores, dtype=float).reshape(n)
-    kinds = np.array(graph.edge_kinds if graph.edge_kinds is not None else ["normal"] * n, dtype=object).reshape(n)
-    corner = kinds == "corner"
-    filled = kinds == "skeleton"  # added from the segmentation skeleton (graph/skeleton_fill.py)
-    patch = np.full((n, 2), -1, dtype=np.int64) if graph.edge_patches is None else graph.edge_patches
-    patch = np.where((patch >= 0).all(axis=1, keepdims=True), patch, -1)
-    boundary_of_edge = np.full(n, -1, dtype=np.int64)
+        return np.stack(pixel_to_world(transform, line[:, 0], line[:, 1]), axis=1)
 
     rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges", "skeleton_edges", "patches")}
-    geometry = []
-    for c, chain in enumerate(merge_chains(graph)):
-        k = chain.edges
-        boundary_of_edge[k] = c
-        line = world(chain.polyline)
-        known = np.isfinite(score[k])
-        distinct = dict.fromkeys(map(tuple, patch[k][patch[k, 0] >= 0].tolist()))
+    geometry, edge_rows = [], []
+    for c, boundary in enumerate(boundaries, start=first_id):
+        lines = [world(e.line) for e in boundary.edges]
+        length = np.array([units.line_length_m(line) for line in lines], dtype=float)
+        score = np.array([np.nan if e.score is None else e.score for e in boundary.edges], dtype=float)
+        kinds = [e.kind or "normal" for e in boundary.edges]
+        known = np.isfinite(score)
+        line = world(boundary.polyline)
         geometry.append(LineString(line))
         rows["length_m"].append(units.line_length_m(line))
-        rows["n_edges"].append(len(k))
-        rows["confidence_mean"].append(_weighted_mean(score[k][known], length[k][known]))
-        rows["confidence_min"].append(float(score[k][known].min()) if known.any() else np.nan)
-        rows["corner_edges"].append(int(corner[k].sum()))
-        rows["skeleton_edges"].append(int(filled[k].sum()))
+        rows["n_edges"].append(len(boundary.edges))
+        rows["confidence_mean"].append(_weighted_mean(score[known], length[known]))
+        rows["confidence_min"].append(float(score[known].min()) if known.any() else np.nan)
+        rows["corner_edges"].append(kinds.count("corner"))
+        rows["skeleton_edges"].append(kinds.count("skeleton"))  # added from the segmentation skeleton (graph/skeleton_fill.py)
+        distinct = dict.fromkeys(e.patch for e in boundary.edges if e.patch is not None and min(e.patch) >= 0)
         rows["patches"].append(";".join(f"{r},{col}" for r, col in distinct))
-
-    boundaries = gpd.GeoDataFrame(
+        for e, edge_world, metres, kind in zip(boundary.edges, lines, length, kinds):
+            patch = e.patch if e.patch is not None and min(e.patch) >= 0 else (-1, -1)
+            edge_rows.append((e.id, c, e.u, e.v, np.nan if e.score is None else e.score, kind == "corner", kind, *patch, metres,
+                              LineString(edge_world)))
+    edge_rows.sort(key=lambda row: row[0])
+    boundaries_frame = gpd.GeoDataFrame(
         {
-            "boundary_id": np.arange(len(geometry), dtype=np.int64),
+            "boundary_id": np.arange(first_id, first_id + len(geometry), dtype=np.int64),
             "length_m": np.array(rows["length_m"], dtype=float),
             "n_edges": np.array(rows["n_edges"], dtype=np.int64),
             "confidence_mean": np.array(rows["confidence_mean"], dtype=float),
@@ -117,34 +259,37 @@ def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tupl
             "skeleton_edges": np.array(rows["skeleton_edges"], dtype=np.int64),
             "patches": np.array(rows["patches"], dtype=object),
         },
-        geometry=gpd.GeoSeries(geometry, crs=graph.crs),
-        crs=graph.crs,
+        geometry=gpd.GeoSeries(geometry, crs=crs),
+        crs=crs,
     )
-    edges = gpd.GeoDataFrame(
+    columns = list(zip(*edge_rows)) if edge_rows else [[] for _ in range(11)]
+    edges_frame = gpd.GeoDataFrame(
         {
-            "edge_id": np.arange(n, dtype=np.int64),
-            "boundary_id": boundary_of_edge,
-            "u": graph.edges[:, 0].copy(),
-            "v": graph.edges[:, 1].copy(),
-            "confidence": score,
-            "corner": corner,
-            "kind": kinds.astype(str),
-            "patch_row": patch[:, 0].copy(),
-            "patch_col": patch[:, 1].copy(),
-            "length_m": length,
+            "edge_id": np.array(columns[0], dtype=np.int64),
+            "boundary_id": np.array(columns[1], dtype=np.int64),
+            "u": np.array(columns[2], dtype=np.int64),
+            "v": np.array(columns[3], dtype=np.int64),
+            "confidence": np.array(columns[4], dtype=float),
+            "corner": np.array(columns[5], dtype=bool),
+            "kind": np.array(columns[6], dtype=object).astype(str),
+            "patch_row": np.array(columns[7], dtype=np.int64),
+            "patch_col": np.array(columns[8], dtype=np.int64),
+            "length_m": np.array(columns[9], dtype=float),
         },
-        geometry=gpd.GeoSeries([LineString(line) for line in edge_lines], crs=graph.crs),
-        crs=graph.crs,
+        geometry=gpd.GeoSeries(list(columns[10]), crs=crs),
+        crs=crs,
     )
-    return boundaries, edges
+    return boundaries_frame, edges_frame
 
 
-def _write_layer(frame: gpd.GeoDataFrame, path: Path, layer: str | None, driver: str) -> None:
-    """One layer into ``path`` (a GeoPackage gains a layer per call); the geometry type is given
-    so that an empty layer still declares LineString."""
+def _write_layer(frame: gpd.GeoDataFrame, path: Path, layer: str | None, driver: str, append: bool = False,
+                 metadata: dict | None = None) -> None:
+    """One layer into ``path`` (a GeoPackage gains a layer per call), or more rows into it with
+    ``append``; the geometry type is given so that an empty layer still declares LineString."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="'crs' was not provided")  # a graph without CRS
-        pyogrio.write_dataframe(frame, path, layer=layer, driver=driver, geometry_type="LineString")
+        pyogrio.write_dataframe(frame, path, layer=layer, driver=driver, geometry_type="LineString", append=append,
+                                layer_metadata=metadata)
 
 
 def _centre(graph: BoundaryGraph) -> tuple[float, float] | None:

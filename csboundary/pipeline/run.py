@@ -31,7 +31,8 @@ import numpy as np
 import rasterio
 
 from csboundary.data.atomic import check_output_dir, clear_stale_temporaries, staging_folder
-from csboundary.data.grid import GridConfig
+from csboundary.data.grid import GridConfig, PatchGrid
+from csboundary.data.windows import pixel_to_world
 from csboundary.data.raster import Mosaic
 from csboundary.data.model_view import mosaic_units
 from csboundary.data.units import GroundUnits
@@ -40,7 +41,7 @@ from csboundary.pipeline.city import GDAL_ENV, STAGES, CityResult, CityRun, Patc
 from csboundary.pipeline.map_output import write_maps_cog
 from csboundary.pipeline.run_store import STORE_DIR, RunStore
 from csboundary.viz.overlay import overview_scale
-from csboundary.pipeline.outputs import write_graph_outputs
+from csboundary.pipeline.outputs import GraphWriter, read_prediction_graph
 
 ORANGE = (255, 140, 0)
 OVERVIEW_PX = 2000  # longest side of overview.png
@@ -53,7 +54,7 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
                    grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(), progress: bool = True,
                    settings: dict | None = None, ground_truth=(), units: GroundUnits | None = None, restart: bool = False,
                    executor: Callable[[CityRun], None] = run_here, threads: int | None = None,
-                   lanelet2: bool = False) -> tuple[CityResult, dict]:
+                   lanelet2: bool = False, keep_graphs: bool = True, **city) -> tuple[CityResult, dict]:
     """Predict ``mosaic`` and write every output into ``out_dir``; returns the result and the summary.
 
     ``ground_truth`` (world LineStrings), when given, is drawn in cyan under the prediction.
@@ -61,6 +62,9 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     :func:`csboundary.data.model_view.model_view`, which also gives them for CRS-less imagery).
     ``settings`` (JSON-ready) describe the model and how it is run: with the inputs, the grid and
     the code version they decide whether an unfinished run in ``out_dir`` is resumed or refused.
+    The city graph is written block by block as it is made; ``keep_graphs`` also keeps it (and
+    the patch graphs) in the result, for scoring: ``predict`` does not, so its memory does not
+    grow with the city. ``city`` passes ``block`` and ``one_pass`` on to :func:`predict_city`.
     """
     if units is None:
         units = mosaic_units(mosaic) or PIXEL_UNITS
@@ -72,22 +76,28 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     start = time.perf_counter()
     with staging_folder(out) as stage, contextlib.ExitStack() as stack:
         stack.enter_context(rasterio.Env(**GDAL_ENV))  # overviews read every tile too
+        files = {"gpkg": stage / "boundaries.gpkg", "geojson": stage / "boundaries.geojson", "graph_json": stage / "graph.json"}
+        crs = mosaic.crs.to_string() if mosaic.crs is not None else None
+        writer = GraphWriter(files, crs, PatchGrid.for_mosaic(mosaic, grid_config).transform, units)
+        stack.callback(writer.abort)
         result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
                               store=store, write_cores=write_maps, executor=executor, threads=threads,
-                              overview_scale=overview_scale(mosaic.window, OVERVIEW_PX))
+                              overview_scale=overview_scale(mosaic.window, OVERVIEW_PX), writer=writer.add, keep_graphs=keep_graphs, **city)
+        counts = writer.close()
         rss_after_prediction = peak_rss_mb()
         written_at = time.perf_counter()
-        files = write_outputs(mosaic, result, stage, units, ground_truth, store)
+        files.update(write_pictures(mosaic, result, stage, files["gpkg"], ground_truth, store))
         if write_maps:
             files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
         if lanelet2:
             from csboundary.pipeline.lanelet2_export import LANELET2_MAP, write_lanelet2
 
-            written = write_lanelet2(result.graph, stage / LANELET2_MAP)
+            graph = result.graph if keep_graphs else read_prediction_graph(files["gpkg"])
+            written = write_lanelet2(graph, stage / LANELET2_MAP)
             files.update(lanelet2=written["path"], projector_info=written["projector_info"])
-        seconds = dict(result.seconds, outputs=time.perf_counter() - written_at)
+        seconds = dict(result.seconds, outputs=result.outputs_seconds + time.perf_counter() - written_at)
         seconds["total"] = time.perf_counter() - start
-        summary = summarize(mosaic, result, seconds, files, settings or {}, units)
+        summary = summarize(mosaic, result, seconds, files, settings or {}, units, counts)
         summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
         (stage / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n")
     store.remove()
@@ -109,17 +119,20 @@ def run_manifest(mosaic: Mosaic, settings: dict, grid_config: GridConfig, batch_
             "write_maps": write_maps, "code_version": code_version()}
 
 
-def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict, units: GroundUnits | None = None) -> dict:
-    """Counts, timings and throughput of one run (JSON-ready); areas and lengths in true metres."""
-    graph = result.graph
+def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict, units: GroundUnits | None = None,
+              counts: dict | None = None) -> dict:
+    """Counts, timings and throughput of one run (JSON-ready); areas and lengths in true metres.
+    ``counts`` are the writer's (:class:`~csboundary.pipeline.outputs.GraphWriter`); without
+    them they are taken from ``result.graph``."""
     units = units or mosaic_units(mosaic) or PIXEL_UNITS
+    if counts is None:
+        counts = graph_counts(result.graph, units)
     area_km2 = units.area_km2(mosaic.bounds)
-    boundary_m = sum(units.line_length_m(np.asarray(line.coords)) for line in graph.to_linestrings(world=True)) if graph.n_edges else 0.0
     n = result.n_patches
-    kinds = graph.edge_kinds or []
+    kinds = counts["kinds"]
     return {
         "inputs": [str(Path(t.path).resolve()) for t in mosaic.tiles],  # absolute: review and apply-review run from anywhere
-        "crs": graph.crs,
+        "crs": mosaic.crs.to_string() if mosaic.crs is not None else None,
         "length_unit": f"metre (from {units.unit_name}{', geodesic' if units.geographic else ''})",
         "mosaic_px": [mosaic.width, mosaic.height],
         "area_km2": round(area_km2, 6),
@@ -127,14 +140,15 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
         "patches_without_imagery": result.patches_without_imagery,
         "grid": list(result.grid.shape),
         "counts": {
-            "vertices": graph.n_vertices,
-            "edges": graph.n_edges,
-            "corner_edges": sum(k == "corner" for k in kinds),
-            "skeleton_edges": sum(k == "skeleton" for k in kinds),  # filled in from the segmentation (graph/skeleton_fill.py)
-            "attach_edges": sum(k == "attach" for k in kinds),  # a dangling end joined to the line ahead (graph/end_attachment.py)
-            "boundary_km": round(boundary_m / 1000, 4),
-            "patch_graph_edges": int(sum(g.n_edges for g in result.patch_graphs.values())),
-            "vertex_pairs_within_1px": count_close_pairs(graph.vertices, 1.0),
+            "vertices": counts["vertices"],
+            "edges": counts["edges"],
+            "corner_edges": kinds.get("corner", 0),
+            "skeleton_edges": kinds.get("skeleton", 0),  # filled in from the segmentation (graph/skeleton_fill.py)
+            "attach_edges": kinds.get("attach", 0),  # a dangling end joined to the line ahead (graph/end_attachment.py)
+            "boundaries": counts["boundaries"],
+            "boundary_km": round(counts["boundary_m"] / 1000, 4),
+            "patch_graph_edges": result.patch_graph_edges,
+            "vertex_pairs_within_1px": result.close_vertex_pairs,
         },
         "seconds": {k: round(v, 3) for k, v in seconds.items()},
         "seconds_per_patch": {k: round(seconds[k] / n, 4) for k in (*STAGES, "total")},
@@ -146,35 +160,59 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
     }
 
 
-def write_outputs(mosaic: Mosaic, result: CityResult, out: Path, units: GroundUnits, ground_truth=(), store: RunStore | None = None) -> dict[str, Path]:
-    """The vector files (:func:`write_graph_outputs`) and the pictures (:func:`render_overlays`).
-    The pictures are drawn first and PNG-encoded in a second thread while this one builds and
-    writes the vector files: encoding leaves the GIL, so the two overlap (0.27 s instead of 0.40 s
-    on the 16-patch test city); drawing too in that thread made both slower (0.46 s), as their
-    Python work took turns on the GIL."""
-    from csboundary.viz.overlay import write_png
+def graph_counts(graph, units: GroundUnits) -> dict:
+    """What :class:`~csboundary.pipeline.outputs.GraphWriter` counts, of a whole graph."""
+    from csboundary.pipeline.outputs import graph_frames
 
-    pictures = render_overlays(mosaic, result, ground_truth, store)
-    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-png") as encoder:
-        encoded = {name: encoder.submit(write_png, out / f"{name}.png", rgb) for name, rgb in pictures.items()}
-        files = write_graph_outputs(result.graph, out, units=units)
-        files.update({name: future.result() for name, future in encoded.items()})
-    return files
+    kinds: dict[str, int] = {}
+    for kind in graph.edge_kinds or ["normal"] * graph.n_edges:
+        kinds[kind] = kinds.get(kind, 0) + 1
+    boundaries, edges = graph_frames(graph, units)
+    return {"vertices": graph.n_vertices, "edges": graph.n_edges, "kinds": kinds, "boundaries": len(boundaries),
+            "boundary_m": float(edges["length_m"].sum())}
 
 
-def render_overlays(mosaic: Mosaic, result: CityResult, ground_truth=(), store: RunStore | None = None) -> dict[str, np.ndarray]:
-    """RGB pictures ``overview`` (whole mosaic; from the run's core thumbnails when ``store`` has
-    them all) and ``detail`` (the patch core holding the most prediction)."""
-    from csboundary.viz.overlay import overview_from_thumbs, render_window
+def write_pictures(mosaic: Mosaic, result: CityResult, out: Path, gpkg: Path, ground_truth=(), store: RunStore | None = None) -> dict[str, Path]:
+    """``overview.png`` (whole mosaic, from the run's core thumbnails when ``store`` has them
+    all) and ``detail.png`` (the patch core holding the most of the city graph), the prediction
+    read back from ``gpkg`` a chunk at a time, so drawing a city's lines holds one chunk. The
+    overview is PNG-encoded in a second thread while this one draws the detail (encoding leaves
+    the GIL)."""
+    from csboundary.viz.overlay import draw_world_lines, overview_from_thumbs, render_window, write_png
 
-    predicted = result.graph.to_linestrings(world=True)
-    layers = [(predicted, ORANGE)]
     base = None if store is None else overview_from_thumbs(result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb,
                                                            result.blank)
-    overview = render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid, layers=layers, base=base)
-    busiest = max(result.patch_graphs, key=lambda i: result.patch_graphs[i].edge_lengths().sum(), default=(0, 0))
-    detail = render_window(mosaic, result.grid.patch(*busiest).core, ground_truth, layers=layers)
-    return {"overview": overview, "detail": detail}
+    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-png") as encoder:
+        overview = render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid, base=base)
+        for lines in edge_lines_in_chunks(gpkg):
+            draw_world_lines(overview, mosaic, mosaic.window, lines, ORANGE, max_size=OVERVIEW_PX)
+        encoded = {"overview": encoder.submit(write_png, out / "overview.png", overview)}
+        core = result.grid.patch(*result.busiest_core).core
+        detail = render_window(mosaic, core, ground_truth)
+        for lines in edge_lines_in_chunks(gpkg, bounds=window_bounds(mosaic, core)):
+            draw_world_lines(detail, mosaic, core, lines, ORANGE)
+        encoded["detail"] = encoder.submit(write_png, out / "detail.png", detail)
+        return {name: future.result() for name, future in encoded.items()}
+
+
+def edge_lines_in_chunks(gpkg: Path, bounds=None, chunk: int = 50_000):
+    """The GeoPackage's edge lines (world): all of them ``chunk`` at a time, or those meeting ``bounds``."""
+    import pyogrio
+
+    from csboundary.pipeline.outputs import EDGES_LAYER
+
+    if bounds is not None:
+        yield list(pyogrio.read_dataframe(gpkg, layer=EDGES_LAYER, columns=[], bbox=bounds).geometry)
+        return
+    total = pyogrio.read_info(gpkg, layer=EDGES_LAYER)["features"]
+    for skip in range(0, total, chunk):
+        yield list(pyogrio.read_dataframe(gpkg, layer=EDGES_LAYER, columns=[], skip_features=skip, max_features=chunk).geometry)
+
+
+def window_bounds(mosaic: Mosaic, window) -> tuple[float, float, float, float]:
+    """World (minx, miny, maxx, maxy) of a pixel window of the mosaic."""
+    xs, ys = pixel_to_world(mosaic.transform, np.array([window.col_off, window.col_end]), np.array([window.row_off, window.row_end]))
+    return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
 
 
 def stage_table(summary: dict) -> str:

@@ -66,28 +66,31 @@ def render_window(
     # read reduced in strips: a city overview never holds the full image
     read = base if base is not None else mosaic.read(window, scale=scale)
     rgb = to_display(read.data, read.valid)
-    thickness = 2 if scale > 0.5 else 1
-    world_box = box(*_world_bounds(mosaic, window))
-
-    def to_pixels(lines_world: Iterable[LineString]) -> list[np.ndarray]:
-        out = []
-        for line in lines_world:
-            if not line.intersects(world_box):
-                continue
-            xy = np.asarray(line.coords)[:, :2]
-            cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
-            out.append(np.stack([(cols - window.col_off) * scale, (rows - window.row_off) * scale], axis=1))
-        return out
-
     if grid is not None:
         for patch in grid:
             for w, c in ((patch.expanded, GRID_EXPANDED), (patch.core, GRID_CORE)):
                 corners = np.array([[w.col_off, w.row_off], [w.col_end, w.row_off], [w.col_end, w.row_end], [w.col_off, w.row_end], [w.col_off, w.row_off]], float)
                 draw_lines(rgb, [(corners - [window.col_off, window.row_off]) * scale], c, 1)
-    draw_lines(rgb, to_pixels(boundaries), colour, thickness)
+    draw_world_lines(rgb, mosaic, window, boundaries, colour, max_size)
     for lines_world, layer_colour in layers:
-        draw_lines(rgb, to_pixels(lines_world), layer_colour, thickness)
+        draw_world_lines(rgb, mosaic, window, lines_world, layer_colour, max_size)
     return rgb
+
+
+def draw_world_lines(rgb: np.ndarray, mosaic: Mosaic, window: PixelWindow, lines_world: Iterable[LineString], colour,
+                     max_size: int | None = None) -> None:
+    """Draw world LineStrings onto a picture :func:`render_window` made of ``window`` (same
+    ``max_size``), in place; lines off the window are skipped."""
+    scale = overview_scale(window, max_size)
+    world_box = box(*_world_bounds(mosaic, window))
+    out = []
+    for line in lines_world:
+        if not line.intersects(world_box):
+            continue
+        xy = np.asarray(line.coords)[:, :2]
+        cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
+        out.append(np.stack([(cols - window.col_off) * scale, (rows - window.row_off) * scale], axis=1))
+    draw_lines(rgb, out, colour, 2 if scale > 0.5 else 1)
 
 
 def overview_scale(window: PixelWindow, max_size: int | None) -> float:
