@@ -39,9 +39,9 @@ from csboundary.data.grid import GridConfig, Patch, PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
+from csboundary.graph.graph_stream import StreamBoundary, StreamPiece
 from csboundary.graph.stitching import StitchConfig, to_mosaic
-from csboundary.pipeline.city_blocks import BLOCK, CityGraphRecipe, city_blocks
+from csboundary.pipeline.city_blocks import BLOCK, CityCollector, CityGraphRecipe, stream_city_graph
 from csboundary.pipeline.edge_confidence import core_sampler
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
 from csboundary.pipeline.run_store import RunStore
@@ -224,38 +224,6 @@ class CityJob:
         _trim_heap()
 
 
-class CityCollector:
-    """The whole city graph (and its evidence) put together from the pieces of a
-    :class:`~csboundary.graph.graph_stream.GraphStream`, numbered as the files number it."""
-
-    def __init__(self, transform, crs: str | None):
-        self.transform, self.crs = transform, crs
-        self.vertices: list[np.ndarray] = []
-        self.vertex_kinds: list[str] = []
-        self.edges: list = []
-        self.evidence: list[np.ndarray] = []
-
-    def add(self, piece: StreamPiece, evidence: np.ndarray | None = None) -> None:
-        self.vertices.append(piece.vertices)
-        self.vertex_kinds += piece.vertex_kinds or ["vertex"] * len(piece.vertices)
-        self.edges += piece.edges
-        if evidence is not None:
-            self.evidence.append(evidence)
-
-    def result(self) -> tuple[BoundaryGraph, np.ndarray | None]:
-        edges = self.edges
-        graph = BoundaryGraph(
-            np.concatenate(self.vertices).reshape(-1, 2) if self.vertices else np.zeros((0, 2)),
-            np.array([[e.u, e.v] for e in edges], np.int64).reshape(-1, 2),
-            vertex_kinds=list(self.vertex_kinds), edge_kinds=[e.kind or "normal" for e in edges],
-            edge_polylines=[e.polyline for e in edges],
-            edge_scores=np.array([np.nan if e.score is None else e.score for e in edges], float),
-            edge_patches=np.array([e.patch or (-1, -1) for e in edges], np.int64).reshape(-1, 2),
-            transform=self.transform, crs=self.crs,
-        )
-        return graph, np.concatenate(self.evidence) if self.evidence else None
-
-
 def empty_graph(patch: Patch) -> BoundaryGraph:
     """The graph of a window with no imagery around it (mosaic pixels)."""
     return to_mosaic(BoundaryGraph(np.zeros((0, 2)), np.zeros((0, 2), np.int64)), patch)
@@ -387,56 +355,15 @@ class CityRun:
             counted.setdefault(index, graph.n_edges)
             return graph
 
-        stream, whole = GraphStream(), CityCollector(grid.transform, crs) if keep_graphs else None
-        core_length: dict[Index, float] = defaultdict(float)
-        seconds: dict[str, float] = defaultdict(float)
-        reach = 2 * grid.config.core  # no edge reaches farther from its core than its 1100 px window (module city_blocks)
-        span = recipe.block * grid.config.core
-        n_block_rows, n_block_cols = -(-grid.n_rows // recipe.block), -(-grid.n_cols // recipe.block)
-
-        def finished_after(index: Index):
-            def final(points: np.ndarray) -> np.ndarray:
-                row = np.minimum((points[:, 1] + reach) // span, n_block_rows - 1)
-                col = np.minimum((points[:, 0] + reach) // span, n_block_cols - 1)
-                return (row < index[0]) | ((row == index[0]) & (col <= index[1]))
-            return final
-
-        def emit(piece: StreamPiece | None, boundaries: list[StreamBoundary]) -> None:
-            start = time.perf_counter()
-            if writer is not None:
-                writer(piece, boundaries)
-            seconds["outputs"] += time.perf_counter() - start
-
-        n_blocks = n_block_rows * n_block_cols
-        with tqdm(total=n_blocks, desc="stitch graphs", unit="block", disable=not progress or n_blocks < 2) as bar:
-            for block in city_blocks(load, grid, recipe, sample, one_pass):
-                for stage, value in block.seconds.items():
-                    seconds[stage] += value
-                start = time.perf_counter()
-                piece = stream.add(block.graph)
-                boundaries = stream.finish(finished_after(block.index))
-                for (r, c), length in zip(block.cores.tolist(), block.graph.edge_lengths()):
-                    core_length[r, c] += float(length)
-                if whole is not None:
-                    whole.add(piece, block.evidence)
-                if block.index[1] == n_block_cols - 1:
-                    stream.forget_above((block.index[0] + 1) * span - reach)
-                seconds["graph_stitching"] += time.perf_counter() - start
-                emit(piece, boundaries)
-                bar.update(1)
-        emit(None, stream.finish())
-        self.add_seconds({k: v for k, v in seconds.items() if k in STAGES})
+        whole = CityCollector(grid.transform, crs) if keep_graphs else None
+        made = stream_city_graph(load, grid, recipe, sample, writer, whole, one_pass, progress)
+        self.add_seconds({k: v for k, v in made.seconds.items() if k in STAGES})
         if keep_graphs and store.root is not None:
             self.patch_graphs = {p.index: load(p.index) for p in grid}
-        graph, evidence = whole.result() if whole is not None else (CityCollector(grid.transform, crs).result()[0], None)
-        result = CityResult(graph, self.patch_graphs if keep_graphs else {}, grid, {s: self.seconds.get(s, 0.0) for s in STAGES},
-                            self.map_bytes_peak, len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence,
-                            self.job.blank)
-        result.outputs_seconds = seconds["outputs"]
-        result.patch_graph_edges = sum(counted.values())
-        result.close_vertex_pairs = stream.close_pairs
-        result.busiest_core = max(core_length, key=core_length.get, default=(0, 0))
-        return result
+        graph, evidence = (whole or CityCollector(grid.transform, crs)).result()
+        return CityResult(graph, self.patch_graphs if keep_graphs else {}, grid, {s: self.seconds.get(s, 0.0) for s in STAGES},
+                          self.map_bytes_peak, len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence,
+                          self.job.blank, made.seconds.get("outputs", 0.0), sum(counted.values()), made.close_pairs, made.busiest_core)
 
 
 def run_here(run: CityRun, drain_workers: int | None = None) -> None:

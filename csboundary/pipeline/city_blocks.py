@@ -19,10 +19,12 @@ edges in the same order (``tests/pipeline/test_city_blocks.py``; the demo and te
 from __future__ import annotations
 
 import time
+from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
 import numpy as np
+from tqdm import tqdm
 
 from csboundary.data.grid import PatchGrid
 from csboundary.graph import BoundaryGraph
@@ -30,6 +32,7 @@ from csboundary.graph.chains import edge_line
 from csboundary.graph.edge_evidence import Sampler, edge_evidence
 from csboundary.graph.end_attachment import ATTACH, attach_ends, dangling_ends
 from csboundary.graph.fragments import drop_short_fragments
+from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
 from csboundary.graph.noding import node_shared_points
 from csboundary.graph.stitching import StitchConfig, owner_cores, polyline_midpoint, stitch_patch_graphs
 from csboundary.models.confidence import EdgeConfidence
@@ -118,6 +121,99 @@ def city_blocks(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, r
         block = _finished_block(index, local, cores, keep, grid, recipe, sample)
         block.seconds = {"graph_stitching": built - start, "confidence": time.perf_counter() - built}
         yield block
+
+
+@dataclass
+class MadeCityGraph:
+    """What :func:`stream_city_graph` measured on the way."""
+
+    seconds: dict  # graph_stitching, confidence, outputs (the writer's)
+    close_pairs: int  # vertices less than 1 px apart (stitching merges them: 0)
+    busiest_core: Index  # the patch core holding the most of the city graph's length
+    held_peak: int  # vertices and edges the stream held at most
+
+
+def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, recipe: CityGraphRecipe,
+                      sample: Sampler | None = None, writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
+                      collector: "CityCollector | None" = None, one_pass: bool = False, progress: bool = False) -> MadeCityGraph:
+    """Make the city graph block by block (:func:`city_blocks`) and hand each block's vertices
+    and edges, then the boundaries it completed, to ``writer`` (and ``collector``, which keeps
+    the whole graph). A vertex is final, and the boundaries through it can be completed, once
+    every block within ``2 * core`` of it is done: no edge reaches farther from its core than
+    the 1100 px window it came from."""
+    stream = GraphStream()
+    core_length: dict[Index, float] = defaultdict(float)
+    seconds: dict[str, float] = defaultdict(float)
+    reach = 2 * grid.config.core
+    span = recipe.block * grid.config.core
+    n_block_rows, n_block_cols = -(-grid.n_rows // recipe.block), -(-grid.n_cols // recipe.block)
+    held = 0
+
+    def finished_after(index: Index):
+        def final(points: np.ndarray) -> np.ndarray:
+            row = np.minimum((points[:, 1] + reach) // span, n_block_rows - 1)
+            col = np.minimum((points[:, 0] + reach) // span, n_block_cols - 1)
+            return (row < index[0]) | ((row == index[0]) & (col <= index[1]))
+        return final
+
+    def emit(piece: StreamPiece | None, boundaries: list[StreamBoundary]) -> None:
+        start = time.perf_counter()
+        if writer is not None:
+            writer(piece, boundaries)
+        seconds["outputs"] += time.perf_counter() - start
+
+    n_blocks = n_block_rows * n_block_cols
+    with tqdm(total=n_blocks, desc="stitch graphs", unit="block", disable=not progress or n_blocks < 2) as bar:
+        for block in city_blocks(load_graph, grid, recipe, sample, one_pass):
+            for stage, value in block.seconds.items():
+                seconds[stage] += value
+            start = time.perf_counter()
+            piece = stream.add(block.graph)
+            held = max(held, stream.held)
+            boundaries = stream.finish(finished_after(block.index))
+            for (r, c), length in zip(block.cores.tolist(), block.graph.edge_lengths()):
+                core_length[r, c] += float(length)
+            if collector is not None:
+                collector.add(piece, block.evidence)
+            if block.index[1] == n_block_cols - 1:
+                stream.forget_above((block.index[0] + 1) * span - reach)
+            seconds["graph_stitching"] += time.perf_counter() - start
+            emit(piece, boundaries)
+            bar.update(1)
+    emit(None, stream.finish())
+    return MadeCityGraph(dict(seconds), stream.close_pairs, max(core_length, key=core_length.get, default=(0, 0)), held)
+
+
+class CityCollector:
+    """The whole city graph (and its evidence) put together from the pieces of a
+    :class:`~csboundary.graph.graph_stream.GraphStream`, numbered as the files number it."""
+
+    def __init__(self, transform, crs: str | None):
+        self.transform, self.crs = transform, crs
+        self.vertices: list[np.ndarray] = []
+        self.vertex_kinds: list[str] = []
+        self.edges: list = []
+        self.evidence: list[np.ndarray] = []
+
+    def add(self, piece: StreamPiece, evidence: np.ndarray | None = None) -> None:
+        self.vertices.append(piece.vertices)
+        self.vertex_kinds += piece.vertex_kinds or ["vertex"] * len(piece.vertices)
+        self.edges += piece.edges
+        if evidence is not None:
+            self.evidence.append(evidence)
+
+    def result(self) -> tuple[BoundaryGraph, np.ndarray | None]:
+        edges = self.edges
+        graph = BoundaryGraph(
+            np.concatenate(self.vertices).reshape(-1, 2) if self.vertices else np.zeros((0, 2)),
+            np.array([[e.u, e.v] for e in edges], np.int64).reshape(-1, 2),
+            vertex_kinds=list(self.vertex_kinds), edge_kinds=[e.kind or "normal" for e in edges],
+            edge_polylines=[e.polyline for e in edges],
+            edge_scores=np.array([np.nan if e.score is None else e.score for e in edges], float),
+            edge_patches=np.array([e.patch or (-1, -1) for e in edges], np.int64).reshape(-1, 2),
+            transform=self.transform, crs=self.crs,
+        )
+        return graph, np.concatenate(self.evidence) if self.evidence else None
 
 
 def _finished_block(index: Index, local: BoundaryGraph, cores: np.ndarray, keep: np.ndarray, grid: PatchGrid,

@@ -12,7 +12,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.end_attachment import attach_ends, dangling_ends
 from csboundary.graph.fragments import fragment_lengths
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.city import city_graph
+from csboundary.pipeline.city_blocks import CityGraphRecipe, city_graph
 
 # a road boundary along y = 100 from x = 0 to 300 (a corner edge with a shape), and a side
 # street's boundary coming down x = 150 that stops 30 px short of it
@@ -98,10 +98,10 @@ def test_the_city_graph_drops_a_short_piece_before_attaching_the_rest():
     vertices = np.array([[0.0, 100], [300, 100], [150, 40], [150, 70], [250, 0], [250, 70]])
     graph = BoundaryGraph(vertices, np.array([[0, 1], [2, 3], [4, 5]]), edge_kinds=["normal"] * 3, edge_scores=np.ones(3),
                           edge_patches=np.zeros((3, 2), int))
-    city = city_graph({(0, 0): graph}, GRID, StitchConfig(), None, min_fragment_px=50, attach_px=40)
+    city = city_graph({(0, 0): graph}, GRID, CityGraphRecipe(StitchConfig(), None, min_fragment_px=50, attach_px=40))
     assert city.edge_kinds.count("attach") == 1 and len(fragment_lengths(city)[1]) == 1
     assert not np.any(np.all(city.vertices == [150, 40], axis=1))  # the scrap is gone
-    assert city_graph({(0, 0): graph}, GRID, StitchConfig(), None, min_fragment_px=50).n_edges == 2
+    assert city_graph({(0, 0): graph}, GRID, CityGraphRecipe(StitchConfig(), None, min_fragment_px=50)).n_edges == 2
 
 
 def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp_path):
