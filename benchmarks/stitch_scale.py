@@ -1,7 +1,7 @@
 """The city graph and its files against the number of patch graphs (NYC is ~51,000): time per patch
 and peak memory of stitching plus writing the outputs, block by block as ``predict`` does.
 
-    python benchmarks/stitch_scale.py 100 400 1600 6400 25600 [--one-pass] [--keep]
+    python benchmarks/stitch_scale.py 100 400 1600 6400 25600 [--one-pass] [--keep] [--block=N]
 
 Each size runs in a fresh process (peak resident memory only grows within one). The patch graphs
 are made on the fly, as the run store reads them from disk: a street grid of boundaries every
@@ -54,7 +54,7 @@ def patch_graph(patch):
     return BoundaryGraph(graph.vertices, graph.edges, edge_scores=np.full(graph.n_edges, 0.9))
 
 
-def one(n: int, one_pass: bool, keep: bool) -> dict:
+def one(n: int, one_pass: bool, keep: bool, block: int | None = None) -> dict:
     from affine import Affine
 
     from csboundary.data.grid import PatchGrid
@@ -65,7 +65,7 @@ def one(n: int, one_pass: bool, keep: bool) -> dict:
     side = max(1, round(math.sqrt(n)))
     transform = Affine(PIXEL_M, 0, 580000, 0, -PIXEL_M, 4510000)
     grid = PatchGrid(side * 1000, side * 1000, transform)
-    recipe = CityGraphRecipe(crs=CRS)
+    recipe = CityGraphRecipe(crs=CRS, **({"block": block} if block else {}))
     with tempfile.TemporaryDirectory(dir=Path(__file__).resolve().parents[1] / "runs") as tmp:
         files = {"gpkg": Path(tmp) / "boundaries.gpkg", "geojson": Path(tmp) / "boundaries.geojson", "graph_json": Path(tmp) / "graph.json"}
         writer = GraphWriter(files, CRS, transform, ground_units(CRS, transform * (0, 0)))
@@ -85,7 +85,8 @@ def one(n: int, one_pass: bool, keep: bool) -> dict:
 def main() -> None:
     args = sys.argv[1:]
     if args and args[0] == "--one":
-        print(json.dumps(one(int(args[1]), "--one-pass" in args, "--keep" in args)))
+        block = next((int(a.split("=")[1]) for a in args if a.startswith("--block=")), None)
+        print(json.dumps(one(int(args[1]), "--one-pass" in args, "--keep" in args, block)))
         return
     flags = [a for a in args if a.startswith("--")]
     sizes = [int(a) for a in args if not a.startswith("--")] or [100, 400, 1600, 6400]

@@ -107,18 +107,33 @@ def predict_patch(
                f"{kinds.count('skeleton')} filled in from the segmentation)")
 
 
+BOUNDS_HELP = ("One district: MINX,MINY,MAXX,MAXY in the prediction's CRS; the edges meeting it are read from the GeoPackage's "
+               "spatial index, so a city of any size is handled a district at a time.")
+
+
+def district_bounds(text: str | None) -> tuple[float, float, float, float] | None:
+    if text is None:
+        return None
+    x0, y0, x1, y1 = parse_numbers(text, 4, "--bounds", "MINX,MINY,MAXX,MAXY")
+    if not (x0 < x1 and y0 < y1):
+        raise typer.BadParameter(f"{text!r}: need MINX < MAXX and MINY < MAXY", param_hint="--bounds")
+    return x0, y0, x1, y1
+
+
 def export_lanelet2(
     prediction: Path = typer.Argument(..., help="A predict output folder (its graph.json), or a graph.json file."),
     out: Path = typer.Option(..., "--out", help="Lanelet2 OSM file to write; map_projector_info.yaml goes beside it."),
     origin: Optional[str] = typer.Option(None, help="Projection origin LAT,LON (default: the middle of the boundaries)."),
+    bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
 ) -> None:
     """The predicted boundaries as a Lanelet2 map: one road_border linestring per boundary (closed
     loops closed), confidence as an attribute, UTM projector around the origin (Autoware's
-    map_projector_info.yaml beside it)."""
-    from csboundary.graph import BoundaryGraph
+    map_projector_info.yaml beside it). With --bounds, one district of the city."""
     from csboundary.pipeline.lanelet2_export import write_lanelet2
+    from csboundary.pipeline.outputs import read_prediction_graph
 
-    source = prediction / "graph.json" if prediction.is_dir() else prediction
+    source = prediction / "graph.json" if prediction.is_dir() and bounds is None else prediction
+    box = district_bounds(bounds)
     out_file(out, (".osm",))
     at = None
     if origin is not None:
@@ -128,7 +143,7 @@ def export_lanelet2(
         at = (lat, lon)
     from csboundary.pipeline.outputs import check_finite_geometry
 
-    graph = BoundaryGraph.read_json(source)
+    graph = read_prediction_graph(source, box)
     check_finite_geometry(graph, source)
     written = write_lanelet2(graph, out, at)
     typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
@@ -139,15 +154,18 @@ def review(
     prediction: Path = typer.Argument(..., help="A predict output folder."),
     out: Optional[Path] = typer.Option(None, "--out", help="Folder of the page (default: PREDICTION/review)."),
     ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to show as a toggle (default: the city's own, if any)."),
+    bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
     quiet: QuietOption = False,
 ) -> None:
     """A self-contained review page: imagery with pan and zoom, boundaries coloured by
     confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
-    for apply-review. Open OUT/index.html (no network needed)."""
+    for apply-review. Open OUT/index.html (no network needed). With --bounds, one district of
+    the city (its edits merge into the whole city all the same)."""
     from csboundary.pipeline.review import write_review
 
+    box = district_bounds(bounds)
     out_dir(out or prediction / "review")
-    done = write_review(prediction, out, ground_truth, progress=not quiet)
+    done = write_review(prediction, out, ground_truth, progress=not quiet, bounds=box)
     typer.echo(f"{done['page']}: {done['edges']} edges to review{', ground truth ' + str(done['ground_truth']) if done['ground_truth'] else ''}")
 
 

@@ -75,9 +75,10 @@ def _read_polygons(path: str | Path, layer: str, crs=None) -> list | None:
     return [g for g in frame.geometry if g is not None and not g.is_empty]
 
 
-def read_ground_truth(path: str | Path, crs=None) -> gpd.GeoDataFrame:
+def read_ground_truth(path: str | Path, crs=None, bbox: tuple[float, float, float, float] | None = None) -> gpd.GeoDataFrame:
     """Read boundary LineStrings (GeoPackage, GeoJSON or anything OGR reads), exploded to parts,
-    reprojected to ``crs`` when both it and the file's CRS are known."""
+    reprojected to ``crs`` when both it and the file's CRS are known; with ``bbox`` (in
+    ``crs``) only the lines meeting it."""
     path = Path(path)
     if not path.exists():
         raise InputError(path, "file not found")
@@ -93,4 +94,8 @@ def read_ground_truth(path: str | Path, crs=None) -> gpd.GeoDataFrame:
     bad = ~frame.geometry.geom_type.isin(["LineString", "LinearRing"])
     if bad.any():
         raise InputError(path, f"{int(bad.sum())} geometries are not LineStrings (road boundaries are lines)")
+    if bbox is not None:
+        from shapely.geometry import box
+
+        frame = frame[frame.intersects(box(*bbox))].reset_index(drop=True)
     return frame

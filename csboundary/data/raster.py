@@ -12,6 +12,8 @@ in weakened form. Extra bands beyond 4 are ignored with a warning.
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import threading
 import warnings
@@ -275,6 +277,17 @@ class Mosaic:
 
     def window_from_bounds(self, minx: float, miny: float, maxx: float, maxy: float) -> PixelWindow:
         return window_from_bounds(self.transform, minx, miny, maxx, maxy)
+
+    def crop(self, window: PixelWindow) -> "Mosaic":
+        """The part of the mosaic under ``window`` (mosaic pixels) as a mosaic of its own: the
+        same files, placed relative to the window's corner (a district of a city)."""
+        part = window.intersection(self.window)
+        if part is None:
+            raise ValueError(f"{window} does not meet the mosaic {self.window}")
+        window = part
+        tiles = [dataclasses.replace(t, window=PixelWindow(t.window.col_off - window.col_off, t.window.row_off - window.row_off,
+                                                           t.window.width, t.window.height)) for t in self._tiles_in(window)]
+        return Mosaic(tiles, self.crs, self.transform * Affine.translation(window.col_off, window.row_off), window.width, window.height)
 
     # -- reading --------------------------------------------------------------------------------
     def read(self, window: PixelWindow, scale: float = 1.0) -> WindowRead:

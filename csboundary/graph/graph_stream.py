@@ -7,7 +7,7 @@ vertices, edges with their numbers); once the caller declares which vertices are
 piece touches them), it returns the boundaries (chains through degree-2 vertices,
 :mod:`csboundary.graph.chain_stream`) that became complete, with their edges. It keeps only the
 vertices and edges of chains that are not complete yet, and the numbers of vertices a later piece
-may still share (:meth:`GraphStream.forget_above`).
+may still share (:meth:`GraphStream.forget`).
 """
 
 from __future__ import annotations
@@ -126,12 +126,16 @@ class GraphStream:
                     del self._position[x]
         return out
 
-    def forget_above(self, row_px: float) -> None:
-        """Forget the numbers of the vertices above pixel row ``row_px``: no later piece uses them."""
-        for key in [k for k in self._ids if k[1] < row_px]:
-            del self._ids[key]
-            cell = self._cells.get(_cell(key))
-            if cell is not None:
+    def forget(self, is_final: Callable[[np.ndarray], np.ndarray]) -> None:
+        """Forget the numbers of the vertices for whose positions ``is_final`` is True: no later
+        piece uses them."""
+        if not self._ids:
+            return
+        keys = list(self._ids)
+        for key, done in zip(keys, is_final(np.array(keys, float))):
+            if done:
+                del self._ids[key]
+                cell = self._cells[_cell(key)]
                 cell.remove(key)
                 if not cell:
                     del self._cells[_cell(key)]

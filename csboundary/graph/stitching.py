@@ -99,6 +99,8 @@ def owner_bounds(patch: Patch, grid: PatchGrid) -> tuple[float, float, float, fl
 def polyline_midpoint(points: np.ndarray) -> np.ndarray:
     """The point at half the arc length of a polyline."""
     points = np.asarray(points, float)
+    if len(points) == 2:  # the general steps below, for the commonest line, give exactly this
+        return points[0] + 0.5 * (points[1] - points[0]) if (points[0] != points[1]).any() else points[0]
     cum = arc_lengths(points)
     if len(points) < 2 or cum[-1] == 0:
         return points[0]
@@ -109,10 +111,24 @@ def polyline_midpoint(points: np.ndarray) -> np.ndarray:
     return points[k] + t * (points[k + 1] - points[k])
 
 
-def owner_cores(graph: BoundaryGraph, grid: PatchGrid) -> np.ndarray:
+def edge_midpoints(graph: BoundaryGraph) -> np.ndarray:
+    """(E, 2) each edge's :func:`polyline_midpoint` along its line from u to v (the same
+    numbers; straight edges, most of a graph, in one vectorised step)."""
+    u, v = graph.edges[:, 0], graph.edges[:, 1]
+    p0, p1 = graph.vertices[u], graph.vertices[v]
+    out = np.where((p0 != p1).any(axis=1)[:, None], p0 + 0.5 * (p1 - p0), p0).reshape(-1, 2)
+    if graph.edge_polylines is not None:
+        for k, line in enumerate(graph.edge_polylines):
+            if line is not None and len(line) > 2:
+                out[k] = polyline_midpoint(edge_line(graph, k))
+    return out
+
+
+def owner_cores(graph: BoundaryGraph, grid: PatchGrid, mids: np.ndarray | None = None) -> np.ndarray:
     """(E, 2) the (row, col) of the patch core holding each edge's midpoint (half its arc length
-    from u to v), clamped to the grid: which core an edge of the city graph belongs to."""
-    mids = np.array([polyline_midpoint(edge_line(graph, k)) for k in range(graph.n_edges)], float).reshape(-1, 2)
+    from u to v; ``mids`` when given), clamped to the grid: which core an edge of the city graph
+    belongs to."""
+    mids = edge_midpoints(graph) if mids is None else mids
     core = grid.config.core
     rows = np.clip(np.floor(mids[:, 1] / core), 0, grid.n_rows - 1).astype(np.int64)
     cols = np.clip(np.floor(mids[:, 0] / core), 0, grid.n_cols - 1).astype(np.int64)

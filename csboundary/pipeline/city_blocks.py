@@ -28,18 +28,17 @@ from tqdm import tqdm
 
 from csboundary.data.grid import PatchGrid
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.chains import edge_line
 from csboundary.graph.edge_evidence import Sampler, edge_evidence
 from csboundary.graph.end_attachment import ATTACH, attach_ends, dangling_ends
 from csboundary.graph.fragments import drop_short_fragments
 from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
 from csboundary.graph.noding import node_shared_points
-from csboundary.graph.stitching import StitchConfig, owner_cores, polyline_midpoint, stitch_patch_graphs
+from csboundary.graph.stitching import StitchConfig, edge_midpoints, owner_cores, stitch_patch_graphs
 from csboundary.models.confidence import EdgeConfidence
 from csboundary.pipeline.edge_confidence import scored_graph
 
 Index = tuple[int, int]
-BLOCK = 8  # patches along a block's side: 64 patch graphs and their ring of 36 in memory at once
+BLOCK = 4  # patches along a block's side: 16 patch graphs and their ring of 20 in memory at once
 HALO = 1  # patches of context around a block
 
 
@@ -102,25 +101,35 @@ def city_blocks(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, r
     """The city graph block by block (module docstring). ``load_graph(index)`` gives a patch's
     graph (mosaic pixels); ``sample`` reads the stored maps for the evidence. With ``one_pass``
     every patch graph is loaded and the city graph made once (memory grows with the city)."""
-    whole = whole_cores = None
+    whole = whole_cores = whole_mids = None
     if one_pass:
         whole = city_graph({p.index: load_graph(p.index) for p in grid}, grid, recipe)
-        whole_cores = owner_cores(whole, grid)
+        whole_mids = edge_midpoints(whole)
+        whole_cores = owner_cores(whole, grid, whole_mids)
     for rows, cols in block_ranges(grid, recipe.block):
         start = time.perf_counter()
         if whole is None:
             ring_rows = range(max(rows.start - recipe.halo, 0), min(rows.stop + recipe.halo, grid.n_rows))
             ring_cols = range(max(cols.start - recipe.halo, 0), min(cols.stop + recipe.halo, grid.n_cols))
             local = city_graph({(r, c): load_graph((r, c)) for r in ring_rows for c in ring_cols}, grid, recipe)
-            cores = owner_cores(local, grid)
+            mids = edge_midpoints(local)
+            cores = owner_cores(local, grid, mids)
         else:
-            local, cores = whole, whole_cores
+            local, cores, mids = whole, whole_cores, whole_mids
         keep = np.isin(cores[:, 0], rows) & np.isin(cores[:, 1], cols)
         index = (rows.start // recipe.block, cols.start // recipe.block)
         built = time.perf_counter()
-        block = _finished_block(index, local, cores, keep, grid, recipe, sample)
+        block = _finished_block(index, local, cores, mids, keep, grid, recipe, sample)
         block.seconds = {"graph_stitching": built - start, "confidence": time.perf_counter() - built}
         yield block
+
+
+def edge_reach(grid: PatchGrid) -> float:
+    """How far (px, along each axis) a vertex may lie from the midpoint of an edge at it: an
+    edge comes from one patch's window (``size`` px) and stays in it. A vertex a later block
+    touches after it was declared final is an error (:class:`~csboundary.graph.chain_stream.ChainStream`),
+    never a silent one."""
+    return float(grid.config.size + 2 * grid.config.margin)
 
 
 @dataclass
@@ -139,12 +148,11 @@ def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchG
     """Make the city graph block by block (:func:`city_blocks`) and hand each block's vertices
     and edges, then the boundaries it completed, to ``writer`` (and ``collector``, which keeps
     the whole graph). A vertex is final, and the boundaries through it can be completed, once
-    every block within ``2 * core`` of it is done: no edge reaches farther from its core than
-    the 1100 px window it came from."""
+    every block within :func:`edge_reach` of it is done."""
     stream = GraphStream()
     core_length: dict[Index, float] = defaultdict(float)
     seconds: dict[str, float] = defaultdict(float)
-    reach = 2 * grid.config.core
+    reach = edge_reach(grid)
     span = recipe.block * grid.config.core
     n_block_rows, n_block_cols = -(-grid.n_rows // recipe.block), -(-grid.n_cols // recipe.block)
     held = 0
@@ -170,13 +178,13 @@ def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchG
             start = time.perf_counter()
             piece = stream.add(block.graph)
             held = max(held, stream.held)
-            boundaries = stream.finish(finished_after(block.index))
+            final = finished_after(block.index)
+            boundaries = stream.finish(final)
+            stream.forget(final)
             for (r, c), length in zip(block.cores.tolist(), block.graph.edge_lengths()):
                 core_length[r, c] += float(length)
             if collector is not None:
                 collector.add(piece, block.evidence)
-            if block.index[1] == n_block_cols - 1:
-                stream.forget_above((block.index[0] + 1) * span - reach)
             seconds["graph_stitching"] += time.perf_counter() - start
             emit(piece, boundaries)
             bar.update(1)
@@ -216,12 +224,12 @@ class CityCollector:
         return graph, np.concatenate(self.evidence) if self.evidence else None
 
 
-def _finished_block(index: Index, local: BoundaryGraph, cores: np.ndarray, keep: np.ndarray, grid: PatchGrid,
+def _finished_block(index: Index, local: BoundaryGraph, cores: np.ndarray, mids: np.ndarray, keep: np.ndarray, grid: PatchGrid,
                     recipe: CityGraphRecipe, sample: Sampler | None) -> CityBlock:
     """The block's edges of ``local`` in order, scored by the confidence."""
     degree = np.bincount(local.edges.ravel(), minlength=local.n_vertices)  # in the city graph, not just the block
     picked = np.flatnonzero(keep)
-    picked = picked[_edge_order(local, picked, cores)]
+    picked = picked[_edge_order(local, picked, cores, mids)]
     graph, used = _subgraph_in_order(local, picked)
     cores = cores[picked]
     evidence = None
@@ -235,16 +243,12 @@ def _finished_block(index: Index, local: BoundaryGraph, cores: np.ndarray, keep:
     return CityBlock(index, graph, cores, evidence)
 
 
-def _edge_order(graph: BoundaryGraph, picked: np.ndarray, cores: np.ndarray) -> np.ndarray:
+def _edge_order(graph: BoundaryGraph, picked: np.ndarray, cores: np.ndarray, mids: np.ndarray) -> np.ndarray:
     """The order of the ``picked`` edges: by core (row-major), then midpoint (row, col), then
-    the two ends' positions, all exact numbers of the edge itself."""
-    keys = []
-    for e in picked.tolist():
-        line = edge_line(graph, e)
-        mid = polyline_midpoint(line)
-        keys.append((int(cores[e, 0]), int(cores[e, 1]), float(mid[1]), float(mid[0]), *map(float, line[0]), *map(float, line[-1]),
-                     len(line)))
-    return np.array(sorted(range(len(keys)), key=keys.__getitem__), np.int64)
+    the positions of u and of v, all exact numbers of the edge itself."""
+    ends = graph.vertices[graph.edges[picked]].reshape(-1, 4)
+    keys = (ends[:, 3], ends[:, 2], ends[:, 1], ends[:, 0], mids[picked, 0], mids[picked, 1], cores[picked, 1], cores[picked, 0])
+    return np.lexsort(keys).astype(np.int64)  # the last key sorts first
 
 
 def _subgraph_in_order(graph: BoundaryGraph, edges: np.ndarray) -> tuple[BoundaryGraph, np.ndarray]:

@@ -19,11 +19,13 @@ import shutil
 import tempfile
 import warnings
 from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
 import pyogrio
+from affine import Affine
 from shapely.geometry import LineString
 
 from csboundary.data.atomic import atomic_path
@@ -82,6 +84,7 @@ class GraphWriter:
         self.boundaries = 0
         self.counts = {"vertices": 0, "edges": 0, "kinds": {}, "boundary_m": 0.0}
         self._layers_started = False
+        self._geojson = _GeoJSONWriter(paths["geojson"], stem, crs)
         self._json = open(paths["graph_json"], "w")
         header = json.dumps({**json_header(crs, transform), "vertices": []})
         self._json.write(header[:-2])  # up to the open vertex list
@@ -105,12 +108,14 @@ class GraphWriter:
         self._json.write("], \"edges\": [")
         shutil.copyfileobj(self._edges_part, self._json)
         self._json.write("]}")
+        self._geojson.finish()
         self.abort()
         self.counts["boundaries"] = self.boundaries
         return self.counts
 
     def abort(self) -> None:
         """Close the files (the caller removes the unfinished ones)."""
+        self._geojson.close()
         self._json.close()
         self._edges_part.close()
 
@@ -136,27 +141,88 @@ class GraphWriter:
         _write_layer(boundaries, self.paths["gpkg"], BOUNDARIES_LAYER, "GPKG", append)
         _write_layer(edges, self.paths["gpkg"], EDGES_LAYER, "GPKG", append,
                      None if append else {TRANSFORM_KEY: ",".join(repr(float(x)) for x in list(self.transform)[:6])})
-        _write_layer(boundaries, self.paths["geojson"], self.stem, "GeoJSON", append)  # the layer name is in the file: never the temporary's
+        self._geojson.add(boundaries)
         self._layers_started = True
 
 
-def read_prediction_graph(source: str | Path, bounds: tuple[float, float, float, float] | None = None) -> BoundaryGraph:
-    """The graph of a prediction (a predict output folder, its graph.json or its GeoPackage).
+class _GeoJSONWriter:
+    """A FeatureCollection written feature by feature (GDAL's GeoJSON driver rewrites the file
+    to append to it, which grows with the file): named ``name`` (never the temporary file's),
+    with the OGC URN of an EPSG CRS as GDAL writes it; NaN properties are null."""
 
-    Without ``bounds`` it is read from graph.json when there is one. With ``bounds`` (MINX,
-    MINY, MAXX, MAXY in the prediction's CRS) only the edges whose lines meet that box are read,
-    from the GeoPackage's ``edges`` layer through its spatial index, so a district of a city of
-    any size costs memory for the district alone; vertices keep the city's numbers' order but
-    are numbered anew, and their kinds are not in the GeoPackage."""
+    def __init__(self, path: Path, name: str, crs: str | None):
+        self._file = open(path, "w")
+        header = {"type": "FeatureCollection", "name": name}
+        code = _epsg(crs)
+        if code is not None:
+            header["crs"] = {"type": "name", "properties": {"name": f"urn:ogc:def:crs:EPSG::{code}"}}
+        self._file.write(json.dumps(header)[:-1] + ', "features": [\n')
+        self._first = True
+
+    def add(self, frame: gpd.GeoDataFrame) -> None:
+        columns = [c for c in frame.columns if c != frame.geometry.name]
+        for values, geometry in zip(frame[columns].itertuples(index=False, name=None), frame.geometry):
+            properties = {c: _json_value(v) for c, v in zip(columns, values)}
+            feature = {"type": "Feature", "properties": properties,
+                       "geometry": {"type": "LineString", "coordinates": np.asarray(geometry.coords)[:, :2].tolist()}}
+            self._file.write(("" if self._first else ",\n") + json.dumps(feature))
+            self._first = False
+
+    def finish(self) -> None:
+        self._file.write("\n]}\n")
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _json_value(value):
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def _epsg(crs: str | None) -> int | None:
+    if crs is None:
+        return None
+    from pyproj import CRS
+
+    try:
+        return CRS.from_user_input(crs).to_epsg()
+    except Exception:  # pyproj raises its own types for a CRS it cannot read
+        return None
+
+
+def read_prediction_graph(source: str | Path, bounds: tuple[float, float, float, float] | None = None) -> BoundaryGraph:
+    """The graph of a prediction (a predict output folder, its graph.json or its GeoPackage):
+    from graph.json when there is one and no ``bounds``, else from the GeoPackage
+    (:func:`read_district`)."""
     source = Path(source)
     folder = source if source.is_dir() else source.parent
-    if source.suffix == ".json" or (source.is_dir() and bounds is None and (folder / "graph.json").exists()):
-        if bounds is None:
-            return BoundaryGraph.read_json(source if source.suffix == ".json" else folder / "graph.json")
-        source = folder / "boundaries.gpkg"
-    gpkg = source if source.suffix == ".gpkg" else folder / "boundaries.gpkg"
+    if bounds is None and source.suffix != ".gpkg" and (source.suffix == ".json" or (folder / "graph.json").exists()):
+        return BoundaryGraph.read_json(source if source.suffix == ".json" else folder / "graph.json")
+    return read_district(source, bounds).graph
+
+
+@dataclass
+class District:
+    """Part of a city graph: the graph (vertices numbered anew in the order of the city's
+    numbers) and, for each of its edges and vertices, its number in the city's graph.json."""
+
+    graph: BoundaryGraph
+    edge_ids: np.ndarray
+    vertex_ids: np.ndarray
+
+
+def read_district(source: str | Path, bounds: tuple[float, float, float, float] | None = None) -> District:
+    """The edges of a prediction's GeoPackage whose lines meet ``bounds`` (MINX, MINY, MAXX,
+    MAXY in its CRS; None: all), read through the layer's spatial index, so a district of a city
+    of any size costs memory for the district alone. Vertex kinds are not in the GeoPackage."""
+    source = Path(source)
+    gpkg = source if source.suffix == ".gpkg" else (source if source.is_dir() else source.parent) / "boundaries.gpkg"
     if not gpkg.exists():
-        raise InputError(gpkg, "file not found (a predict output folder holds graph.json and boundaries.gpkg)")
+        raise InputError(gpkg, "file not found (a predict output folder holds boundaries.gpkg)")
     try:
         info = pyogrio.read_info(gpkg, layer=EDGES_LAYER)
         frame = pyogrio.read_dataframe(gpkg, layer=EDGES_LAYER, bbox=bounds)
@@ -165,8 +231,6 @@ def read_prediction_graph(source: str | Path, bounds: tuple[float, float, float,
     values = (info.get("layer_metadata") or {}).get(TRANSFORM_KEY)
     if values is None:
         raise InputError(gpkg, f"its {EDGES_LAYER} layer does not say its pixel grid (written by an older csboundary)")
-    from affine import Affine
-
     transform = Affine(*map(float, values.split(",")))
     frame = frame.sort_values("edge_id", kind="stable")
     lines = []
@@ -175,22 +239,17 @@ def read_prediction_graph(source: str | Path, bounds: tuple[float, float, float,
         cols, rows = world_to_pixel(transform, xy[:, 0], xy[:, 1])
         lines.append(np.stack([cols, rows], axis=1))
     ends = frame[["u", "v"]].to_numpy(np.int64).reshape(-1, 2)
-    ids, first = np.unique(ends.ravel(), return_index=True)
-    ids = ids[np.argsort(first, kind="stable")]
-    number = {int(x): k for k, x in enumerate(ids.tolist())}
+    ids = np.unique(ends)
     position = {}
     for (u, v), line in zip(ends.tolist(), lines):
         position.setdefault(u, line[0])
         position.setdefault(v, line[-1])
-    crs = info.get("crs")
-    return BoundaryGraph(
-        np.array([position[int(x)] for x in ids], float).reshape(-1, 2),
-        np.array([[number[u], number[v]] for u, v in ends.tolist()], np.int64).reshape(-1, 2),
-        edge_kinds=frame["kind"].astype(str).tolist(), edge_polylines=lines,
-        edge_scores=frame["confidence"].to_numpy(float),
-        edge_patches=frame[["patch_row", "patch_col"]].to_numpy(np.int64).reshape(-1, 2),
-        transform=transform, crs=crs,
+    graph = BoundaryGraph(
+        np.array([position[int(x)] for x in ids], float).reshape(-1, 2), np.searchsorted(ids, ends).reshape(-1, 2),
+        edge_kinds=frame["kind"].astype(str).tolist(), edge_polylines=lines, edge_scores=frame["confidence"].to_numpy(float),
+        edge_patches=frame[["patch_row", "patch_col"]].to_numpy(np.int64).reshape(-1, 2), transform=transform, crs=info.get("crs"),
     )
+    return District(graph, frame["edge_id"].to_numpy(np.int64), ids)
 
 
 def check_finite_geometry(graph: BoundaryGraph, source) -> None:

@@ -94,7 +94,7 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
             options = {"executor": dask_executor(client), "threads": threads or worker_threads}
             settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
         _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=progress,
-                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, **options)
+                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, keep_graphs=False, **options)
     return summary
 
 

@@ -3,6 +3,7 @@ edits merged back into every output (the CLI's ``review`` and ``apply-review``).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import time
@@ -16,7 +17,7 @@ from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.review_edits import EditError, apply_edits
 from csboundary.pipeline.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
-from csboundary.pipeline.outputs import write_graph_outputs
+from csboundary.pipeline.outputs import read_district, write_graph_outputs
 from csboundary.viz.review_page import write_review_page
 
 REVIEW_LOG = "review.json"
@@ -42,16 +43,32 @@ def city_ground_truth(inputs: list[Path]) -> Path | None:
     return path if layout.is_city_dir(city_dir) and path.exists() else None
 
 
-def write_review(prediction: Path, out: Path | None = None, ground_truth: Path | None = None, progress: bool = True) -> dict:
+def write_review(prediction: Path, out: Path | None = None, ground_truth: Path | None = None, progress: bool = True,
+                 bounds: tuple[float, float, float, float] | None = None) -> dict:
     """The review page of ``prediction`` in ``out`` (default ``prediction/review``), with
-    ``ground_truth`` (default: the city's own) as a toggle; returns page, edges, ground truth."""
+    ``ground_truth`` (default: the city's own) as a toggle; returns page, edges, ground truth.
+
+    ``bounds`` (MINX, MINY, MAXX, MAXY in the prediction's CRS) makes the page of one district:
+    its imagery and the edges meeting it, read from the GeoPackage's spatial index, so a city of
+    any size is reviewed a district at a time; the edits it exports name the city's edges and
+    vertices, and ``apply-review`` merges them into the whole city."""
     inputs = prediction_inputs(prediction)
-    graph = BoundaryGraph.read_json(prediction / "graph.json")
     ground_truth = ground_truth or city_ground_truth(inputs)
-    with Mosaic.open(inputs) as mosaic:
-        lines = list(read_ground_truth(ground_truth, mosaic.crs).geometry) if ground_truth is not None else []
+    with contextlib.ExitStack() as stack:
+        mosaic = stack.enter_context(Mosaic.open(inputs))
+        ids = None
+        if bounds is None:
+            graph = BoundaryGraph.read_json(prediction / "graph.json")
+        else:
+            try:
+                mosaic = mosaic.crop(mosaic.window_from_bounds(*bounds))
+            except ValueError:
+                raise InputError(prediction, f"--bounds {','.join(map(str, bounds))} lies outside the imagery {mosaic.bounds}") from None
+            district = read_district(prediction, bounds)
+            graph, ids = district.graph, (district.edge_ids, district.vertex_ids)
+        lines = list(read_ground_truth(ground_truth, mosaic.crs, bbox=bounds).geometry) if ground_truth is not None else []
         page = write_review_page(graph, mosaic, out or prediction / "review", lines, progress=progress,
-                                 fingerprint=graph_fingerprint(prediction))
+                                 fingerprint=graph_fingerprint(prediction), ids=ids)
     return {"page": page, "edges": graph.n_edges, "ground_truth": ground_truth if lines else None}
 
 

@@ -92,7 +92,7 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         if lanelet2:
             from csboundary.pipeline.lanelet2_export import LANELET2_MAP, write_lanelet2
 
-            graph = result.graph if keep_graphs else read_prediction_graph(files["gpkg"])
+            graph = result.graph if keep_graphs else read_prediction_graph(files["graph_json"])
             written = write_lanelet2(graph, stage / LANELET2_MAP)
             files.update(lanelet2=written["path"], projector_info=written["projector_info"])
         seconds = dict(result.seconds, outputs=result.outputs_seconds + time.perf_counter() - written_at)

@@ -95,3 +95,22 @@ def test_a_graph_with_a_nan_vertex_is_one_line(demo, tmp_path):
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "graph.json" in lines[0] and "not a finite number" in lines[0]
     assert not (tmp_path / "m.osm").exists()
+
+
+def test_export_lanelet2_of_a_district(demo, tmp_path):
+    frame = gpd.read_file(demo / "boundaries.gpkg", layer="road_boundaries")
+    x0, y0, x1, y1 = frame.total_bounds
+    west = (x0, y0, (x0 + x1) / 2, y1)
+    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "west.osm"), "--bounds", ",".join(map(str, west)))
+    assert done.returncode == 0, done.stderr
+    projector = projector_for(read_origin(tmp_path / "map_projector_info.yaml"))
+    borders = [ls for ls in lanelet2.io.load(str(tmp_path / "west.osm"), projector).lineStringLayer if ls.attributes["type"] == "road_border"]
+    # the map holds exactly the edges meeting the district, merged into boundaries of their own
+    from shapely.geometry import box
+
+    edges = gpd.read_file(demo / "boundaries.gpkg", layer="edges")
+    meeting = edges[edges.intersects(box(*west))]
+    assert 0 < len(meeting) < len(edges) and len(borders) > 0
+    assert sum(float(ls.attributes["length_m"]) for ls in borders) == pytest.approx(meeting["length_m"].sum(), rel=1e-3)
+    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "bad.osm"), "--bounds", "5,5,1,1")
+    assert done.returncode != 0 and "MINX < MAXX" in done.stderr

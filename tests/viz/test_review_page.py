@@ -178,3 +178,45 @@ def test_review_works_from_another_folder_than_predict_ran_in(tmp_path):
     done = run_cli("review", str(tmp_path / "work" / "pred"), cwd=elsewhere)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "work" / "pred" / "review" / "index.html").exists()
+
+
+def test_a_district_page_names_the_city_s_edges(reviewed, browser, tmp_path):
+    """A page of the city's west half: its edges only, read from the GeoPackage; the edge deleted
+    there is the city's edge of that number, and apply-review removes it from the whole city."""
+    from selenium.webdriver.common.by import By
+    from shapely.geometry import box
+
+    from csboundary.graph import BoundaryGraph
+
+    pred = tmp_path / "pred"
+    shutil.copytree(reviewed, pred, ignore=shutil.ignore_patterns("review"))
+    city = BoundaryGraph.read_json(pred / "graph.json")
+    x0, y0, x1, y1 = _world_bounds(city)
+    west = (x0, y0, (x0 + x1) / 2, y1)
+    done = run_cli("review", str(pred), "--bounds", ",".join(map(str, west)), "--out", str(tmp_path / "west"), "--quiet")
+    assert done.returncode == 0, done.stderr
+    inside = [k for k, line in enumerate(city.to_linestrings(world=True)) if line.intersects(box(*west))]
+    assert 0 < len(inside) < city.n_edges
+
+    browser.get((tmp_path / "west" / "index.html").as_uri())
+    _wait(browser, "return window.review && window.review.loadedTiles() > 0")
+    assert browser.execute_script("return window.review.edgeCount()") == len(inside)
+    rows = browser.find_elements(By.CSS_SELECTOR, "#edge-list li")
+    rows[0].click()
+    browser.find_element(By.ID, "delete").click()
+    browser.find_element(By.ID, "export").click()
+    edits = json.loads(browser.find_element(By.ID, "export-text").get_attribute("value"))
+    (edge,) = [f["properties"]["edge"] for f in edits["features"]]
+    assert edge in inside and edge == min(inside, key=lambda k: city.edge_scores[k])  # the city's number of the least sure
+
+    (tmp_path / "edits.geojson").write_text(json.dumps(edits))
+    done = run_cli("apply-review", str(pred), str(tmp_path / "edits.geojson"))
+    assert done.returncode == 0, done.stderr
+    after = BoundaryGraph.read_json(pred / "graph.json")
+    assert after.n_edges == city.n_edges - 1
+    assert json.loads((pred / "review.json").read_text())["reviews"][-1]["deleted_edges"] == [edge]
+
+
+def _world_bounds(graph: BoundaryGraph) -> tuple[float, float, float, float]:
+    world = graph.world_vertices()
+    return float(world[:, 0].min()), float(world[:, 1].min()), float(world[:, 0].max()), float(world[:, 1].max())

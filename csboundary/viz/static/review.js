@@ -211,13 +211,16 @@
     render();
   }
 
+  // a district's page names the city's edges and vertices (their numbers in the city's graph.json)
+  const cityEdge = (id) => (D.edge_ids ? D.edge_ids[id] : id);
+  const cityVertex = (i) => (D.vertex_ids ? D.vertex_ids[i] : i);
   const world = (p) => { const t = D.transform; return [t[0] * p[0] + t[1] * p[1] + t[2], t[3] * p[0] + t[4] * p[1] + t[5]]; };
   function exportEdits() {
     const features = [];
     const edgeGeometry = (id) => ({ type: "LineString", coordinates: edgeLine(D.edges[id]).map(world) });
-    [...state.deleted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "delete", edge: id }, geometry: edgeGeometry(id) }));
-    [...state.accepted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "accept", edge: id }, geometry: edgeGeometry(id) }));
-    [...state.moved.keys()].sort((a, b) => a - b).forEach((i) => features.push({ type: "Feature", properties: { action: "move", vertex: i }, geometry: { type: "Point", coordinates: world(pos(i)) } }));
+    [...state.deleted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "delete", edge: cityEdge(id) }, geometry: edgeGeometry(id) }));
+    [...state.accepted].sort((a, b) => a - b).forEach((id) => features.push({ type: "Feature", properties: { action: "accept", edge: cityEdge(id) }, geometry: edgeGeometry(id) }));
+    [...state.moved.keys()].sort((a, b) => a - b).forEach((i) => features.push({ type: "Feature", properties: { action: "move", vertex: cityVertex(i) }, geometry: { type: "Point", coordinates: world(pos(i)) } }));
     state.added.forEach((line) => features.push({ type: "Feature", properties: { action: "add" }, geometry: { type: "LineString", coordinates: line.map(world) } }));
     state.areas.forEach((ring) => features.push({ type: "Feature", properties: { action: "complete" }, geometry: { type: "Polygon", coordinates: [[...ring, ring[0]].map(world)] } }));
     const text = JSON.stringify({ type: "FeatureCollection", properties: { crs: D.crs, graph_sha256: D.graph_sha256, tool: "csboundary review" }, features }, null, 1);
