@@ -1,8 +1,9 @@
 """How fast the review page of a prediction opens and redraws, in headless Chromium (issue 16).
 
-    .venv/bin/python benchmarks/review_page.py PRED_DIR [--screenshot docs/review.png]
+    .venv/bin/python benchmarks/review_page.py PRED_DIR [--screenshot docs/review.png] [--bounds MINX,MINY,MAXX,MAXY --out DIR]
 
-Writes PRED_DIR/review with ``csboundary review`` if it is not there (timed), opens its
+Writes PRED_DIR/review (or the page of one district, ``--bounds``, into ``--out``) with
+``csboundary review`` if it is not there (timed), opens its
 index.html from disk in Debian's Chromium (headless, 1400 x 900 window) and prints:
 
 * **open**: from navigation start until the script has built the page and every image tile of
@@ -57,15 +58,20 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("prediction", type=Path)
     parser.add_argument("--screenshot", type=Path)
+    parser.add_argument("--bounds", help="one district: MINX,MINY,MAXX,MAXY in the prediction's CRS")
+    parser.add_argument("--out", type=Path, help="the page's folder (default PRED_DIR/review)")
     args = parser.parse_args()
-    page = args.prediction / "review" / "index.html"
+    folder = args.out or args.prediction / "review"
+    page = folder / "index.html"
     if not page.exists():
         start = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "csboundary", "review", str(args.prediction), "--quiet"], check=True)
+        district = ["--bounds", args.bounds] if args.bounds else []
+        subprocess.run([sys.executable, "-m", "csboundary", "review", str(args.prediction), "--out", str(folder), "--quiet", *district],
+                       check=True)
         print(f"csboundary review: {time.perf_counter() - start:.1f} s")
-    data = (args.prediction / "review" / "data.js").read_text()
+    data = (folder / "data.js").read_text()
     meta = json.loads(data[data.index("=") + 1 : data.rindex(";")])
-    tiles = sum(1 for _ in (args.prediction / "review" / "tiles").rglob("*.jpg"))
+    tiles = sum(1 for _ in (folder / "tiles").rglob("*.jpg"))
     print(f"page of {meta['width']}x{meta['height']} px, {len(meta['edges'])} edges, {meta['levels']} pyramid levels, {tiles} tiles, "
           f"data.js {len(data) / 1e6:.1f} MB")
     driver = browser()

@@ -4,8 +4,8 @@ is computed from (:mod:`csboundary.models.confidence`).
 The evidence of an edge is its own score (AfANet's probability, or the mean map value along a
 corner or filled edge), its kind, its shape (length, how far it strays from straight), its
 place in the graph (the degree of its ends, the length of the connected piece and of the merged
-boundary it belongs to, and how straight that boundary runs)
-and the FPN's maps along it: the boundary map on the line, and the road surface a few pixels to
+boundary it belongs to, and how straight that boundary runs, within the group it is given: the
+city graph's patch core) and the FPN's maps along it: the boundary map on the line, and the road surface a few pixels to
 its left and to its right, since a road boundary has roadway on one side only.
 
 The maps are read through ``sample``: a function of (N, 2) pixel points (col, row) in the

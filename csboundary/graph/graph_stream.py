@@ -7,14 +7,12 @@ vertices, edges with their numbers); once the caller declares which vertices are
 piece touches them), it returns the boundaries (chains through degree-2 vertices,
 :mod:`csboundary.graph.chain_stream`) that became complete, with their edges. It keeps only the
 vertices and edges of chains that are not complete yet, and the numbers of vertices a later piece
-may still share (:meth:`GraphStream.forget`).
+may still share.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
 from csboundary.graph.boundary_graph import BoundaryGraph
@@ -63,12 +61,18 @@ class StreamBoundary:
 
 
 class GraphStream:
-    """Numbers, degrees and boundaries of a graph given piece by piece (module docstring)."""
+    """Numbers, degrees and boundaries of a graph given piece by piece (module docstring).
+
+    Each vertex comes with the step after which it is final (the caller knows: for a city, the
+    last block that can touch it); :meth:`finish` at a step declares final every vertex due by
+    then, completes the boundaries through them and forgets their numbers, in time proportional
+    to those vertices alone."""
 
     def __init__(self) -> None:
         self._ids: dict[tuple[float, float], int] = {}
         self._cells: dict[tuple[int, int], list[tuple[float, float]]] = {}  # 1 px cells of the numbered vertices
-        self._position: dict[int, np.ndarray] = {}  # vertices of incomplete chains
+        self._due: dict[int, list[tuple[int, tuple[float, float]]]] = {}  # step -> the vertices final after it
+        self._done = -1  # the last step finished
         self._edges: dict[int, StreamEdge] = {}  # edges of incomplete chains
         self._chains = ChainStream()
         self.n_vertices = 0
@@ -80,19 +84,25 @@ class GraphStream:
         """Vertices and edges held now (what memory grows with)."""
         return len(self._ids) + len(self._edges)
 
-    def add(self, graph: BoundaryGraph) -> StreamPiece:
-        """Number ``graph``'s vertices and edges; returns what it adds."""
+    def add(self, graph: BoundaryGraph, final_step: np.ndarray | None = None) -> StreamPiece:
+        """Number ``graph``'s vertices and edges; returns what it adds. ``final_step`` (V,):
+        the step after which each vertex is final (default 0)."""
         first = self.n_vertices
         ids = np.empty(graph.n_vertices, np.int64)
+        steps = np.zeros(graph.n_vertices, np.int64) if final_step is None else np.asarray(final_step, np.int64)
         new = []
         for k, point in enumerate(graph.vertices.tolist()):
             key = (point[0], point[1])
             found = self._ids.get(key)
             if found is None:
+                step = int(steps[k])
+                if step <= self._done:
+                    raise ValueError(f"vertex {key} is new after step {self._done}, past its final step {step}")
                 found = self._ids[key] = self.n_vertices
                 self.n_vertices += 1
                 new.append(k)
                 self._count_close(key)
+                self._due.setdefault(step, []).append((found, key))
             ids[k] = found
         edges = []
         for k, (a, b) in enumerate(graph.edges.tolist()):
@@ -106,39 +116,25 @@ class GraphStream:
             edges.append(edge)
             self._edges[edge.id] = edge
             self._chains.add_edge(edge.id, u, v)
-            self._position.setdefault(u, graph.vertices[a])
-            self._position.setdefault(v, graph.vertices[b])
         kinds = None if graph.vertex_kinds is None else [graph.vertex_kinds[k] for k in new]
         return StreamPiece(first, graph.vertices[new].reshape(-1, 2), kinds, edges)
 
-    def finish(self, is_final: Callable[[np.ndarray], np.ndarray] | None = None) -> list[StreamBoundary]:
-        """Declare final the held vertices for whose (N, 2) positions ``is_final`` is True
-        (None: all of them); returns the boundaries now complete, by lowest edge number."""
-        held = list(self._position)
-        if not held:
-            return []
-        final = held if is_final is None else [x for x, ok in zip(held, is_final(np.array([self._position[x] for x in held]))) if ok]
-        out = []
-        for chain in self._chains.finish_vertices(final):
-            out.append(StreamBoundary(chain, [self._edges.pop(e) for e in chain.edges]))
-            for x in chain.vertices:
-                if x in self._position and not self._chains.holds(x):
-                    del self._position[x]
-        return out
-
-    def forget(self, is_final: Callable[[np.ndarray], np.ndarray]) -> None:
-        """Forget the numbers of the vertices for whose positions ``is_final`` is True: no later
-        piece uses them."""
-        if not self._ids:
-            return
-        keys = list(self._ids)
-        for key, done in zip(keys, is_final(np.array(keys, float))):
-            if done:
+    def finish(self, step: int | None = None) -> list[StreamBoundary]:
+        """Declare final the vertices due by ``step`` (None: all of them) and forget their
+        numbers; returns the boundaries now complete, by lowest edge number."""
+        due = sorted(k for k in self._due if step is None or k <= step)
+        final = []
+        for k in due:
+            for vertex, key in self._due.pop(k):
+                final.append(vertex)
                 del self._ids[key]
                 cell = self._cells[_cell(key)]
                 cell.remove(key)
                 if not cell:
                     del self._cells[_cell(key)]
+        if step is not None:
+            self._done = max(self._done, step)
+        return [StreamBoundary(chain, [self._edges.pop(e) for e in chain.edges]) for chain in self._chains.finish_vertices(final)]
 
     def _count_close(self, key: tuple[float, float]) -> None:
         cx, cy = _cell(key)
