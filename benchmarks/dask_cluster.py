@@ -81,6 +81,16 @@ def cluster(work: Path, workers: int, threads: int):
     return address, procs
 
 
+def same_files(a: Path, b: Path) -> bool:
+    """graph.json and the GeoJSON byte for byte, and every feature of both GeoPackage layers."""
+    import pyogrio
+
+    if any((a / name).read_bytes() != (b / name).read_bytes() for name in ("graph.json", "boundaries.geojson")):
+        return False
+    return all(pyogrio.read_dataframe(a / "boundaries.gpkg", layer=layer).equals(pyogrio.read_dataframe(b / "boundaries.gpkg", layer=layer))
+               for layer in ("road_boundaries", "edges"))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("city", nargs="?", type=Path, default=Path("data/cities/test-s1-1x1-5000"))
@@ -120,8 +130,9 @@ def main() -> None:
         line = (f"{name:34s} {wall:6.1f} s wall, {summary['seconds']['total'] / n:.3f} s/patch, {summary['km2_per_hour']:7.2f} km2/h, "
                 f"client peak RSS {summary['peak_rss_mb']['total']:.0f} MB")
         if memory:
-            same = (args.work / folder / "graph.json").read_bytes() == (args.work / row[5] / "graph.json").read_bytes()
-            line += f"; worker peak RSS {memory['workers']} MB, scheduler {memory['scheduler']} MB; graph.json == {row[5]}: {same}"
+            same = same_files(args.work / folder, args.work / row[5])
+            line += (f"; worker peak RSS {memory['workers']} MB, scheduler {memory['scheduler']} MB; graph.json, GeoJSON and every "
+                     f"GeoPackage feature == {row[5]}: {same}")
         print(line, flush=True)
 
 

@@ -1,6 +1,6 @@
 """FPN alone against the whole pipeline, for the torch and onnx engines, in one run (issue 15).
 
-    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE] [--bfloat16] [--int8]
+    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE] [--bfloat16] [--int8] [--fpn-threads 1]
 
 CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synthesized if
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
@@ -9,7 +9,8 @@ the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, e
 file). ``--bfloat16`` and ``--int8`` add a row each: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
 table, the core seconds per patch of both (every thread of the process: what the rest of the
 pipeline costs beside the FPN, and the lowest ratio a perfect overlap could reach on this
-machine's cores), and whether the two engines' graph.json are identical (and the largest difference in
+machine's cores), the core seconds per patch of each stage (``--fpn-threads 1``: the FPN on one
+core, everything else on the other, every stage's work on the thread that ran it), and whether the two engines' graph.json are identical (and the largest difference in
 vertex count and edge count when not).
 """
 
@@ -55,7 +56,11 @@ def main() -> None:
     parser.add_argument("--bfloat16", action="store_true",
                         help="also the onnx engine with --precision bfloat16 (the FPN in PyTorch under bfloat16 autocast)")
     parser.add_argument("--int8", action="store_true", help="also the onnx engine with --precision int8 (the FPN quantized on ONNX Runtime)")
+    parser.add_argument("--fpn-threads", type=int, default=None,
+                        help="threads for the networks (1: the FPN on one core, the rest of the pipeline on another)")
     args = parser.parse_args()
+    if args.fpn_threads:
+        torch.set_num_threads(args.fpn_threads)  # ONNX Runtime's sessions take their thread count from it
     if not (args.city / "city.json").exists():
         subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "7", "--split", "test", "--tiles", "2x2",
                         "--tile-size", "2000", "--quiet"], check=True)
@@ -82,7 +87,11 @@ def main() -> None:
             print(f"{engine}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
                   f"{summary['km2_per_hour']} km2/h\n       {stage_table(summary)}\n"
                   f"       core s/patch: FPN alone {fpn_cores:.3f}, end to end {run_cores:.3f}, the rest {rest:.3f}; "
-                  f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}", flush=True)
+                  f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}\n"
+                  f"       core s/patch by stage (the thread that ran it; whole with one thread per network): "
+                  + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in summary["core_seconds_per_patch"].items())
+                  + f"; post-processing (all but the FPN) {sum(v for k, v in summary['core_seconds_per_patch'].items() if k != 'fpn'):.3f}",
+                  flush=True)
     (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
     print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
     for engine in extra:

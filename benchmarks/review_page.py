@@ -61,7 +61,7 @@ def main() -> None:
     parser.add_argument("--bounds", help="one district: MINX,MINY,MAXX,MAXY in the prediction's CRS")
     parser.add_argument("--out", type=Path, help="the page's folder (default PRED_DIR/review)")
     args = parser.parse_args()
-    folder = args.out or args.prediction / "review"
+    folder = (args.out or args.prediction / "review").resolve()
     page = folder / "index.html"
     if not page.exists():
         start = time.perf_counter()

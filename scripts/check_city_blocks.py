@@ -42,7 +42,7 @@ def written(result, store, model, block: int, one_pass: bool, folder: Path) -> d
     sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
     stream_city_graph(result.patch_graphs.__getitem__, grid, recipe, sample, writer.add, one_pass=one_pass)
     counts = writer.close()
-    layers = {layer: pyogrio.read_dataframe(files["gpkg"], layer=layer).to_wkt().to_csv() for layer in ("road_boundaries", "edges")}
+    layers = {f"layer {layer}": pyogrio.read_dataframe(files["gpkg"], layer=layer).to_wkt().to_csv() for layer in ("road_boundaries", "edges")}
     return {"edges": counts["edges"], "boundaries": counts["boundaries"],
             **{name: hashlib.sha256(files[name].read_bytes()).hexdigest() for name in ("graph_json", "geojson")}, **layers}
 

@@ -55,6 +55,7 @@ GDAL_CACHE_MB = 128  # GDAL's block cache defaults to 5 % of RAM and would grow 
 # again (an overlapped window read took 30 ms instead of 1-2 ms; tests/pipeline/test_gdal_cache.py).
 GDAL_ENV = {"GDAL_CACHEMAX": GDAL_CACHE_MB * 2**20, "GDAL_DISABLE_READDIR_ON_OPEN": "TRUE"}
 STAGES = ("read", "fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching", "confidence")
+CPU = "cpu:"  # a stage's core seconds (its thread's) beside its wall seconds
 DEFAULT_CHANNELS = 2  # keypoint + segmentation: the maps of a window no covering patch has imagery for
 
 
@@ -107,13 +108,17 @@ class CityResult:
 
 
 class _Timer:
+    """Wall seconds per stage, and under ``CPU + stage`` the core seconds of the thread that ran
+    it (all of a stage's work when its libraries run on the calling thread: one thread each)."""
+
     def __init__(self):
         self.seconds: dict[str, float] = defaultdict(float)
 
     def __call__(self, stage: str, fn, *args):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.thread_time()
         out = fn(*args)
         self.seconds[stage] += time.perf_counter() - start
+        self.seconds[CPU + stage] += time.thread_time() - cpu
         return out
 
     def add(self, seconds: dict[str, float]) -> None:
@@ -357,11 +362,12 @@ class CityRun:
 
         whole = CityCollector(grid.transform, crs) if keep_graphs else None
         made = stream_city_graph(load, grid, recipe, sample, writer, whole, one_pass, progress)
-        self.add_seconds({k: v for k, v in made.seconds.items() if k in STAGES})
+        self.add_seconds({k: v for k, v in made.seconds.items() if k in STAGES or k.startswith(CPU)})
         if keep_graphs and store.root is not None:
             self.patch_graphs = {p.index: load(p.index) for p in grid}
         graph, evidence = (whole or CityCollector(grid.transform, crs)).result()
-        return CityResult(graph, self.patch_graphs if keep_graphs else {}, grid, {s: self.seconds.get(s, 0.0) for s in STAGES},
+        seconds = {**{s: 0.0 for s in STAGES}, **{k: v for k, v in self.seconds.items() if k in STAGES or k.startswith(CPU)}}
+        return CityResult(graph, self.patch_graphs if keep_graphs else {}, grid, seconds,
                           self.map_bytes_peak, len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence,
                           self.job.blank, made.seconds.get("outputs", 0.0), sum(counted.values()), made.close_pairs, made.busiest_core)
 

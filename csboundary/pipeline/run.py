@@ -37,7 +37,7 @@ from csboundary.data.raster import Mosaic
 from csboundary.data.model_view import mosaic_units
 from csboundary.data.units import GroundUnits
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.city import GDAL_ENV, STAGES, CityResult, CityRun, PatchModel, predict_city, run_here
+from csboundary.pipeline.city import CPU, GDAL_ENV, STAGES, CityResult, CityRun, PatchModel, predict_city, run_here
 from csboundary.pipeline.map_output import write_maps_cog
 from csboundary.pipeline.run_store import STORE_DIR, RunStore
 from csboundary.viz.overlay import overview_scale
@@ -150,8 +150,10 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
             "patch_graph_edges": result.patch_graph_edges,
             "vertex_pairs_within_1px": result.close_vertex_pairs,
         },
-        "seconds": {k: round(v, 3) for k, v in seconds.items()},
+        "seconds": {k: round(v, 3) for k, v in seconds.items() if not k.startswith(CPU)},
         "seconds_per_patch": {k: round(seconds[k] / n, 4) for k in (*STAGES, "total")},
+        # the core seconds of the thread that ran each stage (the whole stage with one thread each)
+        "core_seconds_per_patch": {k: round(seconds.get(CPU + k, 0.0) / n, 4) for k in STAGES},
         "km2_per_hour": round(area_km2 / (seconds["total"] / 3600), 3) if seconds["total"] > 0 else None,
         "map_store_peak_mb": round(result.map_bytes_peak / 2**20, 1),
         "work": result.work,
