@@ -99,7 +99,7 @@ class CityResult:
     blank: frozenset = frozenset()  # patches known to have no imagery, never read
     outputs_seconds: float = 0.0  # spent in the writer the city graph was handed to, block by block
     patch_graph_edges: int = 0  # edges of all patch graphs, before stitching
-    close_vertex_pairs: int = 0  # city graph vertices less than 1 px apart (stitching merges them: 0)
+    close_vertex_pairs: int = 0  # city graph vertices less than 1 px apart (stitching merges them; noding may make some)
     busiest_core: tuple[int, int] = (0, 0)  # the patch core holding the most city graph length
 
     @property

@@ -167,7 +167,7 @@ class MadeCityGraph:
     """What :func:`stream_city_graph` measured on the way."""
 
     seconds: dict  # graph_stitching, confidence, outputs (the writer's)
-    close_pairs: int  # vertices less than 1 px apart (stitching merges them: 0)
+    close_pairs: int  # vertices less than 1 px apart (stitching merges them; noding may make some)
     busiest_core: Index  # the patch core holding the most of the city graph's length
     held_peak: int  # vertices and edges the stream held at most
 
