@@ -149,17 +149,21 @@ def _young_collections_only():
 
 def ring_width(grid: PatchGrid, recipe: CityGraphRecipe) -> int:
     """Patches of context around a block: ``recipe.halo``, or more when the shortest piece kept
-    is long. A piece that holds an edge of the block and leaves the ring runs across at least
-    the ring less half a window, so it is never mistaken for a short one."""
-    return max(recipe.halo, math.ceil((recipe.min_fragment_px + grid.config.size / 2) / grid.config.core))
+    or the farthest end attachment is long. A piece that holds an edge of the block and leaves
+    the ring runs across at least the ring less half a window, so it is never mistaken for a
+    short one; an end is attached as one pass would as long as the line it reaches lies in the
+    ring."""
+    reach = max(recipe.min_fragment_px, recipe.attach_px, recipe.stitch.mend_px)
+    return max(recipe.halo, math.ceil((reach + grid.config.size / 2) / grid.config.core))
 
 
-def edge_reach(grid: PatchGrid) -> float:
+def edge_reach(grid: PatchGrid, recipe: CityGraphRecipe | None = None) -> float:
     """How far (px, along each axis) a vertex may lie from the midpoint of an edge at it: an
-    edge comes from one patch's window (``size`` px) and stays in it. A vertex a later block
-    touches after it was declared final is an error (:class:`~csboundary.graph.chain_stream.ChainStream`),
-    never a silent one."""
-    return float(grid.config.size + 2 * grid.config.margin)
+    edge comes from one patch's window (``size`` px) and stays in it, or is an attachment of at
+    most ``attach_px``. A vertex a later block touches after it was declared final is an error
+    (:class:`~csboundary.graph.graph_stream.GraphStream`), never a silent one."""
+    attach = 0.0 if recipe is None else recipe.attach_px
+    return float(max(grid.config.size + 2 * grid.config.margin, attach + grid.config.size / 2))
 
 
 @dataclass
@@ -182,7 +186,7 @@ def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchG
     stream = GraphStream()
     core_length: dict[Index, float] = defaultdict(float)
     seconds: dict[str, float] = defaultdict(float)
-    reach = edge_reach(grid)
+    reach = edge_reach(grid, recipe)
     span = recipe.block * grid.config.core
     n_block_rows, n_block_cols = -(-grid.n_rows // recipe.block), -(-grid.n_cols // recipe.block)
     held = 0

@@ -43,8 +43,8 @@ TRANSFORM_KEY = "csboundary_transform"  # the graph's pixel -> world transform, 
 def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "boundaries", units: GroundUnits | None = None) -> dict[str, Path]:
     """Write ``{stem}.gpkg``, ``{stem}.geojson`` and ``graph.json`` of a whole graph into ``out_dir``.
 
-    The graph goes through :class:`GraphWriter` as one piece, so its vertices are numbered in
-    order of first use, as in a city run's files. All three are written to temporary names first
+    The graph goes through :class:`GraphWriter` as one piece (its vertices keep their order;
+    two at exactly the same point become one). All three are written to temporary names first
     and renamed only once all of them are complete, so an interrupted run leaves either the
     previous files or none, never a partial one. Returns the paths under the keys ``gpkg``,
     ``geojson`` and ``graph_json``.
@@ -84,11 +84,13 @@ class GraphWriter:
         self.boundaries = 0
         self.counts = {"vertices": 0, "edges": 0, "kinds": {}, "boundary_m": 0.0}
         self._layers_started = False
-        self._geojson = _GeoJSONWriter(paths["geojson"], stem, crs)
-        self._json = open(paths["graph_json"], "w")
+        with ExitStack() as opened:  # a file that fails to open closes the ones opened before it
+            self._geojson = opened.enter_context(_GeoJSONWriter(paths["geojson"], stem, crs))
+            self._json = opened.enter_context(open(paths["graph_json"], "w"))
+            self._edges_part = opened.enter_context(tempfile.TemporaryFile("w+", dir=paths["graph_json"].parent))  # gone however the run ends
+            opened.pop_all()
         header = json.dumps({**json_header(crs, transform), "vertices": []})
         self._json.write(header[:-2])  # up to the open vertex list
-        self._edges_part = tempfile.TemporaryFile("w+", dir=paths["graph_json"].parent)  # gone however the run ends
         self._scored: bool | None = None
         self._first_vertex = self._first_edge = True
 
@@ -174,6 +176,12 @@ class _GeoJSONWriter:
     def close(self) -> None:
         self._file.close()
 
+    def __enter__(self) -> "_GeoJSONWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
 
 def _json_value(value):
     if isinstance(value, (np.integer,)):
@@ -220,6 +228,8 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
     MAXY in its CRS; None: all), read through the layer's spatial index, so a district of a city
     of any size costs memory for the district alone. Vertex kinds are not in the GeoPackage."""
     source = Path(source)
+    if not source.exists():
+        raise InputError(source, "not found")
     gpkg = source if source.suffix == ".gpkg" else (source if source.is_dir() else source.parent) / "boundaries.gpkg"
     if not gpkg.exists():
         raise InputError(gpkg, "file not found (a predict output folder holds boundaries.gpkg)")
@@ -231,7 +241,13 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
     values = (info.get("layer_metadata") or {}).get(TRANSFORM_KEY)
     if values is None:
         raise InputError(gpkg, f"its {EDGES_LAYER} layer does not say its pixel grid (written by an older csboundary)")
-    transform = Affine(*map(float, values.split(",")))
+    try:
+        transform = Affine(*map(float, values.split(",")))
+    except (TypeError, ValueError):
+        raise InputError(gpkg, f"its pixel grid ({TRANSFORM_KEY} = {values!r}) is not six numbers") from None
+    missing = [c for c in ("edge_id", "u", "v", "kind", "confidence", "patch_row", "patch_col") if c not in frame.columns]
+    if missing:
+        raise InputError(gpkg, f"its {EDGES_LAYER} layer lacks {', '.join(missing)} (not a csboundary prediction)")
     frame = frame.sort_values("edge_id", kind="stable")
     lines = []
     for geometry in frame.geometry:
@@ -264,7 +280,7 @@ def check_finite_geometry(graph: BoundaryGraph, source) -> None:
 
 def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
     """The ``road_boundaries`` and ``edges`` tables of a whole graph, as :class:`GraphWriter`
-    writes them (vertices numbered in order of first use)."""
+    writes them."""
     if graph.transform is None:
         raise ValueError("graph has no transform: world coordinates are unknown")
     stream = GraphStream()

@@ -61,7 +61,7 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
             graph = BoundaryGraph.read_json(prediction / "graph.json")
         else:
             try:
-                mosaic = mosaic.crop(mosaic.window_from_bounds(*bounds))
+                mosaic = stack.enter_context(mosaic.crop(mosaic.window_from_bounds(*bounds)))
             except ValueError:
                 raise InputError(prediction, f"--bounds {','.join(map(str, bounds))} lies outside the imagery {mosaic.bounds}") from None
             district = read_district(prediction, bounds)

@@ -83,9 +83,9 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
                               store=store, write_cores=write_maps, executor=executor, threads=threads,
                               overview_scale=overview_scale(mosaic.window, OVERVIEW_PX), writer=writer.add, keep_graphs=keep_graphs, **city)
+        written_at = time.perf_counter()
         counts = writer.close()
         rss_after_prediction = peak_rss_mb()
-        written_at = time.perf_counter()
         files.update(write_pictures(mosaic, result, stage, files["gpkg"], ground_truth, store))
         if write_maps:
             files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)

@@ -92,3 +92,17 @@ def test_the_files_agree_and_read_back(city, tmp_path):
 
     inside = [line.intersects(shapely_box(*box)) for line in graph.to_linestrings(world=True)]
     assert 0 < part.n_edges == sum(inside) < graph.n_edges
+
+
+def test_a_district_of_something_else_is_one_line(tmp_path):
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    from csboundary.errors import InputError
+
+    with pytest.raises(InputError, match="not found"):
+        read_prediction_graph(tmp_path / "typo", bounds=(0, 0, 1, 1))
+    frame = gpd.GeoDataFrame({"u": [0], "v": [1]}, geometry=[LineString([(0, 0), (1, 1)])], crs="EPSG:32618")
+    frame.to_file(tmp_path / "boundaries.gpkg", layer=EDGES_LAYER, engine="pyogrio")
+    with pytest.raises(InputError, match="pixel grid"):
+        read_prediction_graph(tmp_path, bounds=(0, 0, 1, 1))
