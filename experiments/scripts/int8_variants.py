@@ -92,8 +92,10 @@ def conv_names(model: bytes) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--variants", default="current,exclude-head,exclude-head-stem,exclude-decoder,percentile,calib3")
+    parser.add_argument("--variants", default="current,exclude-head,exclude-head-stem,exclude-decoder,percentile,calib3",
+                        help="also qat (with --qat) and float32-noiseA: float32 on windows with +-A grey levels of noise")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--qat", type=Path, default=None, help="variant qat: the folded FPN of int8_qat.py, quantized as the product quantizes")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     from csboundary.pipeline.patch import load_predictor
@@ -113,17 +115,38 @@ def main() -> None:
         "calib3": lambda: quantize(model, calib + calibration_windows(seed=1) + calibration_windows(seed=2)),
         "calib3-exclude-head": lambda: quantize(model, calib + calibration_windows(seed=1) + calibration_windows(seed=2), head),
     }
+
+    def qat_model() -> bytes:
+        import torch
+
+        from csboundary.models.batchnorm_folding import fold_batch_norms
+        from csboundary.models.fpn import fpn_for_weights
+        from csboundary.models.onnx_engine import export_fpn
+
+        saved = torch.load(args.qat, map_location="cpu", weights_only=True)
+        folded = fold_batch_norms(fpn_for_weights(saved["config"]))
+        folded.load_state_dict(saved["state_dict"])
+        return quantize(export_fpn(folded), calib)
+
+    variants["qat"] = qat_model
     sets = test_windows()
     reference = {name: probabilities(session(model, args.threads), ws) for name, ws in sets.items()}
     report = {"float32_s_per_window": {k: round(v[1], 3) for k, v in reference.items()}, "variants": {}}
     print(f"float32: {report['float32_s_per_window']} s per window", flush=True)
     for name in args.variants.split(","):
-        path = args.out / f"fpn-int8-{name}.onnx"
-        if not path.exists():
-            path.write_bytes(variants[name]())
-        sess = session(path.read_bytes(), args.threads)
+        noise = name.startswith("float32-noise")  # float32 on the windows with +-A grey levels of noise: the floor
+        if noise:
+            sess = session(model, args.threads)
+        else:
+            path = args.out / f"fpn-int8-{name}.onnx"
+            if not path.exists():
+                path.write_bytes(variants[name]())
+            sess = session(path.read_bytes(), args.threads)
         row = {}
         for set_name, windows in sets.items():
+            if noise:
+                amplitude, rng = int(name.removeprefix("float32-noise")), np.random.default_rng(0)
+                windows = [np.clip(w.astype(np.int16) + rng.integers(-amplitude, amplitude + 1, w.shape), 0, 255).astype(np.uint8) for w in windows]
             probs, seconds = probabilities(sess, windows)
             diff = np.concatenate([np.abs(p - q).reshape(len(p), -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
             cross = np.concatenate([((p[:2] > 0.5) != (q[:2] > 0.5)).reshape(2, -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
