@@ -7,7 +7,8 @@ float32 scores of the same cities: int8 against imperceptible input noise.
 The reference is ``REF_DIR/<config>-<city>.json`` (as ``precision_scores.py`` writes them); each
 other argument is NAME=DIR[:CONFIG] (CONFIG defaults to NAME) over the same city names. Prints,
 per perturbation: each city's change in F1@5 / APLS / TLTS, the cities where any change exceeds
-``--tolerance`` (0.01), the largest and the mean absolute change and the mean change per metric.
+``--tolerance`` (0.01), the largest and the mean absolute change and the mean change per metric with its 95 %
+interval (paired bootstrap over the cities).
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+
+from csboundary.metrics.compare import paired_bootstrap
 
 METRICS = ("f1@5", "apls", "tlts")
 
@@ -38,23 +41,25 @@ def main() -> None:
         name, _, where = other.partition("=")
         folder, _, config = where.partition(":")
         config = config or name
-        deltas = {}
+        deltas, pairs = {}, {m: ([], []) for m in METRICS}
         for city, base in reference.items():
             path = Path(folder) / f"{config}-{city}.json"
             if path.exists():
                 scores = city_scores(path)
                 deltas[city] = {m: scores[m] - base[m] for m in METRICS}
+                for m in METRICS:
+                    pairs[m][0].append(base[m])
+                    pairs[m][1].append(scores[m])
         print(f"{name} ({len(deltas)} cities)")
         for city, d in deltas.items():
             print(f"  {city:32s} " + " ".join(f"{d[m]:+.3f}" for m in METRICS))
         over = [c for c, d in deltas.items() if any(abs(v) > args.tolerance for v in d.values())]
         print(f"  cities with a change over {args.tolerance}: {len(over)} of {len(deltas)}")
         for m in METRICS:
-            signed = [d[m] for d in deltas.values()]
-            values = [abs(v) for v in signed]
+            values = [abs(d[m]) for d in deltas.values()]
+            mean, low, high, _ = paired_bootstrap(*pairs[m])
             print(f"  {m}: largest |change| {max(values):.3f}, mean |change| {sum(values) / len(values):.4f}, "
-                  f"mean change {sum(signed) / len(signed):+.4f}, "
-                  f"over {args.tolerance}: {sum(v > args.tolerance for v in values)}")
+                  f"mean change {mean:+.4f} [{low:+.4f}, {high:+.4f}], over {args.tolerance}: {sum(v > args.tolerance for v in values)}")
 
 
 if __name__ == "__main__":
