@@ -20,6 +20,7 @@ import numpy as np
 
 from csboundary.models.maps import unit_bands
 from csboundary.models.onnx_quantization import CALIBRATION_STYLES, calibration_windows
+from noisy_city import with_noise  # experiments/scripts/, beside this script
 
 TEST_STYLES = CALIBRATION_STYLES + ("highway",)
 NYC = Path("../shared/data/real/nyc-topo-boundary/000180_31_image.tif")
@@ -146,7 +147,7 @@ def main() -> None:
         for set_name, windows in sets.items():
             if noise:
                 amplitude, rng = int(name.removeprefix("float32-noise")), np.random.default_rng(0)
-                windows = [np.clip(w.astype(np.int16) + rng.integers(-amplitude, amplitude + 1, w.shape), 0, 255).astype(np.uint8) for w in windows]
+                windows = [with_noise(w, amplitude, rng) for w in windows]
             probs, seconds = probabilities(sess, windows)
             diff = np.concatenate([np.abs(p - q).reshape(len(p), -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
             cross = np.concatenate([((p[:2] > 0.5) != (q[:2] > 0.5)).reshape(2, -1) for p, q in zip(probs, reference[set_name][0])], axis=1)

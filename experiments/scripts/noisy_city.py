@@ -21,6 +21,11 @@ import numpy as np
 import rasterio
 
 
+def with_noise(data: np.ndarray, amplitude: int, rng: np.random.Generator) -> np.ndarray:
+    """uint8 ``data`` with an integer drawn uniformly from -amplitude..amplitude added to every value, clipped to 0..255."""
+    return np.clip(data.astype(np.int16) + rng.integers(-amplitude, amplitude + 1, size=data.shape), 0, 255).astype(np.uint8)
+
+
 def noisy_copy(city: Path, out: Path, amplitude: int, seed: int) -> Path:
     target = out / city.name
     if target.exists():
@@ -29,9 +34,7 @@ def noisy_copy(city: Path, out: Path, amplitude: int, seed: int) -> Path:
     for tile in sorted((target / "tiles").glob("*.tif")):
         rng = np.random.default_rng([seed, zlib.crc32(tile.name.encode())])
         with rasterio.open(tile, "r+") as dataset:
-            data = dataset.read()
-            noise = rng.integers(-amplitude, amplitude + 1, size=data.shape)
-            dataset.write(np.clip(data.astype(np.int16) + noise, 0, 255).astype(data.dtype))
+            dataset.write(with_noise(dataset.read(), amplitude, rng))
     return target
 
 

@@ -22,6 +22,13 @@ from pathlib import Path
 METRICS = ("f1@5", "apls", "tlts")
 
 
+def city_metrics(path: Path) -> dict[str, float]:
+    """F1@5, APLS and TLTS at city scale from an ``evaluate-model --json`` file."""
+    data = json.loads(path.read_text())
+    metrics = data["city"]["metrics"] if "city" in data else data["scales"]["city"]["metrics"]
+    return {m: float(metrics[m]) for m in METRICS}
+
+
 def scores(city: Path, config: str, out: Path) -> dict:
     precision, threads = config.split("-")
     target = out / f"{config}-{city.name}.json"
@@ -29,9 +36,7 @@ def scores(city: Path, config: str, out: Path) -> dict:
         env = dict(os.environ, OMP_NUM_THREADS=threads)
         subprocess.run([sys.executable, "-m", "csboundary", "evaluate-model", str(city), "--engine", "onnx", "--precision", precision,
                         "--device", "cpu", "--json", str(target), "--quiet"], check=True, env=env, capture_output=True)
-    data = json.loads(target.read_text())
-    metrics = data["city"]["metrics"] if "city" in data else data["scales"]["city"]["metrics"]
-    return {m: float(metrics[m]) for m in METRICS}
+    return city_metrics(target)
 
 
 def main() -> None:

@@ -14,18 +14,10 @@ interval (paired bootstrap over the cities).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from csboundary.metrics.compare import paired_bootstrap
-
-METRICS = ("f1@5", "apls", "tlts")
-
-
-def city_scores(path: Path) -> dict[str, float]:
-    data = json.loads(path.read_text())
-    metrics = data["city"]["metrics"] if "city" in data else data["scales"]["city"]["metrics"]
-    return {m: float(metrics[m]) for m in METRICS}
+from precision_scores import METRICS, city_metrics  # experiments/scripts/, beside this script
 
 
 def main() -> None:
@@ -35,7 +27,7 @@ def main() -> None:
     parser.add_argument("others", nargs="+")
     parser.add_argument("--tolerance", type=float, default=0.01)
     args = parser.parse_args()
-    reference = {p.name.removeprefix(args.ref_config + "-").removesuffix(".json"): city_scores(p)
+    reference = {p.name.removeprefix(args.ref_config + "-").removesuffix(".json"): city_metrics(p)
                  for p in sorted(args.ref_dir.glob(f"{args.ref_config}-*.json"))}
     for other in args.others:
         name, _, where = other.partition("=")
@@ -45,7 +37,7 @@ def main() -> None:
         for city, base in reference.items():
             path = Path(folder) / f"{config}-{city}.json"
             if path.exists():
-                scores = city_scores(path)
+                scores = city_metrics(path)
                 deltas[city] = {m: scores[m] - base[m] for m in METRICS}
                 for m in METRICS:
                     pairs[m][0].append(base[m])

@@ -70,8 +70,9 @@ def test_gaps_do_not_run_on_from_one_segment_into_the_next():
 @example(40.99999999999999, 0.0, 0.0, 1e-06, 0.25)  # a length of 41 to within an ulp
 def test_on_a_constant_map_the_gap_is_all_or_nothing(x0, y0, x1, y1, value):
     m = np.full((50, 50), value, np.float32)
-    length = np.hypot(x1 - x0, y1 - y0)  # a sample every pixel and both ends; a length within an ulp of
-    samples = {max(2, int(np.ceil(length + e)) + 1) for e in (-1e-9, 1e-9)}  # a whole number may round either way
+    # a sample every pixel and both ends; a length within an ulp of a whole number may round either way
+    length = np.hypot(x1 - x0, y1 - y0)
+    samples = {max(2, int(np.ceil(length + e)) + 1) for e in (-1e-9, 1e-9)}
     assert longest_gap(m, [[x0, y0]], [[x1, y1]], 0.5)[0] in (samples if value < 0.5 else {0})
 
 
