@@ -3,13 +3,16 @@ page, a reviewer's edits merged back, and the demo that shows it all on a synthe
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 
 from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, ConfidenceOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
                                     QuietOption, WeightsOption, finite, positive, out_dir, out_file, parse_numbers, readable_inputs)
+from csboundary.errors import InputError, InputWarning
 
 
 def predict(
@@ -52,20 +55,21 @@ def predict(
     out_dir(out, inputs)
     from csboundary.pipeline.patch import load_predictor
     from csboundary.pipeline.predict import predict_to_folder
-    from csboundary.pipeline.run import stage_table
+    from csboundary.pipeline.run import counted, stage_table, written_files
 
     predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
                                max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
 
     def announce(plan, view) -> None:
-        typer.echo(f"{out}: {len(plan)} patches ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
+        typer.echo(f"{out}: {counted(len(plan), 'patch')} ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
                    f"at {predictor.pixel_size_m:g} m", err=True)
 
     summary = predict_to_folder(inputs, out, predictor, weights=weights, gsd=gsd, batch_size=batch_size, write_maps=write_maps,
                                 lanelet2=lanelet2, restart=restart, scheduler=scheduler, workers=workers, threads=threads,
                                 progress=not quiet, on_plan=announce)
     c = summary["counts"]
-    typer.echo(f"{out}: {c['edges']} edges, {c['vertices']} vertices, {c['boundary_km']} km of boundary\n{stage_table(summary)}")
+    typer.echo(f"{out}: {counted(c['edges'], 'edge')}, {counted(c['vertices'], 'vertex', 'vertices')}, {c['boundary_km']} km of boundary\n"
+               f"{stage_table(summary)}\nwrote {out}: {written_files(out)}")
 
 
 def predict_patch(
@@ -125,10 +129,13 @@ def export_lanelet2(
     out: Path = typer.Option(..., "--out", help="Lanelet2 OSM file to write; map_projector_info.yaml goes beside it."),
     origin: Optional[str] = typer.Option(None, help="Projection origin LAT,LON (default: the middle of the boundaries)."),
     bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
+    min_confidence: Optional[float] = typer.Option(None, "--min-confidence", callback=finite, min=0.0, max=1.0,
+                                                   help="Leave out the edges whose confidence is below this (0 = keep all)."),
 ) -> None:
     """The predicted boundaries as a Lanelet2 map: one road_border linestring per boundary (closed
     loops closed), confidence as an attribute, UTM projector around the origin (Autoware's
-    map_projector_info.yaml beside it). With --bounds, one district of the city."""
+    map_projector_info.yaml beside it). With --bounds, one district of the city; with
+    --min-confidence, only the edges at least that sure."""
     from csboundary.pipeline.lanelet2_export import write_lanelet2
     from csboundary.pipeline.outputs import read_prediction_graph
 
@@ -145,6 +152,14 @@ def export_lanelet2(
 
     graph = read_prediction_graph(source, box)
     check_finite_geometry(graph, source)
+    if min_confidence:
+        if graph.n_edges and (graph.edge_scores is None or not np.isfinite(graph.edge_scores).all()):
+            raise InputError(source, "its edges carry no confidence to compare with --min-confidence (predicted without one)")
+        kept = graph.edge_subgraph(graph.edge_scores >= min_confidence) if graph.n_edges else graph
+        typer.echo(f"--min-confidence {min_confidence:g}: {kept.n_edges} of {graph.n_edges} edges kept")
+        graph = kept
+    if graph.n_edges == 0:
+        warnings.warn(f"{source}: no boundary to export{' in --bounds' if box else ''}; the map is empty", InputWarning)
     written = write_lanelet2(graph, out, at)
     typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
                f"in {written['projector_info']}")

@@ -26,6 +26,10 @@ from csboundary.graph.edge_evidence import FEATURES
 VERSION = 1
 TIE_BREAK = 1e-3  # inside a flat step of the isotonic map, edges are still ordered by the trees' raw output
 MAX_NODES = 10**6
+# a fitted table's leaves stay within tens of log-odds (the shipped one: 16.5) and its learning rate
+# within (0, 1]: larger numbers are damage that would turn every probability into 0 or 1
+MAX_LEAF = 1e3
+MAX_LEARNING_RATE = 1.0
 
 
 @dataclass(frozen=True)
@@ -70,7 +74,7 @@ class EdgeConfidence:
         """(E,) calibrated probability that each edge is true."""
         raw = self.raw(evidence)
         p = np.interp(raw, self.iso_x, self.iso_y)
-        return np.clip(p + TIE_BREAK * (1 / (1 + np.exp(-raw)) - 0.5), 0.0, 1.0)
+        return np.clip(p + TIE_BREAK * 0.5 * np.tanh(raw / 2), 0.0, 1.0)  # tanh: the logistic's centred form, free of overflow
 
     def columns(self, evidence: np.ndarray) -> np.ndarray:
         """The model's features out of the full evidence table; NaN (a map it lacks) is refused."""
@@ -112,6 +116,10 @@ class EdgeConfidence:
             raise bad(f"names unknown features {unknown}")
         if not all(np.isfinite(a).all() and a.ndim == 1 for a in arrays.values()) or not math.isfinite(rate):
             raise bad("holds a value that is not a finite number")
+        if not 0 < rate <= MAX_LEARNING_RATE:
+            raise bad(f"learning rate {rate:g} is outside (0, {MAX_LEARNING_RATE:g}]")
+        if (np.abs(arrays["value"]) > MAX_LEAF).any():
+            raise bad(f"holds a leaf value beyond +-{MAX_LEAF:g} log-odds")
         n = len(arrays["feature"])
         if n > MAX_NODES or any(len(arrays[k]) != n for k in ("threshold", "left", "right", "value")):
             raise bad("tree arrays differ in length")
@@ -126,9 +134,11 @@ class EdgeConfidence:
         if ((split & ((left <= local) | (right <= local) | (left >= size) | (right >= size))).any()
                 or (split & ((feature < 0) | (feature >= len(features)))).any() or ((~split) & (right >= 0)).any()):
             raise bad("trees are not well formed")
-        if len(arrays["iso_x"]) < 2 or len(arrays["iso_x"]) != len(arrays["iso_y"]) or (np.diff(arrays["iso_x"]) < 0).any() \
-                or (arrays["iso_y"] < 0).any() or (arrays["iso_y"] > 1).any():
+        iso_x, iso_y = arrays["iso_x"], arrays["iso_y"]
+        if len(iso_x) < 2 or len(iso_x) != len(iso_y) or (np.diff(iso_x) < 0).any() or (iso_y < 0).any() or (iso_y > 1).any():
             raise bad("isotonic map is not increasing breakpoints to probabilities")
+        if (np.diff(iso_y) < 0).any():  # a decreasing map would rank the surest edges as the most doubtful
+            raise bad("isotonic map decreases (a higher raw score must never mean a lower probability)")
         provenance = data.get("provenance") if isinstance(data.get("provenance"), dict) else {}
         return cls(features, rate, starts, feature, arrays["threshold"], left, right, arrays["value"],
                    arrays["iso_x"], arrays["iso_y"], provenance)

@@ -17,6 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from csboundary.data import city as layout
+from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
 from csboundary.metrics.confidence import TRUE_SHARE, edge_truth
@@ -55,6 +56,22 @@ def city_edges(city_dir: str | Path, predictor: PatchPredictor, assume_model_gsd
     return CityEdges(Path(city_dir).name, result.graph, result.evidence, edge_truth(result.graph, gt))
 
 
+def check_learnable(cities: list[Path], per_city: list[CityEdges]) -> None:
+    """InputError unless the cities give what a fit needs: edges in at least two cities (the
+    calibration holds cities out in turn) and both true and false edges (the trees need two classes)."""
+    named = ", ".join(str(c) for c in cities[:3]) + (" ..." if len(cities) > 3 else "")
+    with_edges = [c for c in per_city if c.graph.n_edges]
+    if len(with_edges) < 2:
+        raise InputError(named, f"{len(with_edges)} of {len(cities)} cities gave predicted edges; the confidence is calibrated on "
+                                "cities held out in turn, so it needs at least two")
+    positive = sum(int(c.positive.sum()) for c in with_edges)
+    if positive == 0:
+        raise InputError(named, "no predicted edge lies on the ground truth (is the ground truth empty, or in another place?): "
+                                "nothing to learn a true edge from")
+    if positive == sum(c.graph.n_edges for c in with_edges):
+        raise InputError(named, "every predicted edge lies on the ground truth: nothing to learn a false edge from")
+
+
 def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predictor: PatchPredictor, seed: int = 0,
                           progress: bool = True, n_trees: int = 200, depth: int = 2,
                           assume_model_gsd: bool = False) -> tuple[EdgeConfidence, list[CityEdges]]:
@@ -63,9 +80,8 @@ def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predicto
     ``assume_model_gsd``: imagery without a pixel size is at the model's (imported crops)."""
     payload = load_checkpoint(weights, ("bundle",))
     per_city = [city_edges(c, predictor, assume_model_gsd) for c in tqdm(cities, desc="predict cities", unit="city", disable=not progress)]
+    check_learnable(cities, per_city)
     per_city = [c for c in per_city if c.graph.n_edges]
-    if not per_city:
-        raise ValueError("no city gave any edge to learn from")
     features = tuple(f for f in FEATURES if not ("surface" in f and not predictor.fpn.config.surface))
     evidence = np.concatenate([c.evidence for c in per_city])
     positive = np.concatenate([c.positive for c in per_city])

@@ -58,7 +58,7 @@ def training_configs(base: dict, base_path: Path, cities: list[Path], budget: Fi
     """The FPN and AfANet training configs of a fine-tune of the bundle ``base`` (its payload,
     read from ``base_path``, where both networks start) on ``cities``: the bundle's own recipe
     (style mix, losses, surface head) with the budget's steps, rates and user share."""
-    recipe = (base["provenance"].get("fpn") or {}).get("train_config") or {}
+    recipe = ((base.get("provenance") or {}).get("fpn") or {}).get("train_config") or {}
     worlds = {**(recipe.get("worlds") or {}), "cities": budget.synthetic_cities}
     worlds.setdefault("tile_size", 2500)
     shared = dict(seed=seed, cache=str(cache), train_city=None, worlds=worlds, valid_city=FINETUNE_VALID,
@@ -69,13 +69,24 @@ def training_configs(base: dict, base_path: Path, cities: list[Path], budget: Fi
                       hard_negative_margin_px=int(recipe.get("hard_negative_margin_px", 6)),
                       pos_weight_keypoint=float(recipe.get("pos_weight_keypoint", 20.0)),
                       pos_weight_segmentation=float(recipe.get("pos_weight_segmentation", 10.0)), **shared)
-    afanet_recipe = (base["provenance"].get("afanet") or {}).get("train_config") or {}
+    afanet_recipe = ((base.get("provenance") or {}).get("afanet") or {}).get("train_config") or {}
     afanet = TrainConfig(model="afanet", steps=budget.afanet_steps, gt_steps=0, lr=budget.afanet_lr, init_afanet=str(base_path.resolve()),
                          validate_every=max(1, min(200, budget.afanet_steps)),
                          vertex_threshold=float(base["inference"].get("vertex_threshold", 0.5)),  # the vertices it meets at inference
                          window=int(afanet_recipe.get("window", 1100)), max_vertices=int(afanet_recipe.get("max_vertices", 160)),
                          max_pos_weight=float(afanet_recipe.get("max_pos_weight", 30.0)), augment=afanet_recipe.get("augment", {}), **shared)
     return fpn, afanet
+
+
+def checked_base(path: Path) -> dict:
+    """The base bundle's payload, after every check ``predict`` makes of it (networks, settings,
+    edge confidence): a bundle predict would refuse is refused before training, not after."""
+    import torch
+
+    from csboundary.pipeline.patch import PatchPredictor
+
+    PatchPredictor.load(path, torch.device("cpu"))
+    return load_checkpoint(path, ("bundle",))
 
 
 def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool) -> Path:
@@ -112,7 +123,7 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     ``work``). Returns what was done and how long each stage took."""
     out, base_path = Path(out), Path(weights) if weights else shipped_weights()
     work = Path(work) if work else default_work(out)
-    base = load_checkpoint(base_path, ("bundle",))
+    base = checked_base(base_path)
     cities = labelled_cities(labelled, work)
     fpn_config, afanet_config = training_configs(base, base_path, cities, budget, seed, Path(cache) if cache else work / "synthetic")
     resolved = resolve_device(device)
@@ -133,6 +144,6 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     payload.update(fpn=tuned_fpn["fpn"], fpn_config=tuned_fpn["fpn_config"], afanet=tuned_afanet["afanet"],
                    afanet_config=tuned_afanet["afanet_config"],
                    provenance={"fpn": {k: tuned_fpn.get(k) for k in keys}, "afanet": {k: tuned_afanet.get(k) for k in keys},
-                               "base": base["provenance"], "finetune": record})
+                               "base": base.get("provenance") or {}, "finetune": record})
     save_checkpoint(out, "bundle", **payload)
     return {"out": out, "cities": cities, "work": work, "seconds": seconds, "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps}}

@@ -245,6 +245,11 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
         transform = Affine(*map(float, values.split(",")))
     except (TypeError, ValueError):
         raise InputError(gpkg, f"its pixel grid ({TRANSFORM_KEY} = {values!r}) is not six numbers") from None
+    if bounds is not None:
+        extent = prediction_extent(gpkg, transform, info)
+        if extent is not None and not (bounds[0] < extent[2] and extent[0] < bounds[2] and bounds[1] < extent[3] and extent[1] < bounds[3]):
+            raise InputError(source, f"--bounds {','.join(f'{v:g}' for v in bounds)} lies outside the prediction "
+                                     f"({', '.join(f'{v:.6g}' for v in extent)} in {info.get('crs') or 'pixels'})")
     missing = [c for c in ("edge_id", "u", "v", "kind", "confidence", "patch_row", "patch_col") if c not in frame.columns]
     if missing:
         raise InputError(gpkg, f"its {EDGES_LAYER} layer lacks {', '.join(missing)} (not a csboundary prediction)")
@@ -266,6 +271,18 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
         edge_patches=frame[["patch_row", "patch_col"]].to_numpy(np.int64).reshape(-1, 2), transform=transform, crs=info.get("crs"),
     )
     return District(graph, frame["edge_id"].to_numpy(np.int64), ids)
+
+
+def prediction_extent(gpkg: Path, transform: Affine, info: dict) -> tuple[float, float, float, float] | None:
+    """(MINX, MINY, MAXX, MAXY) of what a prediction covers: its imagery (the pixel grid and the
+    mosaic size in ``summary.json`` beside the GeoPackage), else its edges' extent."""
+    try:
+        width, height = json.loads((gpkg.parent / "summary.json").read_text())["mosaic_px"]
+        xs, ys = pixel_to_world(transform, np.array([0.0, float(width)]), np.array([0.0, float(height)]))
+        return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
+    except (OSError, ValueError, KeyError, TypeError):
+        total = info.get("total_bounds")
+        return tuple(map(float, total)) if total is not None and np.isfinite(total).all() else None
 
 
 def check_finite_geometry(graph: BoundaryGraph, source) -> None:

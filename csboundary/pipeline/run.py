@@ -217,11 +217,21 @@ def window_bounds(mosaic: Mosaic, window) -> tuple[float, float, float, float]:
     return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
 
 
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """``n`` and the noun, plural unless one: "1 patch", "4 patches", "2 vertices"."""
+    return f"{n} {noun}" if n == 1 else f"{n} {plural or noun + ('es' if noun.endswith(('ch', 'sh', 's')) else 's')}"
+
+
+def written_files(folder: Path) -> str:
+    """The finished files of an output folder, by name (what a run wrote, for the user)."""
+    return ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in Path(folder).iterdir() if not p.name.startswith(".")))
+
+
 def stage_table(summary: dict) -> str:
     """Seconds per patch for each stage, one line."""
     per = summary["seconds_per_patch"]
     parts = ", ".join(f"{k.replace('_', ' ')} {per[k]:.3f}" for k in STAGES)
-    return (f"{summary['patches']} patches, {summary['area_km2']:.3f} km2 in {summary['seconds']['total']:.1f} s "
+    return (f"{counted(summary['patches'], 'patch')}, {summary['area_km2']:.3f} km2 in {summary['seconds']['total']:.1f} s "
             f"({summary['km2_per_hour']} km2/h); s/patch: {parts}")
 
 

@@ -19,6 +19,8 @@ import torch
 from affine import Affine
 
 from csboundary.data.geotiff import write_geotiff
+from csboundary.data.synth.city import synthesize_city
+from csboundary.data.synth.styles import style_config
 from csboundary.models.afanet import AfANet, AfANetConfig
 from csboundary.models.checkpoint import FORMAT, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
@@ -202,6 +204,45 @@ def test_damaged_or_hostile_weights_are_one_line(world, tmp_path, case, needle):
     assert not (tmp_path / "out").exists()
 
 
+def confidence_table(**changes) -> dict:
+    """A well-formed edge confidence over the score alone: one split at 0.5, leaves -2 and +2, an
+    increasing isotonic map; ``changes`` damage it."""
+    table = {"version": 1, "features": ["score"], "learning_rate": 0.1, "tree_starts": [0, 3], "feature": [0, -1, -1],
+             "threshold": [0.5, 0.0, 0.0], "left": [1, -1, -1], "right": [2, -1, -1], "value": [0.0, -2.0, 2.0],
+             "iso_x": [-0.2, 0.2], "iso_y": [0.1, 0.9], "provenance": {}}
+    return {**table, **changes}
+
+
+def test_a_sound_confidence_table_is_accepted(world, tmp_path):
+    bundle = tiny_bundle(tmp_path / "w.pt", confidence=confidence_table())
+    result = run_cli("predict", str(world["tif"]), "--out", str(tmp_path / "out"), "--weights", str(bundle), "--device", "cpu", "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert "overflow" not in result.stderr
+
+
+@pytest.mark.parametrize("changes, needle", [
+    ({"value": [0.0, -1e308, 1e308]}, "leaf value beyond"),
+    ({"iso_y": [0.9, 0.1]}, "isotonic map decreases"),
+    ({"iso_y": [0.1, 1.5]}, "isotonic map is not"),
+    ({"learning_rate": 1e300}, "learning rate"),
+    ({"value": [0.0, float("nan"), 2.0]}, "not a finite number"),
+])
+def test_a_damaged_confidence_table_is_one_line(world, tmp_path, changes, needle):
+    bundle = tiny_bundle(tmp_path / "w.pt", confidence=confidence_table(**changes))
+    result = run_cli("predict", str(world["tif"]), "--out", str(tmp_path / "out"), "--weights", str(bundle), "--device", "cpu", "--quiet")
+    one_error(result, str(bundle), needle)
+    assert not (tmp_path / "out").exists()
+
+
+def test_finetune_checks_the_base_bundle_before_training(world, tmp_path):
+    bundle = tiny_bundle(tmp_path / "w.pt", confidence=confidence_table(value=[0.0, float("nan"), 2.0]))
+    city = tmp_path / "city"
+    synthesize_city(city, seed=3, split="valid", config=style_config("classic", tile_size=300), progress=False)
+    result = run_cli("finetune", str(city), "--weights", str(bundle), "--out", str(tmp_path / "tuned.pt"), "--device", "cpu")
+    one_error(result, str(bundle), "not a finite number")
+    assert final_files(tmp_path) == ["city", "w.pt"]  # no tuned bundle, no work folder
+
+
 @pytest.mark.parametrize("device, needle", [("tpu", "must be auto, cpu, cuda"), ("cuda:7", "CUDA")])
 def test_unknown_or_missing_device_is_one_line(world, tmp_path, device, needle):
     if device.startswith("cuda") and torch.cuda.device_count() > 7:
@@ -347,3 +388,13 @@ def test_a_missing_input_is_reported_before_pytorch_loads(tmp_path, command):
     one_error(result, "missing.tif")
     assert "torch imported: False" in result.stdout
     assert not (tmp_path / "out").exists()
+
+
+def test_predict_names_what_it_wrote_and_counts_in_english(world, tmp_path):
+    result = predict(world, world["tif"], out=tmp_path / "out")
+    assert result.returncode == 0, result.stderr
+    assert "1 patch (1x1)" in result.stderr and "1 patches" not in result.stdout + result.stderr
+    wrote = [line for line in result.stdout.splitlines() if line.startswith(f"wrote {tmp_path / 'out'}: ")]
+    assert len(wrote) == 1
+    named = wrote[0].split(": ", 1)[1].split(", ")
+    assert named == final_files(tmp_path / "out") and {"graph.json", "boundaries.gpkg", "summary.json"} <= set(named)

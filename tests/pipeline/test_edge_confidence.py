@@ -110,3 +110,25 @@ def test_fit_confidence_writes_a_bundle_predict_uses(tmp_path):
     assert done.returncode == 0, done.stderr
     scores = np.asarray(BoundaryGraph.read_json(tmp_path / "patch" / "graph.json").edge_scores, float)
     assert len(scores) and ((scores >= 0) & (scores <= 1)).all()
+
+
+def test_fit_confidence_on_cities_without_ground_truth_is_one_line(tmp_path):
+    import geopandas as gpd
+
+    from csboundary.data.ground_truth import LAYER
+
+    cities = []
+    for seed in (1, 2):
+        city = tmp_path / f"city{seed}"
+        done = run_cli("synth", str(city), "--seed", str(seed), "--tile-size", "700", "--split", "valid", "--quiet")
+        assert done.returncode == 0, done.stderr
+        truth = city / "ground_truth.gpkg"
+        empty = gpd.read_file(truth, layer=LAYER).iloc[:0]
+        truth.unlink()
+        empty.to_file(truth, layer=LAYER, driver="GPKG")
+        cities.append(city)
+    for given, needle in ((cities[:1], "needs at least two"), (cities, "no predicted edge lies on the ground truth")):
+        done = run_cli("fit-confidence", *map(str, given), "--out", str(tmp_path / "fitted.pt"), "--trees", "5", "--device", "cpu", "--quiet")
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and needle in lines[0] and str(cities[0]) in lines[0], done.stderr
+        assert not (tmp_path / "fitted.pt").exists()

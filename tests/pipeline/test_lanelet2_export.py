@@ -114,3 +114,28 @@ def test_export_lanelet2_of_a_district(demo, tmp_path):
     assert sum(float(ls.attributes["length_m"]) for ls in borders) == pytest.approx(meeting["length_m"].sum(), rel=1e-3)
     done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "bad.osm"), "--bounds", "5,5,1,1")
     assert done.returncode != 0 and "MINX < MAXX" in done.stderr
+
+
+@pytest.mark.parametrize("where", ["beside", "degrees"])
+def test_bounds_outside_the_prediction_are_one_line_and_no_map(demo, tmp_path, where):
+    frame = gpd.read_file(demo / "boundaries.gpkg", layer="edges")
+    x0, y0, x1, y1 = frame.total_bounds
+    # a district east of the city, or the city's own corner given in degrees on its metric CRS
+    bounds = (x1 + 5000, y0, x1 + 6000, y1) if where == "beside" else (-74.01, 40.70, -74.00, 40.71)
+    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "m.osm"), "--bounds", ",".join(map(str, bounds)))
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and "lies outside the prediction" in lines[0], done.stderr
+    assert not (tmp_path / "m.osm").exists() and not (tmp_path / "map_projector_info.yaml").exists()
+
+
+def test_min_confidence_leaves_out_the_doubtful_edges(demo, tmp_path):
+    edges = gpd.read_file(demo / "boundaries.gpkg", layer="edges")
+    cut = float(np.median(edges["confidence"]))
+    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "sure.osm"), "--min-confidence", str(cut))
+    assert done.returncode == 0, done.stderr
+    kept = edges[edges["confidence"] >= cut]
+    assert f"{len(kept)} of {len(edges)} edges kept" in done.stdout
+    projector = projector_for(read_origin(tmp_path / "map_projector_info.yaml"))
+    borders = [ls for ls in lanelet2.io.load(str(tmp_path / "sure.osm"), projector).lineStringLayer if ls.attributes["type"] == "road_border"]
+    assert sum(float(ls.attributes["length_m"]) for ls in borders) == pytest.approx(kept["length_m"].sum(), rel=1e-3)
+    assert min(float(ls.attributes["confidence_min"]) for ls in borders) >= cut - 1e-4
