@@ -20,7 +20,7 @@ from affine import Affine
 
 from csboundary.data.geotiff import write_geotiff
 from csboundary.models.afanet import AfANet, AfANetConfig
-from csboundary.models.checkpoint import FORMAT, save_checkpoint
+from csboundary.models.checkpoint import FORMAT, load_checkpoint, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
 from helpers import run_cli
 
@@ -163,6 +163,49 @@ def test_geographic_crs_is_measured_on_the_ellipsoid(world, tmp_path):
     assert summary["area_km2"] == pytest.approx(abs(area) / 1e6, rel=1e-3)
     assert summary["area_km2"] > 0.005 and "geodesic" in summary["length_unit"]
     assert summary["mosaic_px"][0] == pytest.approx(300, abs=3)  # square 0.3 m pixels on the ground
+
+
+def curbed_image(folder: Path, transform: Affine, crs: str) -> tuple[Path, Path]:
+    """A 120 px GeoTIFF and a GeoPackage with one curb on it (both in ``crs``), for make-city."""
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    folder.mkdir(parents=True, exist_ok=True)
+    tif = image(folder / "tile.tif", size=120, transform=transform, crs=crs)
+    curb = [transform @ (5.5, 10.5), transform @ (100.5, 10.5)]
+    gpd.GeoDataFrame(geometry=[LineString(curb)], crs=crs).to_file(folder / "curbs.gpkg")
+    return tif, folder / "curbs.gpkg"
+
+
+@pytest.mark.parametrize("crs, transform, metres, warned", [
+    ("EPSG:2263", Affine(0.5, 0, 987000, 0, -0.5, 200000), "0.152", False),  # NYC's own 0.5 ft: the model's pixel
+    ("EPSG:2263", Affine(0.5 / 0.3048006, 0, 987000, 0, -0.5 / 0.3048006, 200000), "0.5", True),  # 0.5 m in feet
+    ("EPSG:4326", Affine(0.152 / 84305.0, 0, -74.0, 0, -0.152 / 111040.0, 40.7), "0.152", False),  # 0.152 m in degrees at 40.7 N
+])
+def test_make_city_gives_and_compares_pixel_sizes_in_metres(tmp_path, crs, transform, metres, warned):
+    """Feet and degrees are not metres: a city at the model's pixel size is not told to resample."""
+    tif, curbs = curbed_image(tmp_path / "in", transform, crs)
+    result = run_cli("make-city", str(tif), "--ground-truth", str(curbs), "--out", str(tmp_path / "city"))
+    assert result.returncode == 0, result.stderr
+    assert f"120x120 px at {metres} m," in result.stdout
+    assert ("resample the tiles" in result.stderr) is warned, result.stderr
+    if warned:
+        assert f"pixel size {metres} m differs from the model's 0.152 m" in result.stderr
+    meta = json.loads((tmp_path / "city" / "city.json").read_text())
+    assert meta["pixel_m"] == pytest.approx(float(metres), rel=0.01) and meta["gsd"] == pytest.approx(transform.a)
+
+
+def test_a_bundle_trained_on_a_feet_city_records_its_pixel_size_in_metres(tmp_path):
+    """The bundle's pixel size is what every input is resampled to: NYC's 0.5 ft is 0.1524 m, not 0.5 m."""
+    tif, curbs = curbed_image(tmp_path / "in", Affine(0.5, 0, 987000, 0, -0.5, 200000), "EPSG:2263")
+    assert run_cli("make-city", str(tif), "--ground-truth", str(curbs), "--out", str(tmp_path / "city")).returncode == 0
+    bundle = load_checkpoint(tiny_bundle(tmp_path / "tiny.pt"), ("bundle",))
+    train_config = {"model": "fpn", "train_city": None, "extra_train_cities": [str(tmp_path / "city")]}
+    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=bundle["fpn"], fpn_config=bundle["fpn_config"], train_config=train_config)
+    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=bundle["afanet"], afanet_config=bundle["afanet_config"])
+    result = run_cli("bundle-weights", "--fpn", str(tmp_path / "fpn.pt"), "--afanet", str(tmp_path / "afanet.pt"), "--out", str(tmp_path / "b.pt"))
+    assert result.returncode == 0, result.stderr
+    assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["pixel_size_m"] == pytest.approx(0.1524, abs=1e-4)
 
 
 # -- weights -----------------------------------------------------------------------------------------
