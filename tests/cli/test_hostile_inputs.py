@@ -333,6 +333,51 @@ def test_geojson_layer_is_named_boundaries_not_the_temporary(world, tmp_path):
     assert json.loads((tmp_path / "out" / "boundaries.geojson").read_text())["name"] == "boundaries"
 
 
+# -- coordinate spaces of evaluate ----------------------------------------------------------------------
+def labelled_picture(folder: Path, size: int = 96) -> Path:
+    """A plain RGB picture (no CRS) and its edge mask, as import-masks and predict-patch take them."""
+    import cv2
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(folder / "a_image.png"), np.random.default_rng(0).integers(0, 256, (size, size, 3), dtype=np.uint8))
+    label = np.zeros((size, size, 3), np.uint8)
+    label[size // 2, :] = 255
+    cv2.imwrite(str(folder / "a_edge.png"), label)
+    return folder / "a_image.png"
+
+
+def test_a_prediction_of_a_picture_without_crs_is_not_scored_against_an_imported_city(world, tmp_path):
+    """import-masks places the picture in metres of EPSG:32618; predict-patch on the same picture
+    gives its pixels, without a CRS. Scored against each other they got near 0 without a word."""
+    picture = labelled_picture(tmp_path / "src")
+    done = run_cli("import-masks", str(tmp_path / "src"), "--out", str(tmp_path / "set"), "--gsd", str(GSD), "--quiet")
+    assert done.returncode == 0, done.stderr
+    done = run_cli("predict-patch", str(picture), "--gsd", str(GSD), "--out", str(tmp_path / "pred"), "--weights", str(world["bundle"]), "--device", "cpu")
+    assert done.returncode == 0, done.stderr
+    pred = tmp_path / "pred" / "graph.json"
+    for gt in (tmp_path / "set" / "a", tmp_path / "set" / "a" / "ground_truth.gpkg"):
+        one_error(run_cli("evaluate", str(pred), str(gt)), f"{pred}: has no CRS but {gt} is in EPSG:32618", "evaluate-set")
+    one_error(run_cli("evaluate", str(tmp_path / "set" / "a" / "ground_truth.gpkg"), str(pred)), f"{pred}: has no CRS")
+
+
+def test_world_coordinates_with_and_without_a_crs_are_not_mixed_but_two_crss_are_reprojected(world, tmp_path):
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    curbs = [LineString([(500003.0, 4399970.0), (500080.0, 4399970.0)]), LineString([(500003.0, 4399940.0), (500080.0, 4399940.0)])]
+    gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_file(tmp_path / "pred.gpkg")
+    gpd.GeoDataFrame(geometry=curbs).to_file(tmp_path / "nocrs.gpkg")  # the same numbers, CRS left out
+    one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "nocrs.gpkg"), "--gsd", "0.3"),
+              "nocrs.gpkg: has no CRS but", "is in EPSG:32618", "ogr2ogr -a_srs EPSG:32618")
+    plain = image(tmp_path / "plain.tif", transform=Affine.identity(), crs=None)
+    one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "pred.gpkg"), "--raster", str(plain)),
+              f"{plain}: has no CRS", "give a georeferenced raster")
+    gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_crs("EPSG:4326").to_file(tmp_path / "gt.geojson", driver="GeoJSON")
+    done = run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "gt.geojson"), "--raster", str(world["tif"]), "--json", str(tmp_path / "s.json"))
+    assert done.returncode == 0, done.stderr  # two CRSs: reprojected, the same lines score 1
+    assert json.loads((tmp_path / "s.json").read_text())["metrics"]["f1@2"] == pytest.approx(1.0)
+
+
 # -- huge coordinates --------------------------------------------------------------------------------
 def test_a_far_away_label_point_is_refused_in_one_line_without_memory(tmp_path):
     gt = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {
