@@ -110,7 +110,7 @@ def make_city_cmd(
 
     no_file_at(out)
     meta = make_city(tiles, ground_truth, out)
-    typer.echo(f"{out}: {len(meta['tiles'])} tile(s), {meta['width']}x{meta['height']} px at {meta['gsd']:g} m, {meta['boundaries']} boundaries")
+    typer.echo(f"{out}: {len(meta['tiles'])} tile(s), {meta['width']}x{meta['height']} px at {meta['pixel_m']:.3g} m, {meta['boundaries']} boundaries")
 
 
 def labels(

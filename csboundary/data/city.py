@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from csboundary.data.atomic import atomic_path
+from csboundary.data.units import geometric_mean, ground_units
 from csboundary.errors import InputError
 
 META_FILE = "city.json"
@@ -64,6 +65,29 @@ def read_meta(city_dir: str | Path) -> dict[str, Any]:
     if not isinstance(meta, dict):
         raise InputError(path, "invalid city metadata (not a JSON object)")
     return meta
+
+
+def pixel_metres(meta: dict[str, Any]) -> float | None:
+    """A city's pixel size in true metres from its ``city.json``: ``gsd`` is in the CRS's units
+    (US feet for NYC tiles), so it is converted; ``pixel_m`` (written by make-city and
+    import-masks) is taken as it is. None when unknown (a geographic CRS needs the ``transform``)."""
+    if isinstance(meta.get("pixel_m"), (int, float)):
+        return float(meta["pixel_m"])
+    gsd, crs, transform = meta.get("gsd"), meta.get("crs"), meta.get("transform")
+    if not isinstance(gsd, (int, float)) or not crs:
+        return None
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    placed = isinstance(transform, list) and len(transform) == 6
+    try:
+        if not placed and CRS.from_user_input(crs).is_geographic:
+            return None
+        a, e, at = (transform[0], transform[4], (transform[2], transform[5])) if placed else (gsd, gsd, None)
+        metres = ground_units(crs, at).metres_per_unit
+    except CRSError:
+        return None
+    return geometric_mean((abs(a) * metres[0], abs(e) * metres[1]))
 
 
 def is_city_dir(path: str | Path) -> bool:

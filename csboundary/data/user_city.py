@@ -19,8 +19,9 @@ from shapely.geometry import box
 
 from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, write_meta
 from csboundary.data.ground_truth import read_ground_truth, write_ground_truth
-from csboundary.data.units import MODEL_GSD
+from csboundary.data.model_view import mosaic_units
 from csboundary.data.raster import Mosaic
+from csboundary.data.units import MODEL_GSD, geometric_mean, pixel_size_m
 from csboundary.data.windows import pixel_to_world
 from csboundary.errors import InputError, InputWarning
 
@@ -34,7 +35,9 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     with Mosaic.open(tiles) as mosaic:
         paths = [Path(t.path).resolve() for t in mosaic.tiles]
         crs = mosaic.crs
-        gsd = abs(mosaic.transform.a)
+        gsd = abs(mosaic.transform.a)  # CRS units (feet, degrees...): only for city.json's gsd
+        units = mosaic_units(mosaic)
+        pixel_m = geometric_mean(pixel_size_m(units, mosaic.transform)) if units is not None else None
         size = (mosaic.width, mosaic.height)
         xs, ys = pixel_to_world(mosaic.transform, np.array([0.0, size[0]]), np.array([0.0, size[1]]))
     if crs is None:
@@ -50,8 +53,8 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
         raise InputError(ground_truth, "holds no road boundaries")
     if not frame.intersects(box(xs.min(), ys.min(), xs.max(), ys.max())).any():
         raise InputError(ground_truth, f"no boundary lies on the tiles (checked in {crs}); is its CRS right?")
-    if abs(gsd / MODEL_GSD - 1) > 0.15:
-        warnings.warn(f"{paths[0]}: pixel size {gsd:g} differs from the model's {MODEL_GSD:g} m; resample the tiles "
+    if abs(pixel_m / MODEL_GSD - 1) > 0.15:
+        warnings.warn(f"{paths[0]}: pixel size {pixel_m:.3g} m differs from the model's {MODEL_GSD:g} m; resample the tiles "
                       "(e.g. gdalwarp -tr) so training sees objects at the size it predicts them", InputWarning, stacklevel=2)
     out = begin_city(out)
     folder = tiles_dir(out)
@@ -61,7 +64,7 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     if complete is not None:
         complete = complete.to_crs(crs) if complete.crs is not None else complete.set_crs(crs)
     write_ground_truth(ground_truth_path(out), frame, complete=complete)
-    meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "width": size[0], "height": size[1], "tiles": names,
+    meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "units": units.unit_name, "pixel_m": pixel_m, "width": size[0], "height": size[1], "tiles": names,
             "tile_sources": [str(p) for p in paths], "ground_truth_source": str(Path(ground_truth).resolve()),
             "boundaries": len(frame), **({"complete_areas": len(complete)} if complete is not None else {}), "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
     write_meta(out, meta)

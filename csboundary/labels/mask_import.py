@@ -43,6 +43,7 @@ from csboundary.data.atomic import atomic_path
 from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, tile_name, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
+from csboundary.data.units import geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import pixel_to_world
 from csboundary.errors import InputError
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
@@ -109,11 +110,12 @@ def mask_polylines(mask: np.ndarray, rule: MaskRule) -> list[np.ndarray]:
     return [np.asarray(p, float) for p in graph.edge_polylines or [] if p is not None and len(p) >= 2]
 
 
-def resample(image: np.ndarray, factor: float) -> np.ndarray:
-    """(bands, h, w) uint8 scaled by ``factor`` (>1 enlarges): area averaging to shrink, bicubic to enlarge."""
+def resample(image: np.ndarray, factor: tuple[float, float]) -> np.ndarray:
+    """(bands, h, w) uint8 scaled by ``factor`` (columns, rows; >1 enlarges): area averaging to
+    shrink, bicubic to enlarge. Two factors: degree pixels are not square on the ground."""
     h, w = image.shape[1:]
-    size = (max(1, round(w * factor)), max(1, round(h * factor)))
-    method = cv2.INTER_AREA if factor < 1 else cv2.INTER_CUBIC
+    size = (max(1, round(w * factor[0])), max(1, round(h * factor[1])))
+    method = cv2.INTER_AREA if min(factor) < 1 else cv2.INTER_CUBIC
     return np.stack([cv2.resize(band, size, interpolation=method) for band in image])
 
 
@@ -136,18 +138,22 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
     picture, _, _ = read_picture(mask_path)
     if picture.shape[1:] != image.shape[1:]:
         raise InputError(mask_path, f"is {picture.shape[2]}x{picture.shape[1]} px; its image {image_path.name} is {image.shape[2]}x{image.shape[1]}")
-    source_gsd = abs(transform.a) if transform is not None else gsd
-    if source_gsd is None or not np.isfinite(source_gsd) or source_gsd <= 0:
+    if transform is None and (gsd is None or not np.isfinite(gsd) or gsd <= 0):
         raise InputError(image_path, "has no georeference: give its pixel size in metres (--gsd)")
-    factor = source_gsd / target_gsd
-    lines = mask_polylines(label_mask(picture, rule, mask_path), rule)
-    out_image = resample(image, factor) if abs(factor - 1) > 1e-6 else image
-    origin = (transform.c, transform.f) if transform is not None else (0.0, 0.0)
-    out_transform = Affine(target_gsd, 0, origin[0], 0, -target_gsd, origin[1])
     out_crs = crs or PLACEHOLDER_CRS
+    centre = transform @ (image.shape[2] / 2, image.shape[1] / 2) if transform is not None else None
+    units = ground_units(out_crs, centre)  # the CRS's units may be feet or degrees: pixel sizes compare in metres
+    source_m = pixel_size_m(units, transform) if transform is not None else (gsd, gsd)
+    if not all(np.isfinite(v) and v > 0 for v in source_m):
+        raise InputError(image_path, f"its georeference gives no pixel size ({transform.a:g} x {transform.e:g}: rotated?)")
+    factor = (source_m[0] / target_gsd, source_m[1] / target_gsd)
+    lines = mask_polylines(label_mask(picture, rule, mask_path), rule)
+    out_image = resample(image, factor) if max(abs(f - 1) for f in factor) > 1e-6 else image
+    origin = (transform.c, transform.f) if transform is not None else (0.0, 0.0)
+    out_transform = Affine(target_gsd / units.metres_per_unit[0], 0, origin[0], 0, -target_gsd / units.metres_per_unit[1], origin[1])
     world = []
     for line in lines:
-        xs, ys = pixel_to_world(out_transform, line[:, 0] * factor, line[:, 1] * factor)
+        xs, ys = pixel_to_world(out_transform, line[:, 0] * factor[0], line[:, 1] * factor[1])
         world.append(LineString(np.column_stack([xs, ys])))
     city_dir = begin_city(city_dir)
     write_geotiff(tiles_dir(city_dir) / tile_name(0, 0), out_image, out_transform, out_crs, tags={"source": SOURCE})
@@ -158,8 +164,9 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
         "image": str(image_path),
         "mask": str(mask_path),
         "mask_rule": asdict(rule),
-        "source_gsd": source_gsd,
-        "gsd": target_gsd,
+        "source_gsd": geometric_mean(source_m),  # metres
+        "gsd": out_transform.a,  # CRS units, as every city.json's
+        "pixel_m": target_gsd,
         "crs": out_crs,
         "georeferenced": transform is not None,
         "transform": list(out_transform)[:6],

@@ -6,7 +6,8 @@ in this order: ``--pixels`` (coordinates already are pixels), the raster given w
 (a city directory, GeoTIFF(s) or a directory of tiles), the city directory given as an input,
 the transform stored in a graph JSON input, or ``--gsd`` (a north-up grid of that pixel size at
 the inputs' top-left corner). World coordinates are reprojected to the frame's CRS when both are
-known and differ. Every problem is an :class:`~csboundary.errors.InputError` naming the file.
+known and differ; world coordinates with a CRS and without one are refused (:func:`check_spaces`).
+Every problem is an :class:`~csboundary.errors.InputError` naming the file.
 """
 
 from __future__ import annotations
@@ -171,11 +172,36 @@ def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels:
             if src.lines is not None:
                 check_degrees(src.lines, src.path)
     frame = resolve_frame(pred_src, gt_src, raster, gsd, pixels)
+    if not pixels:
+        check_spaces(pred_src, gt_src, frame)
     pred, gt = to_frame(pred_src, frame), to_frame(gt_src, frame)
     for graph, path in ((pred, pred_src.path), (gt, gt_src.path)):
         check_finite(graph, path, frame)
     check_overlap(pred, gt, frame, pred_src.path, gt_src.path)
     return pred, gt, frame
+
+
+def check_spaces(pred: Source, gt: Source, frame: Frame) -> None:
+    """World coordinates with a CRS and world coordinates without one cannot be put on each other
+    (a prediction of a picture without a CRS is in its pixels, a labelled city in metres): taking
+    one to be in the other's CRS scores near 0 without a word. Inputs in different CRSs are fine
+    (they are reprojected); graphs without a transform are the frame's pixels by definition."""
+    placed = [(s.path, s.crs, "graph" if s.graph is not None else "lines")
+              for s in (pred, gt) if s.graph is None or s.graph.transform is not None]
+    if frame.width is not None:  # a raster gives the frame: it is placed too
+        placed.append((frame.source, frame.crs, "raster"))
+    known = next(((path, crs) for path, crs, _ in placed if crs is not None), None)
+    unknown = next(((path, kind) for path, crs, kind in placed if crs is None), None)
+    if known is None or unknown is None:
+        return
+    from pyproj import CRS
+
+    crs = CRS.from_user_input(known[1]).to_string()
+    problem = f"has no CRS but {known[0]} is in {crs}, so the two cannot be aligned (scores would be meaningless)"
+    predicted = "a prediction of a picture without a CRS is scored by predicting the labelled city itself (evaluate-model CITY, evaluate-set SET)"
+    advice = {"graph": predicted, "lines": f"if its coordinates are in {crs}, set that CRS (e.g. ogr2ogr -a_srs {crs}); {predicted}",
+              "raster": "give a georeferenced raster, or leave --raster out"}[unknown[1]]
+    raise InputError(unknown[0], f"{problem}: {advice}")
 
 
 def check_finite(graph: BoundaryGraph, path, frame: Frame) -> None:

@@ -22,7 +22,7 @@ from csboundary.data.geotiff import write_geotiff
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.styles import style_config
 from csboundary.models.afanet import AfANet, AfANetConfig
-from csboundary.models.checkpoint import FORMAT, save_checkpoint
+from csboundary.models.checkpoint import FORMAT, load_checkpoint, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
 from helpers import run_cli
 
@@ -165,6 +165,49 @@ def test_geographic_crs_is_measured_on_the_ellipsoid(world, tmp_path):
     assert summary["area_km2"] == pytest.approx(abs(area) / 1e6, rel=1e-3)
     assert summary["area_km2"] > 0.005 and "geodesic" in summary["length_unit"]
     assert summary["mosaic_px"][0] == pytest.approx(300, abs=3)  # square 0.3 m pixels on the ground
+
+
+def curbed_image(folder: Path, transform: Affine, crs: str) -> tuple[Path, Path]:
+    """A 120 px GeoTIFF and a GeoPackage with one curb on it (both in ``crs``), for make-city."""
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    folder.mkdir(parents=True, exist_ok=True)
+    tif = image(folder / "tile.tif", size=120, transform=transform, crs=crs)
+    curb = [transform @ (5.5, 10.5), transform @ (100.5, 10.5)]
+    gpd.GeoDataFrame(geometry=[LineString(curb)], crs=crs).to_file(folder / "curbs.gpkg")
+    return tif, folder / "curbs.gpkg"
+
+
+@pytest.mark.parametrize("crs, transform, metres, warned", [
+    ("EPSG:2263", Affine(0.5, 0, 987000, 0, -0.5, 200000), "0.152", False),  # NYC's own 0.5 ft: the model's pixel
+    ("EPSG:2263", Affine(0.5 / 0.3048006, 0, 987000, 0, -0.5 / 0.3048006, 200000), "0.5", True),  # 0.5 m in feet
+    ("EPSG:4326", Affine(0.152 / 84305.0, 0, -74.0, 0, -0.152 / 111040.0, 40.7), "0.152", False),  # 0.152 m in degrees at 40.7 N
+])
+def test_make_city_gives_and_compares_pixel_sizes_in_metres(tmp_path, crs, transform, metres, warned):
+    """Feet and degrees are not metres: a city at the model's pixel size is not told to resample."""
+    tif, curbs = curbed_image(tmp_path / "in", transform, crs)
+    result = run_cli("make-city", str(tif), "--ground-truth", str(curbs), "--out", str(tmp_path / "city"))
+    assert result.returncode == 0, result.stderr
+    assert f"120x120 px at {metres} m," in result.stdout
+    assert ("resample the tiles" in result.stderr) is warned, result.stderr
+    if warned:
+        assert f"pixel size {metres} m differs from the model's 0.152 m" in result.stderr
+    meta = json.loads((tmp_path / "city" / "city.json").read_text())
+    assert meta["pixel_m"] == pytest.approx(float(metres), rel=0.01) and meta["gsd"] == pytest.approx(transform.a)
+
+
+def test_a_bundle_trained_on_a_feet_city_records_its_pixel_size_in_metres(tmp_path):
+    """The bundle's pixel size is what every input is resampled to: NYC's 0.5 ft is 0.1524 m, not 0.5 m."""
+    tif, curbs = curbed_image(tmp_path / "in", Affine(0.5, 0, 987000, 0, -0.5, 200000), "EPSG:2263")
+    assert run_cli("make-city", str(tif), "--ground-truth", str(curbs), "--out", str(tmp_path / "city")).returncode == 0
+    bundle = load_checkpoint(tiny_bundle(tmp_path / "tiny.pt"), ("bundle",))
+    train_config = {"model": "fpn", "train_city": None, "extra_train_cities": [str(tmp_path / "city")]}
+    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=bundle["fpn"], fpn_config=bundle["fpn_config"], train_config=train_config)
+    save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=bundle["afanet"], afanet_config=bundle["afanet_config"])
+    result = run_cli("bundle-weights", "--fpn", str(tmp_path / "fpn.pt"), "--afanet", str(tmp_path / "afanet.pt"), "--out", str(tmp_path / "b.pt"))
+    assert result.returncode == 0, result.stderr
+    assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["pixel_size_m"] == pytest.approx(0.1524, abs=1e-4)
 
 
 # -- weights -----------------------------------------------------------------------------------------
@@ -329,6 +372,51 @@ def test_leftovers_of_a_killed_run_are_cleared_by_the_next(world, tmp_path):
 def test_geojson_layer_is_named_boundaries_not_the_temporary(world, tmp_path):
     assert predict(world, world["tif"], out=tmp_path / "out").returncode == 0
     assert json.loads((tmp_path / "out" / "boundaries.geojson").read_text())["name"] == "boundaries"
+
+
+# -- coordinate spaces of evaluate ----------------------------------------------------------------------
+def labelled_picture(folder: Path, size: int = 96) -> Path:
+    """A plain RGB picture (no CRS) and its edge mask, as import-masks and predict-patch take them."""
+    import cv2
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(folder / "a_image.png"), np.random.default_rng(0).integers(0, 256, (size, size, 3), dtype=np.uint8))
+    label = np.zeros((size, size, 3), np.uint8)
+    label[size // 2, :] = 255
+    cv2.imwrite(str(folder / "a_edge.png"), label)
+    return folder / "a_image.png"
+
+
+def test_a_prediction_of_a_picture_without_crs_is_not_scored_against_an_imported_city(world, tmp_path):
+    """import-masks places the picture in metres of EPSG:32618; predict-patch on the same picture
+    gives its pixels, without a CRS. Scored against each other they got near 0 without a word."""
+    picture = labelled_picture(tmp_path / "src")
+    done = run_cli("import-masks", str(tmp_path / "src"), "--out", str(tmp_path / "set"), "--gsd", str(GSD), "--quiet")
+    assert done.returncode == 0, done.stderr
+    done = run_cli("predict-patch", str(picture), "--gsd", str(GSD), "--out", str(tmp_path / "pred"), "--weights", str(world["bundle"]), "--device", "cpu")
+    assert done.returncode == 0, done.stderr
+    pred = tmp_path / "pred" / "graph.json"
+    for gt in (tmp_path / "set" / "a", tmp_path / "set" / "a" / "ground_truth.gpkg"):
+        one_error(run_cli("evaluate", str(pred), str(gt)), f"{pred}: has no CRS but {gt} is in EPSG:32618", "evaluate-set")
+    one_error(run_cli("evaluate", str(tmp_path / "set" / "a" / "ground_truth.gpkg"), str(pred)), f"{pred}: has no CRS")
+
+
+def test_world_coordinates_with_and_without_a_crs_are_not_mixed_but_two_crss_are_reprojected(world, tmp_path):
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    curbs = [LineString([(500003.0, 4399970.0), (500080.0, 4399970.0)]), LineString([(500003.0, 4399940.0), (500080.0, 4399940.0)])]
+    gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_file(tmp_path / "pred.gpkg")
+    gpd.GeoDataFrame(geometry=curbs).to_file(tmp_path / "nocrs.gpkg")  # the same numbers, CRS left out
+    one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "nocrs.gpkg"), "--gsd", "0.3"),
+              "nocrs.gpkg: has no CRS but", "is in EPSG:32618", "ogr2ogr -a_srs EPSG:32618")
+    plain = image(tmp_path / "plain.tif", transform=Affine.identity(), crs=None)
+    one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "pred.gpkg"), "--raster", str(plain)),
+              f"{plain}: has no CRS", "give a georeferenced raster")
+    gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_crs("EPSG:4326").to_file(tmp_path / "gt.geojson", driver="GeoJSON")
+    done = run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "gt.geojson"), "--raster", str(world["tif"]), "--json", str(tmp_path / "s.json"))
+    assert done.returncode == 0, done.stderr  # two CRSs: reprojected, the same lines score 1
+    assert json.loads((tmp_path / "s.json").read_text())["metrics"]["f1@2"] == pytest.approx(1.0)
 
 
 # -- huge coordinates --------------------------------------------------------------------------------

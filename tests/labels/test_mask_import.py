@@ -76,6 +76,27 @@ def test_georeferenced_input_keeps_its_crs_and_origin(tmp_path, write_tif):
     assert np.allclose(np.asarray(line.coords)[:, 0], 500000.0 + 8.5 * 0.3)
 
 
+@pytest.mark.parametrize("crs, transform, size", [
+    ("EPSG:2263", Affine(0.5, 0, 987000.0, 0, -0.5, 200000.0), 64),  # 0.5 ft = 0.1524 m: as good as the target already
+    ("EPSG:4326", Affine(0.3 / 84305.0, 0, -74.0, 0, -0.3 / 111040.0, 40.7), 128),  # 0.3 m in degrees at 40.7 N
+])
+def test_feet_and_degrees_are_resampled_by_their_size_in_metres(tmp_path, write_tif, crs, transform, size):
+    src = tmp_path / "src"
+    src.mkdir()
+    write_tif(src / "t_image.tif", np.full((3, 64, 64), 90, np.uint8), transform, crs)
+    label = np.zeros((1, 64, 64), np.uint8)
+    label[0, :, 8] = 255
+    write_tif(src / "t_edge.tif", label, transform, crs)
+    target = "0.152" if size == 64 else "0.15"
+    done = run_cli("import-masks", str(src), "--out", str(tmp_path / "out"), "--image-pattern", "{id}_image.tif",
+                   "--mask-pattern", "{id}_edge.tif", "--target-gsd", target, "--quiet")
+    assert done.returncode == 0, done.stderr
+    meta = layout.read_meta(tmp_path / "out" / "t")
+    assert (meta["width"], meta["height"]) == (size, size) and meta["pixel_m"] == float(target)
+    (line,) = read_ground_truth(layout.ground_truth_path(tmp_path / "out" / "t")).geometry
+    assert np.allclose(np.asarray(line.coords)[:, 0], transform.c + 8.5 * transform.a, atol=0.02 * transform.a)
+
+
 def test_a_second_import_adds_to_the_set(tmp_path):
     pair(tmp_path / "src", "a")
     pair(tmp_path / "src", "b", row=30)

@@ -93,9 +93,9 @@ def training_pixel_size(config: dict) -> float | None:
     sizes = set()
     for path in [*paths, *map(Path, cfg.extra_train_cities)]:
         if layout.is_city_dir(path):
-            gsd = layout.read_meta(path).get("gsd")
-            if isinstance(gsd, (int, float)):
-                sizes.add(round(float(gsd), 6))
+            metres = layout.pixel_metres(layout.read_meta(path))  # not city.json's gsd: that is in CRS units (feet in NYC)
+            if metres is not None:
+                sizes.add(round(metres, 6))
     return sizes.pop() if len(sizes) == 1 else None
 
 
