@@ -424,3 +424,38 @@ def test_a_full_disk_keeps_the_finished_work_for_the_same_command(world, slow_ci
     assert again.returncode == 0, again.stderr
     work = json.loads((out / "summary.json").read_text())["work"]
     assert work["patches_reused"] > 0 and work["patches_predicted"] + work["patches_reused"] == 9
+
+
+# -- review edits and fine-tuning ---------------------------------------------------------------------
+MARGIN_RING = [[500000 + GSD * col, 4400000 - GSD * row] for col, row in [(-90, 10), (-10, 10), (-10, 80), (-90, 80), (-90, 10)]]
+
+
+def test_a_complete_area_wholly_in_the_margin_is_refused(world, tmp_path):
+    pred = tmp_path / "pred"
+    assert predict(world, world["tif"], out=pred).returncode == 0
+    before = (pred / "graph.json").read_bytes()
+    edits = tmp_path / "edits.geojson"
+    edits.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [MARGIN_RING]}}]}))
+    one_error(run_cli("apply-review", str(pred), str(edits)), str(edits), "edit 0 (complete)", "covers no pixel of the imagery")
+    assert (pred / "graph.json").read_bytes() == before and not (pred / "review.json").exists()
+
+
+def test_finetune_refuses_a_margin_area_before_making_anything(world, tmp_path):
+    """A review log from before apply-review checked its areas: refused in one line, no work folder made."""
+    from csboundary.graph import BoundaryGraph
+    from csboundary.pipeline.outputs import write_graph_outputs
+
+    pred = tmp_path / "pred"
+    assert predict(world, world["tif"], out=pred).returncode == 0
+    predicted = BoundaryGraph.read_json(pred / "graph.json")
+    reviewed = BoundaryGraph(np.array([[50.0, 20.0], [50.0, 280.0]]), [[0, 1]], edge_scores=np.array([0.9]),
+                             transform=predicted.transform, crs=predicted.crs)
+    reviewed.write_json(pred / "graph.json")
+    write_graph_outputs(reviewed, pred)
+    (pred / "review.json").write_text(json.dumps({"reviews": [{"time": "2025-01-01T00:00:00", "complete_areas": [MARGIN_RING]}]}))
+    work = tmp_path / "work"
+    done = run_cli("finetune", str(pred), "--out", str(tmp_path / "tuned.pt"), "--work", str(work), "--fpn-steps", "1",
+                   "--afanet-steps", "1", "--synthetic-cities", "1", "--device", "cpu", "--quiet")
+    one_error(done, str(pred / "review.json"), "no area marked complete in it covers any of the imagery")
+    assert not work.exists() and not (tmp_path / "tuned.pt").exists()
