@@ -22,7 +22,7 @@ from csboundary.data.geotiff import write_geotiff
 from csboundary.models.afanet import AfANet, AfANetConfig
 from csboundary.models.checkpoint import FORMAT, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from helpers import run_cli
+from helpers import obey_file_permissions, run_cli
 
 UTM = "EPSG:32618"
 GSD = 0.3  # the tiny test bundle's pixel size, so 0.3 m test imagery is used as it is
@@ -459,3 +459,19 @@ def test_finetune_refuses_a_margin_area_before_making_anything(world, tmp_path):
                    "--afanet-steps", "1", "--synthetic-cities", "1", "--device", "cpu", "--quiet")
     one_error(done, str(pred / "review.json"), "no area marked complete in it covers any of the imagery")
     assert not work.exists() and not (tmp_path / "tuned.pt").exists()
+
+
+def test_apply_review_names_the_folder_it_cannot_write(world, tmp_path):
+    pred = tmp_path / "pred"
+    assert predict(world, world["tif"], out=pred).returncode == 0
+    edits = tmp_path / "edits.geojson"
+    edits.write_text(json.dumps({"type": "FeatureCollection", "features": []}))
+    pred.chmod(0o555)
+    try:
+        done = run_cli("apply-review", str(pred), str(edits), preexec_fn=obey_file_permissions if os.geteuid() == 0 else None)
+    except subprocess.SubprocessError:
+        pytest.skip("running as root without the capability to give up CAP_DAC_OVERRIDE")
+    finally:
+        pred.chmod(0o755)
+    one_error(done, f"error: {pred}: cannot write there")
+    assert final_files(pred) == ["boundaries.geojson", "boundaries.gpkg", "detail.png", "graph.json", "overview.png", "summary.json"]
