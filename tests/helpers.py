@@ -10,9 +10,20 @@ from affine import Affine
 from hypothesis import strategies as st
 
 
-def run_cli(*args: str, cwd: Path | None = None, timeout: int = 600) -> subprocess.CompletedProcess:
+def run_cli(*args: str, cwd: Path | None = None, timeout: int = 600, preexec_fn=None) -> subprocess.CompletedProcess:
     """``python -m csboundary ARGS`` as a user runs it: exit code, stdout, stderr."""
-    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, cwd=cwd, timeout=timeout)
+    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, cwd=cwd, timeout=timeout,
+                          preexec_fn=preexec_fn)
+
+
+def obey_file_permissions() -> None:
+    """A ``preexec_fn`` for a command run as root: it drops CAP_DAC_OVERRIDE (Linux), so a folder
+    without write permission stops it as it stops a user (the suite may run as root)."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(24, 1, 0, 0, 0) != 0:  # PR_CAPBSET_DROP, CAP_DAC_OVERRIDE: gone from the command it execs
+        raise OSError(ctypes.get_errno(), "cannot drop CAP_DAC_OVERRIDE")
 
 
 north_up = st.builds(

@@ -12,7 +12,8 @@ feature's ``action`` property says what a person did:
   vertices within ``snap_px`` pixels, else become new vertices;
 * ``complete`` (Polygon geometry): the reviewer vouches that inside it every boundary is drawn and
   every drawn edge is right, so the reviewed graph there is a label (fine-tuning trains on it and
-  treats the rest as unknown). The graph does not change.
+  treats the rest as unknown). The graph does not change. The polygon must cover imagery, not
+  only the margin around it that other edits may reach.
 
 Nothing is taken on trust: an edge's index must come with that edge's geometry (its two ends
 within ``match_px``), and every coordinate must be a pair of finite numbers inside ``extent``
@@ -28,7 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from shapely.geometry import Polygon
+from shapely.geometry import Polygon, box
 
 from csboundary.data.windows import world_to_pixel
 from csboundary.graph.boundary_graph import BoundaryGraph
@@ -148,7 +149,7 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
                 raise EditError(f"{what}: needs a LineString of at least 2 positions")
             added.append(line)
         elif action == "complete":
-            areas.append(_complete_ring(geometry, what, pixels))
+            areas.append(_complete_ring(geometry, what, pixels, extent))
         else:
             raise EditError(f"{what}: unknown action (one of {', '.join(ACTIONS)})")
 
@@ -201,14 +202,17 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
     return result, record
 
 
-def _complete_ring(geometry: dict, what: str, pixels) -> list[list[float]]:
+def _complete_ring(geometry: dict, what: str, pixels, extent: tuple[float, float, float, float]) -> list[list[float]]:
     """The outer ring of a ``complete`` edit's Polygon in world coordinates, closed, checked to
-    lie on the imagery (``pixels`` raises otherwise) and to enclose an area."""
+    lie on the imagery (``pixels`` raises otherwise), to enclose an area and to cover at least a
+    pixel of the imagery itself, not only the margin around it (fine-tuning labels nothing there)."""
     rings = geometry.get("coordinates") if geometry.get("type") == "Polygon" else None
     if not isinstance(rings, list) or not rings:
         raise EditError(f"{what}: needs a Polygon geometry")
     ring = pixels(rings[0], what)
     if len(ring) < 3 or not Polygon(ring).is_valid or Polygon(ring).area < 1.0:
         raise EditError(f"{what}: the polygon needs 3 corners around an area of at least one pixel, without crossing itself")
+    if Polygon(ring).intersection(box(*extent)).area < 1.0:
+        raise EditError(f"{what}: the polygon covers no pixel of the imagery, only the margin around it")
     world = [[float(x), float(y)] for x, y in (p[:2] for p in rings[0])]
     return world if world[0] == world[-1] else [*world, world[0]]

@@ -15,6 +15,7 @@ cities), so a run stopped at any point continues where it stopped when given aga
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -124,7 +125,13 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     out, base_path = Path(out), Path(weights) if weights else shipped_weights()
     work = Path(work) if work else default_work(out)
     base = checked_base(base_path)
-    cities = labelled_cities(labelled, work)
+    made = not work.exists()
+    try:
+        cities = labelled_cities(labelled, work)  # every input checked before anything is made
+    except InputError:
+        if made:  # the refused input of a second reviewed prediction comes after the first one's city was made
+            shutil.rmtree(work, ignore_errors=True)
+        raise
     fpn_config, afanet_config = training_configs(base, base_path, cities, budget, seed, Path(cache) if cache else work / "synthetic")
     resolved = resolve_device(device)
     seconds = {}

@@ -18,10 +18,12 @@ import pyogrio
 from shapely.geometry import Polygon
 
 from csboundary.data import city as layout
-from csboundary.data.ground_truth import LAYER
+from csboundary.data.ground_truth import LAYER, read_complete_area
+from csboundary.data.raster import Mosaic
 from csboundary.data.user_city import make_city
 from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
+from csboundary.models.training.data import covers_imagery
 from csboundary.pipeline.evaluate_set import set_cities
 from csboundary.pipeline.review import REVIEW_LOG, prediction_inputs, read_log
 
@@ -34,19 +36,36 @@ def complete_areas(prediction: Path) -> list[list[list[float]]]:
     return [ring for entry in log["reviews"] for ring in entry.get("complete_areas") or []]
 
 
-def reviewed_city(prediction: Path, out: Path) -> Path:
-    """The city directory ``out`` of a reviewed prediction folder: its imagery (linked), its
-    reviewed boundaries as ground truth and its complete areas; InputError when no area is
-    marked complete (nothing in it is known to be a label)."""
+def reviewed_areas(prediction: Path) -> gpd.GeoDataFrame:
+    """The areas marked complete in a reviewed prediction folder, checked to cover some of its
+    imagery; InputError when none is marked (nothing in it is known to be a label) or none
+    covers the imagery (a review log from before apply-review checked that)."""
     areas = complete_areas(prediction)
     if not areas:
         raise InputError(prediction, "no area of it is marked complete: on the review page mark what you reviewed "
                                      "(Area, or View complete), export the edits and run apply-review")
-    ground_truth = prediction / REVIEWED_GROUND_TRUTH
-    crs = pyogrio.read_info(ground_truth, layer=LAYER)["crs"]  # the graph's, in which the areas were drawn
+    crs = pyogrio.read_info(prediction / REVIEWED_GROUND_TRUTH, layer=LAYER)["crs"]  # the graph's, in which the areas were drawn
     complete = gpd.GeoDataFrame(geometry=[Polygon(ring) for ring in areas], crs=crs)
-    make_city(prediction_inputs(prediction), ground_truth, out, complete=complete)
+    with Mosaic.open(prediction_inputs(prediction)) as mosaic:
+        if not covers_imagery(list(complete.to_crs(mosaic.crs).geometry if mosaic.crs else complete.geometry), mosaic):
+            raise InputError(prediction / REVIEW_LOG, "no area marked complete in it covers any of the imagery (they lie in "
+                                                      "the margin around it): mark the areas again and run apply-review")
+    return complete
+
+
+def reviewed_city(prediction: Path, out: Path, complete: gpd.GeoDataFrame) -> Path:
+    """The city directory ``out`` of a reviewed prediction folder: its imagery (linked), its
+    reviewed boundaries as ground truth and its ``complete`` areas (:func:`reviewed_areas`)."""
+    make_city(prediction_inputs(prediction), prediction / REVIEWED_GROUND_TRUTH, out, complete=complete)
     return out
+
+
+def check_complete_area(city: Path) -> None:
+    """A labelled city with a complete area must have some of its imagery inside it."""
+    with Mosaic.open(layout.tiles_dir(city)) as mosaic:
+        areas = read_complete_area(layout.ground_truth_path(city), mosaic.crs)
+        if areas is not None and not covers_imagery(areas, mosaic):
+            raise InputError(city, "its complete area does not cover any of its imagery")
 
 
 def is_reviewed_prediction(path: Path) -> bool:
@@ -55,15 +74,18 @@ def is_reviewed_prediction(path: Path) -> bool:
 
 def labelled_cities(paths: list[Path], work: Path) -> list[Path]:
     """The city directories of ``paths``: a city is itself, a set (``set.json``, or a folder of
-    cities) is its cities, a reviewed prediction becomes a city under ``work/labelled/``."""
+    cities) is its cities, a reviewed prediction becomes a city under ``work/labelled/``. Every
+    input is checked before anything is made in ``work``: a refused one leaves nothing behind."""
     found: list[Path] = []
+    reviewed: dict[Path, tuple[Path, gpd.GeoDataFrame]] = {}  # city to make -> (prediction, its complete areas)
     for path in paths:
         path = Path(path)
         if layout.is_city_dir(path):
             found.append(path)
         elif is_reviewed_prediction(path):
             digest = hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:8]
-            found.append(reviewed_city(path, work / "labelled" / f"{path.name}-{digest}"))
+            found.append(work / "labelled" / f"{path.name}-{digest}")
+            reviewed[found[-1]] = (path, reviewed_areas(path))
         elif (path / SET_FILE).exists() or (path.is_dir() and any(layout.is_city_dir(p) for p in path.iterdir())):
             found += set_cities(path)
         elif (path / "summary.json").exists():
@@ -74,4 +96,9 @@ def labelled_cities(paths: list[Path], work: Path) -> list[Path]:
     names = [p.resolve() for p in found]
     if len(set(names)) != len(names):
         raise InputError(next(p for p in found if names.count(p.resolve()) > 1), "given twice")
+    for city in found:
+        if city not in reviewed:
+            check_complete_area(city)
+    for city, (prediction, complete) in reviewed.items():
+        reviewed_city(prediction, city, complete)
     return found

@@ -12,6 +12,7 @@ import geopandas as gpd
 import numpy as np
 
 from csboundary.data.atomic import check_output_dir, staging_folder
+from csboundary.data.folder_lock import folder_lock
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import ModelInput, model_view
@@ -56,14 +57,33 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
     mosaic, _ = open_imagery(inputs)
     view = model_view(mosaic, gsd, predictor.pixel_size_m)
     check_output_dir(out, inputs=inputs)
-    grid = PatchGrid.for_mosaic(view.mosaic)
-    warn_if_sparse(grid, view.mosaic, inputs)
-    if on_plan is not None:
-        on_plan(grid, view)
-    if threads and not (scheduler or workers):
-        import torch
+    with contextlib.ExitStack() as stack:
+        if Path(out).is_dir():  # a folder in use is refused before the plan is told (run_prediction locks it too)
+            stack.enter_context(folder_lock(out))
+        grid = PatchGrid.for_mosaic(view.mosaic)
+        warn_if_sparse(grid, view.mosaic, inputs)
+        if on_plan is not None:
+            on_plan(grid, view)
+        if threads and not (scheduler or workers):
+            import torch
 
-        torch.set_num_threads(threads)
+            torch.set_num_threads(threads)
+        settings = run_settings(predictor, view, weights, batch_size)
+        stack.enter_context(view.mosaic)
+        options = {}
+        if scheduler or workers:
+            from csboundary.pipeline.distributed import dask_client, dask_executor
+
+            client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
+            options = {"executor": dask_executor(client), "threads": threads or worker_threads}
+            settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
+        _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=progress,
+                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, keep_graphs=False, **options)
+    return summary
+
+
+def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Path | None, batch_size: int) -> dict:
+    """The model and how it is run, for the run's manifest (JSON-ready)."""
     settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
                 "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
                 "max_gap": [predictor.support.max_gap_px, predictor.support.gap_level],
@@ -85,17 +105,7 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
             settings["surface_both_sides"] = predictor.surface.both_sides
     if predictor.gate.active:  # likewise
         settings["surface_gate"] = [predictor.gate.radius_px, predictor.gate.full_change, predictor.gate.min_piece_px]
-    with view.mosaic, contextlib.ExitStack() as stack:
-        options = {}
-        if scheduler or workers:
-            from csboundary.pipeline.distributed import dask_client, dask_executor
-
-            client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
-            options = {"executor": dask_executor(client), "threads": threads or worker_threads}
-            settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
-        _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=progress,
-                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, keep_graphs=False, **options)
-    return summary
+    return settings
 
 
 def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: PatchPredictor, gsd: float | None = None) -> BoundaryGraph:

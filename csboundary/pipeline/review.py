@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from csboundary.data import city as layout
-from csboundary.data.atomic import atomic_path
+from csboundary.data.atomic import atomic_path, check_output_dir
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
@@ -122,6 +122,7 @@ def apply_review(prediction: Path, edits: Path) -> dict:
         updated, record = apply_edits(graph, features, extent=imagery_extent(prediction))
     except EditError as exc:
         raise InputError(edits, str(exc)) from exc
+    check_output_dir(prediction)  # a folder that cannot be written is named, not the first temporary file in it
     write_graph_outputs(updated, prediction)
     if (prediction / LANELET2_MAP).exists():
         info = prediction / PROJECTOR_INFO

@@ -15,7 +15,9 @@ Every file is written under a temporary name and renamed when complete; ``summar
 means the run finished. The work itself is kept in ``OUT/.csboundary-run/`` as it is done
 (:mod:`csboundary.pipeline.run_store`): the same command run again after a crash, Ctrl-C or
 SIGKILL continues where it stopped, and refuses a store left by other inputs, weights or
-settings (``restart`` discards it). The store is removed once the outputs are in place.
+settings (``restart`` discards it). The store is removed once the outputs are in place. One
+run at a time works in a folder, and a full disk keeps the finished work
+(:mod:`csboundary.pipeline.run_folder`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from typing import Callable
 import numpy as np
 import rasterio
 
-from csboundary.data.atomic import check_output_dir, clear_stale_temporaries, staging_folder
+from csboundary.data.atomic import staging_folder
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.windows import pixel_to_world
 from csboundary.data.raster import Mosaic
@@ -39,7 +41,8 @@ from csboundary.data.units import GroundUnits
 from csboundary.graph.stitching import StitchConfig
 from csboundary.pipeline.city import CPU, GDAL_ENV, STAGES, CityResult, CityRun, PatchModel, predict_city, run_here
 from csboundary.pipeline.map_output import write_maps_cog
-from csboundary.pipeline.run_store import STORE_DIR, RunStore
+from csboundary.pipeline.run_folder import run_folder
+from csboundary.pipeline.run_store import RunStore
 from csboundary.viz.overlay import overview_scale
 from csboundary.pipeline.outputs import GraphWriter, read_prediction_graph
 
@@ -68,13 +71,10 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     """
     if units is None:
         units = mosaic_units(mosaic) or PIXEL_UNITS
-    out = check_output_dir(out_dir, create=True)
-    clear_stale_temporaries(out)  # what a run killed with SIGKILL left behind
-    store = RunStore.open(out / STORE_DIR, run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps), restart=restart,
-                           write_behind=True)
-    (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
-    start = time.perf_counter()
-    with staging_folder(out) as stage, contextlib.ExitStack() as stack:
+    manifest = run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps)
+    with run_folder(out_dir, manifest, restart) as (out, store), staging_folder(out) as stage, contextlib.ExitStack() as stack:
+        (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
+        start = time.perf_counter()
         stack.enter_context(rasterio.Env(**GDAL_ENV))  # overviews read every tile too
         files = {"gpkg": stage / "boundaries.gpkg", "geojson": stage / "boundaries.geojson", "graph_json": stage / "graph.json"}
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
@@ -100,7 +100,6 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         summary = summarize(mosaic, result, seconds, files, settings or {}, units, counts)
         summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
         (stage / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n")
-    store.remove()
     return result, summary
 
 

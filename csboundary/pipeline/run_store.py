@@ -105,7 +105,7 @@ def _atomic_save(path: Path, write, checksum: bool = False) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _holds_work(root: Path) -> bool:
+def holds_work(root: Path) -> bool:
     """Whether a store has any patch's maps or window's graph stored."""
     return any(not n.startswith(".") for sub in ("maps", "graphs") if (root / sub).is_dir() for n in os.listdir(root / sub))
 
@@ -155,7 +155,7 @@ class RunStore:
                 raise RunMismatch(root.parent, f"holds an unfinished run whose {MANIFEST} is damaged; "
                                                "rerun with --restart to discard it, or choose another --out") from None
             differs = [k for k in [*manifest, *(k for k in old if k not in manifest)] if old.get(k) != manifest.get(k)]
-            if differs and not _holds_work(root):  # a run that failed before any work (e.g. on a damaged input) blocks nothing
+            if differs and not holds_work(root):  # a run that failed before any work (e.g. on a damaged input) blocks nothing
                 warnings.warn(f"{root.parent}: discarding an unfinished run with other {', '.join(differs)} that had done no work",
                               InputWarning)
                 shutil.rmtree(root)
@@ -301,6 +301,13 @@ class RunStore:
     def flush(self) -> None:
         """Wait for every background write."""
         self._settle(0)
+
+    def abandon(self) -> None:
+        """Wait for every background write, failed or not (the run is ending on a failure), so
+        nothing is written into the store after this."""
+        for _, future in list(self._pending.values()):
+            future.exception()
+        self._pending.clear()
 
     def load_maps(self, index: Index) -> np.ndarray | None:
         """A patch's stored maps (memory-mapped on disk), ``None`` for a window without imagery."""

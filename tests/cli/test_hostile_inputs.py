@@ -24,7 +24,7 @@ from csboundary.data.synth.styles import style_config
 from csboundary.models.afanet import AfANet, AfANetConfig
 from csboundary.models.checkpoint import FORMAT, load_checkpoint, save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
-from helpers import run_cli
+from helpers import obey_file_permissions, run_cli
 
 UTM = "EPSG:32618"
 GSD = 0.3  # the tiny test bundle's pixel size, so 0.3 m test imagery is used as it is
@@ -486,3 +486,131 @@ def test_predict_names_what_it_wrote_and_counts_in_english(world, tmp_path):
     assert len(wrote) == 1
     named = wrote[0].split(": ", 1)[1].split(", ")
     assert named == final_files(tmp_path / "out") and {"graph.json", "boundaries.gpkg", "summary.json"} <= set(named)
+
+
+# -- one run per output folder -----------------------------------------------------------------------
+def _start_predict(world, inputs, out: Path) -> subprocess.Popen:
+    """``predict`` started in the background, returned once it is working in ``out`` (its staging folder made)."""
+    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(inputs), "--out", str(out), "--weights", str(world["bundle"]),
+                            "--device", "cpu", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not any(p.name.startswith(".run.partial-") for p in (out.iterdir() if out.exists() else [])):
+        assert job.poll() is None and time.time() < deadline, "the run ended before the test could meet it"
+        time.sleep(0.02)
+    return job
+
+
+def test_a_second_run_into_a_folder_in_use_is_refused_and_the_first_completes(world, slow_city, tmp_path):
+    out = tmp_path / "out"
+    first = _start_predict(world, slow_city, out)
+    os.kill(first.pid, signal.SIGSTOP)  # held mid-run, so the second meets it however slow this machine is
+    try:
+        second = predict(world, slow_city, out=out)
+    finally:
+        os.kill(first.pid, signal.SIGCONT)
+    one_error(second, str(out), "in use by another csboundary run", f"pid {first.pid} on ", "started ")
+    _, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["work"]["patches_predicted"] == 9 and summary["work"]["windows_connected"] == 9  # all its own work
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no lock file, no store, no temporary
+
+
+def test_the_lock_of_a_killed_run_blocks_nothing(world, slow_city, tmp_path):
+    out = tmp_path / "out"
+    killed = _start_predict(world, slow_city, out)
+    killed.kill()  # SIGKILL: nothing of it runs again, its lock file stays
+    killed.wait()
+    assert f"pid {killed.pid} " in (out / ".csboundary.lock").read_text()
+    again = predict(world, slow_city, out=out)
+    assert again.returncode == 0, again.stderr
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+# -- a full disk ---------------------------------------------------------------------------------------
+def predict_on_a_filling_disk(world, inputs, out: Path, room: int) -> subprocess.CompletedProcess:
+    """``predict`` in a process whose disk is full once ``room`` arrays are stored (numpy.save and
+    numpy.savez, the run store's writers, then fail with ENOSPC, as they do on a full disk)."""
+    probe = ("import errno, sys, numpy as np\nfrom csboundary.cli import main as m\n"
+             "room = [int(sys.argv.pop(1))]\n"
+             "def filling(write):\n    def full(*a, **k):\n        room[0] -= 1\n        if room[0] < 0:\n"
+             "            raise OSError(errno.ENOSPC, 'No space left on device')\n        return write(*a, **k)\n    return full\n"
+             "np.save, np.savez = filling(np.save), filling(np.savez)\nsys.argv = ['csboundary', *sys.argv[1:]]\nm.main()\n")
+    args = ["predict", str(inputs), "--out", str(out), "--weights", str(world["bundle"]), "--device", "cpu", "--quiet"]
+    return subprocess.run([sys.executable, "-c", probe, str(room), *args], capture_output=True, text=True, timeout=600)
+
+
+def error_lines(result: subprocess.CompletedProcess) -> list[str]:
+    assert "Traceback" not in result.stderr, result.stderr
+    return [line for line in result.stderr.splitlines() if line.startswith("error")]
+
+
+def test_a_full_disk_before_any_work_leaves_nothing(world, tmp_path):
+    out = tmp_path / "out"
+    done = predict_on_a_filling_disk(world, world["tif"], out, room=0)
+    assert done.returncode == 1 and error_lines(done) == [f"error: {out}: no space left on device; nothing of the run was kept"], done.stderr
+    assert not out.exists()  # the folder the run made, gone with its empty work store
+
+
+def test_a_full_disk_keeps_the_finished_work_for_the_same_command(world, slow_city, tmp_path):
+    out = tmp_path / "out"
+    done = predict_on_a_filling_disk(world, slow_city, out, room=12)
+    [line] = error_lines(done)
+    assert done.returncode == 1 and line.startswith(f"error: {out}: no space left on device; the finished work (")
+    assert f"is kept in {out / '.csboundary-run'}: free some space and run the same command to continue" in line
+    assert final_files(out) == [".csboundary-run"]
+    again = predict(world, slow_city, out=out)
+    assert again.returncode == 0, again.stderr
+    work = json.loads((out / "summary.json").read_text())["work"]
+    assert work["patches_reused"] > 0 and work["patches_predicted"] + work["patches_reused"] == 9
+
+
+# -- review edits and fine-tuning ---------------------------------------------------------------------
+MARGIN_RING = [[500000 + GSD * col, 4400000 - GSD * row] for col, row in [(-90, 10), (-10, 10), (-10, 80), (-90, 80), (-90, 10)]]
+
+
+def test_a_complete_area_wholly_in_the_margin_is_refused(world, tmp_path):
+    pred = tmp_path / "pred"
+    assert predict(world, world["tif"], out=pred).returncode == 0
+    before = (pred / "graph.json").read_bytes()
+    edits = tmp_path / "edits.geojson"
+    edits.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [MARGIN_RING]}}]}))
+    one_error(run_cli("apply-review", str(pred), str(edits)), str(edits), "edit 0 (complete)", "covers no pixel of the imagery")
+    assert (pred / "graph.json").read_bytes() == before and not (pred / "review.json").exists()
+
+
+def test_finetune_refuses_a_margin_area_before_making_anything(world, tmp_path):
+    """A review log from before apply-review checked its areas: refused in one line, no work folder made."""
+    from csboundary.graph import BoundaryGraph
+    from csboundary.pipeline.outputs import write_graph_outputs
+
+    pred = tmp_path / "pred"
+    assert predict(world, world["tif"], out=pred).returncode == 0
+    predicted = BoundaryGraph.read_json(pred / "graph.json")
+    reviewed = BoundaryGraph(np.array([[50.0, 20.0], [50.0, 280.0]]), [[0, 1]], edge_scores=np.array([0.9]),
+                             transform=predicted.transform, crs=predicted.crs)
+    reviewed.write_json(pred / "graph.json")
+    write_graph_outputs(reviewed, pred)
+    (pred / "review.json").write_text(json.dumps({"reviews": [{"time": "2025-01-01T00:00:00", "complete_areas": [MARGIN_RING]}]}))
+    work = tmp_path / "work"
+    done = run_cli("finetune", str(pred), "--out", str(tmp_path / "tuned.pt"), "--work", str(work), "--fpn-steps", "1",
+                   "--afanet-steps", "1", "--synthetic-cities", "1", "--device", "cpu", "--quiet")
+    one_error(done, str(pred / "review.json"), "no area marked complete in it covers any of the imagery")
+    assert not work.exists() and not (tmp_path / "tuned.pt").exists()
+
+
+def test_apply_review_names_the_folder_it_cannot_write(world, tmp_path):
+    pred = tmp_path / "pred"
+    assert predict(world, world["tif"], out=pred).returncode == 0
+    edits = tmp_path / "edits.geojson"
+    edits.write_text(json.dumps({"type": "FeatureCollection", "features": []}))
+    pred.chmod(0o555)
+    try:
+        done = run_cli("apply-review", str(pred), str(edits), preexec_fn=obey_file_permissions if os.geteuid() == 0 else None)
+    except subprocess.SubprocessError:
+        pytest.skip("running as root without the capability to give up CAP_DAC_OVERRIDE")
+    finally:
+        pred.chmod(0o755)
+    one_error(done, f"error: {pred}: cannot write there")
+    assert final_files(pred) == ["boundaries.geojson", "boundaries.gpkg", "detail.png", "graph.json", "overview.png", "summary.json"]

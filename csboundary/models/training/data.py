@@ -88,6 +88,23 @@ def _polygon_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
     return rasterize(polygons, out_shape=(mosaic.height, mosaic.width), transform=mosaic.transform, fill=0, default_value=1, dtype="uint8")
 
 
+def covers_imagery(polygons: list, mosaic: Mosaic) -> bool:
+    """Whether ``polygons`` (in the mosaic's CRS) hold the centre of any pixel of the mosaic: a
+    complete area that does not is refused by :class:`TrainingCity`. Only the polygons' bounding
+    window is rasterized, as training rasterizes them."""
+    from affine import Affine
+    from rasterio.features import rasterize
+    from shapely.ops import unary_union
+
+    if not polygons:
+        return False
+    window = mosaic.window_from_bounds(*unary_union(polygons).bounds).intersection(mosaic.window)
+    if window is None:
+        return False
+    transform = mosaic.transform @ Affine.translation(window.col_off, window.row_off)
+    return bool(rasterize(polygons, out_shape=(window.height, window.width), transform=transform, fill=0, default_value=1, dtype="uint8").any())
+
+
 def city_probabilities(cities: list, extra: int, extra_share: float, by_area: bool) -> np.ndarray:
     """The probability of drawing each of ``cities`` for a sample, the last ``extra`` of them the
     extra (user) cities: within each group in proportion to area (``by_area``) or alike, the
