@@ -17,8 +17,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+from affine import Affine
+
 from csboundary.data.atomic import atomic_path
-from csboundary.data.units import geometric_mean, ground_units
+from csboundary.data.units import geometric_mean, ground_units, pixel_size_m
 from csboundary.errors import InputError
 
 META_FILE = "city.json"
@@ -83,11 +85,10 @@ def pixel_metres(meta: dict[str, Any]) -> float | None:
     try:
         if not placed and CRS.from_user_input(crs).is_geographic:
             return None
-        a, e, at = (transform[0], transform[4], (transform[2], transform[5])) if placed else (gsd, gsd, None)
-        metres = ground_units(crs, at).metres_per_unit
+        grid = Affine(*transform[:6]) if placed else Affine.scale(gsd)
+        return geometric_mean(pixel_size_m(ground_units(crs, (grid.c, grid.f) if placed else None), grid))
     except CRSError:
         return None
-    return geometric_mean((abs(a) * metres[0], abs(e) * metres[1]))
 
 
 def is_city_dir(path: str | Path) -> bool:

@@ -273,16 +273,24 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
     return District(graph, frame["edge_id"].to_numpy(np.int64), ids)
 
 
-def prediction_extent(gpkg: Path, transform: Affine, info: dict) -> tuple[float, float, float, float] | None:
-    """(MINX, MINY, MAXX, MAXY) of what a prediction covers: its imagery (the pixel grid and the
-    mosaic size in ``summary.json`` beside the GeoPackage), else its edges' extent."""
+def imagery_extent(prediction: Path) -> tuple[float, float, float, float] | None:
+    """The imagery's extent in graph pixels (from summary.json), or None when not recorded."""
     try:
-        width, height = json.loads((gpkg.parent / "summary.json").read_text())["mosaic_px"]
-        xs, ys = pixel_to_world(transform, np.array([0.0, float(width)]), np.array([0.0, float(height)]))
-        return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
+        width, height = json.loads((prediction / "summary.json").read_text())["mosaic_px"]
+        return (0.0, 0.0, float(width), float(height))
     except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def prediction_extent(gpkg: Path, transform: Affine, info: dict) -> tuple[float, float, float, float] | None:
+    """(MINX, MINY, MAXX, MAXY) of what a prediction covers: its imagery (:func:`imagery_extent`
+    on the pixel grid), else its edges' extent."""
+    pixels = imagery_extent(gpkg.parent)
+    if pixels is None:
         total = info.get("total_bounds")
         return tuple(map(float, total)) if total is not None and np.isfinite(total).all() else None
+    xs, ys = pixel_to_world(transform, np.array(pixels[0::2]), np.array(pixels[1::2]))
+    return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
 
 
 def check_finite_geometry(graph: BoundaryGraph, source) -> None:

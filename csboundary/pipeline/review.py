@@ -17,7 +17,7 @@ from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.review_edits import EditError, apply_edits
 from csboundary.pipeline.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
-from csboundary.pipeline.outputs import read_district, write_graph_outputs
+from csboundary.pipeline.outputs import imagery_extent, read_district, write_graph_outputs
 from csboundary.viz.review_page import write_review_page
 
 REVIEW_LOG = "review.json"
@@ -76,15 +76,6 @@ def graph_fingerprint(prediction: Path) -> str:
     """sha256 of the prediction's graph.json: the review page writes it into the edits it
     exports, so edits are applied only to the graph they were made on."""
     return hashlib.sha256((prediction / "graph.json").read_bytes()).hexdigest()
-
-
-def imagery_extent(prediction: Path) -> tuple[float, float, float, float] | None:
-    """The imagery's extent in graph pixels (from summary.json), or None when not recorded."""
-    try:
-        width, height = json.loads((prediction / "summary.json").read_text())["mosaic_px"]
-        return (0.0, 0.0, float(width), float(height))
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
 
 
 def apply_review(prediction: Path, edits: Path) -> dict:

@@ -89,15 +89,21 @@ def test_min_confidence_needs_a_bundle_with_a_confidence(demo_run, tmp_path):
     assert not (tmp_path / "out" / "graph.json").exists()
 
 
+def synth_cities(folder: Path, tile_size: int) -> list[Path]:
+    """Two small validation-split cities (seeds 1 and 2) made by the command line."""
+    cities = []
+    for seed in (1, 2):
+        city = folder / f"city{seed}"
+        done = run_cli("synth", str(city), "--seed", str(seed), "--tile-size", str(tile_size), "--split", "valid", "--quiet")
+        assert done.returncode == 0, done.stderr
+        cities.append(city)
+    return cities
+
+
 def test_fit_confidence_writes_a_bundle_predict_uses(tmp_path):
     from csboundary.models.checkpoint import file_sha256, load_checkpoint
 
-    cities = []
-    for seed in (1, 2):
-        city = tmp_path / f"city{seed}"
-        done = run_cli("synth", str(city), "--seed", str(seed), "--tile-size", "1100", "--split", "valid", "--quiet")
-        assert done.returncode == 0, done.stderr
-        cities.append(city)
+    cities = synth_cities(tmp_path, 1100)
     out = tmp_path / "fitted.pt"
     done = run_cli("fit-confidence", *map(str, cities), "--out", str(out), "--trees", "5", "--device", "cpu", "--quiet")
     assert done.returncode == 0, done.stderr
@@ -117,16 +123,12 @@ def test_fit_confidence_on_cities_without_ground_truth_is_one_line(tmp_path):
 
     from csboundary.data.ground_truth import LAYER
 
-    cities = []
-    for seed in (1, 2):
-        city = tmp_path / f"city{seed}"
-        done = run_cli("synth", str(city), "--seed", str(seed), "--tile-size", "700", "--split", "valid", "--quiet")
-        assert done.returncode == 0, done.stderr
+    cities = synth_cities(tmp_path, 700)
+    for city in cities:
         truth = city / "ground_truth.gpkg"
         empty = gpd.read_file(truth, layer=LAYER).iloc[:0]
         truth.unlink()
         empty.to_file(truth, layer=LAYER, driver="GPKG")
-        cities.append(city)
     for given, needle in ((cities[:1], "needs at least two"), (cities, "no predicted edge lies on the ground truth")):
         done = run_cli("fit-confidence", *map(str, given), "--out", str(tmp_path / "fitted.pt"), "--trees", "5", "--device", "cpu", "--quiet")
         lines = done.stderr.strip().splitlines()
