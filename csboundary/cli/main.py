@@ -44,6 +44,7 @@ COMMANDS = (  # (name, function)
     ("fit-confidence", training_commands.fit_confidence),
     ("finetune", training_commands.finetune),
     ("evaluate-finetune", training_commands.evaluate_finetune),
+    ("adapt", training_commands.adapt),
 )
 for _name, _command in COMMANDS:
     app.command(_name)(_command)

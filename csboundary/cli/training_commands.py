@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, finite, out_dir, out_file
+from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, finite, out_dir, out_file, positive
 
 
 def train(
@@ -139,6 +139,43 @@ def finetune(
     minutes = sum(done["seconds"].values()) / 60
     typer.echo(f"{out}: fine-tuned on {len(done['cities'])} labelled cities ({budget.fpn_steps} FPN + {budget.afanet_steps} AfANet steps, "
                f"{minutes:.1f} min); runs in {done['work']}")
+
+
+def adapt(
+    imagery: list[Path] = typer.Argument(..., help="Your unlabelled imagery: GeoTIFFs, folders of them, city folders, sets or "
+                                                  "prediction folders (any labels in them are ignored)."),
+    out: Path = typer.Option(..., "--out", help="Bundle to write: the adapted weights, used as any bundle (predict --weights OUT)."),
+    weights: WeightsOption = None,
+    work: Optional[Path] = typer.Option(None, help="Folder of the training runs; give the same command again to continue a stopped "
+                                                    "run (default: OUT-adapt/ beside OUT)."),
+    fpn_steps: Optional[int] = typer.Option(None, min=1, help="FPN self-training steps (default 800)."),
+    afanet_steps: Optional[int] = typer.Option(None, min=0, help="AfANet steps on the adapted FPN's vertices (default 300; 0 keeps "
+                                                                 "the bundle's AfANet)."),
+    synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
+    mix: bool = typer.Option(True, "--mix/--no-mix", help="Paste synthetic roadway, with its labels, into your windows."),
+    surface_anchor: bool = typer.Option(True, "--surface-anchor/--no-surface-anchor",
+                                        help="Teach a boundary only near the edge of the teacher's roadway."),
+    cache: Optional[Path] = typer.Option(None, help="Folder of the synthetic cities (default: in WORK)."),
+    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of imagery without a CRS."),
+    seed: int = typer.Option(0, min=0, help="Seed of the sample draws."),
+    device: DeviceOption = "auto",
+    quiet: QuietOption = False,
+) -> None:
+    """Adapt the weights to your city from its own unlabelled imagery: self-training of the FPN
+    by an averaged teacher, with synthetic cities mixed in, then AfANet on the adapted FPN's
+    vertices (docs/adapt.md). The default budget takes about 13 minutes on a 2-core CPU."""
+    from csboundary.models.training.adapt import AdaptConfig
+    from csboundary.pipeline.adapt import AdaptBudget, adapt as run, default_work
+
+    out_file(out, (".pt",))
+    given = dict(fpn_steps=fpn_steps, afanet_steps=afanet_steps, synthetic_cities=synthetic_cities)
+    budget = AdaptBudget.from_dict({k: v for k, v in given.items() if v is not None})
+    method = AdaptConfig(mix=mix, surface_anchor=surface_anchor)
+    done = run(imagery, out, weights=weights, work=work or default_work(out), budget=budget, method=method, seed=seed, cache=cache,
+               gsd=gsd, device=device, progress=not quiet)
+    minutes = sum(done["seconds"].values()) / 60
+    typer.echo(f"{out}: adapted to {done['images']} images ({done['pixels'] / 1e6:.2f} Mpx; {budget.fpn_steps} FPN + "
+               f"{budget.afanet_steps} AfANet steps, {minutes:.1f} min); runs in {done['work']}")
 
 
 def evaluate_finetune(

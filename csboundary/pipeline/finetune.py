@@ -90,13 +90,15 @@ def checked_base(path: Path) -> dict:
     return load_checkpoint(path, ("bundle",))
 
 
-def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool) -> Path:
-    """One training run in ``run``, resumed from its last checkpoint when one is there; a run
-    whose final weights exist under the same config is not repeated."""
+def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool, trainer=None, final_name: str | None = None) -> Path:
+    """One training run in ``run`` (``trainer(config, run, device, resume, progress)``, by
+    default the trainer of ``kind``), resumed from its last checkpoint when one is there; a run
+    whose final weights (``final_name``, default ``<kind>.pt``) exist under the same config is
+    not repeated."""
     from csboundary.models.training.afanet import train_afanet
     from csboundary.models.training.fpn import train_fpn
 
-    final, last, recorded = run / f"{kind}.pt", run / f"{kind}-last.pt", run / "config.json"
+    final, last, recorded = run / (final_name or f"{kind}.pt"), run / f"{kind}-last.pt", run / "config.json"
     wanted = json.dumps(config.to_dict(), indent=2) + "\n"
     if recorded.exists() and recorded.read_text() != wanted:
         raise InputError(run, "holds a fine-tune with other inputs or settings: give another --work folder or remove it")
@@ -105,8 +107,8 @@ def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool) ->
     run.mkdir(parents=True, exist_ok=True)
     with atomic_path(recorded) as tmp:
         tmp.write_text(wanted)
-    trainer = {"fpn": train_fpn, "afanet": train_afanet}[kind]
-    return trainer(config, run, device, str(last) if last.exists() else None, progress=progress)
+    trainer = trainer or {"fpn": train_fpn, "afanet": train_afanet}[kind]
+    return trainer(config, run, device, str(last) if last.exists() else None, progress)
 
 
 def labelled_record(city: Path) -> dict:

@@ -1,0 +1,223 @@
+"""Self-training the FPN on a user's unlabelled imagery (``csboundary adapt``).
+
+The synthetic-to-real gap in dense prediction has a standard cure (DACS, DAFormer): a teacher
+that is the exponential moving average (EMA) of the student labels the target images; the
+student learns from the teacher's confident pixels under strong augmentation, beside labelled
+source images, and source regions pasted into target images carry their true labels across.
+Here:
+
+* the **teacher** is the EMA of the student's weights; it sees each target window as read
+  (flipped or turned only) and its keypoint, boundary and road-surface probabilities become the
+  pseudo-labels: hard 0/1 for boundary and surface, weighted per pixel by the teacher's
+  confidence ``|2p - 1|``; the keypoint heat as it is (a soft target);
+* the **student** sees the same window re-lit and degraded (strong photometric augmentation);
+* **synthetic labelled windows** of the bundle's style mix make up the rest of every batch, so
+  what the model learnt there is kept;
+* **cross-domain mixing**: the roadway of a synthetic window (its road surface, widened to take in
+  the curb) is pasted into the target window, with its true labels;
+* the **road surface as an anchor**: a boundary is where the roadway ends, so a teacher boundary
+  pixel far from any edge of the teacher's own roadway is taught as background.
+
+Each part is a switch of :class:`AdaptConfig`; ``docs/experiments.md`` records what each does.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from csboundary.config import Config
+from csboundary.models.augmentation import AugmentConfig, flip_rotate90, photometric
+from csboundary.models.checkpoint import file_sha256, save_checkpoint
+from csboundary.models.style_mixing import add_style_mixing
+from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
+from csboundary.models.training.data import TrainingCity
+from csboundary.models.training.fpn import _fpn_batch, fpn_loss, fpn_parameter_groups, starting_fpn, validate_fpn
+from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
+from csboundary.models.training.unlabelled import UnlabelledImagery
+
+
+@dataclass(frozen=True)
+class AdaptConfig(Config):
+    """The self-training method's settings (module doc); the budget and the source recipe are
+    the run's :class:`TrainConfig`. Stored in the run's ``options``."""
+    config_name = "adapt"
+
+    source_batch: int = 2  # synthetic labelled windows per step
+    target_batch: int = 2  # windows of the user's imagery per step
+    ema_decay: float = 0.99  # teacher = decay x teacher + (1 - decay) x student, every step
+    target_weight: float = 1.0  # the pseudo-label loss's weight beside the source loss
+    confidence_weighting: bool = True  # weight each pseudo-label by the teacher's confidence |2p - 1|; else 1
+    strong_augment: bool = True  # the student sees the target re-lit and degraded; else as the teacher does
+    mix: bool = True  # paste synthetic roadway (with its labels) into the target windows
+    mix_widen_px: int = 8  # the pasted roadway is widened by this to carry its curb and boundary along
+    surface_anchor: bool = True  # teacher boundary pixels farther than anchor_px from its roadway's edge are taught as background
+    anchor_px: int = 6
+    export: str = "teacher"  # teacher | student: the network written as the adapted FPN
+
+
+class MeanTeacher(torch.nn.Module):
+    """A student network and its EMA teacher, saved and restored together (an exact resume)."""
+
+    def __init__(self, student: torch.nn.Module):
+        super().__init__()
+        self.teacher = copy.deepcopy(student)
+        self.teacher.requires_grad_(False)
+        self.student = student
+
+    def train(self, mode: bool = True) -> "MeanTeacher":
+        self.training = mode
+        self.student.train(mode)
+        self.teacher.eval()  # the teacher's batch statistics are the EMA's, never a batch's
+        return self
+
+    @torch.no_grad()
+    def update_teacher(self, decay: float) -> None:
+        """Move every teacher weight and batch-norm statistic ``1 - decay`` of the way to the student's."""
+        for t, s in zip(self.teacher.state_dict().values(), self.student.state_dict().values()):
+            if t.dtype.is_floating_point:
+                t.mul_(decay).add_(s, alpha=1 - decay)
+            else:
+                t.copy_(s)
+
+    @torch.no_grad()
+    def pseudo_maps(self, image: torch.Tensor) -> torch.Tensor:
+        """(B, C, H, W) teacher probabilities of ``image``."""
+        self.teacher.eval()
+        return torch.sigmoid(self.teacher(image))
+
+
+def roadway_edge_near(surface: torch.Tensor, px: int) -> torch.Tensor:
+    """(B, H, W) bool: pixels within ``px`` of an edge of the roadway ``surface > 0.5`` (B, H, W)."""
+    road = (surface > 0.5).float()[:, None]
+    grown = F.max_pool2d(road, 3, stride=1, padding=1)
+    shrunk = -F.max_pool2d(-road, 3, stride=1, padding=1)
+    edge = (grown - shrunk) > 0
+    return F.max_pool2d(edge.float(), 2 * px + 1, stride=1, padding=px)[:, 0] > 0
+
+
+def pseudo_labels(maps: torch.Tensor, valid: torch.Tensor, settings: AdaptConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    """Targets and per-pixel weights (B, C, H, W) from teacher probabilities ``maps`` (module
+    doc): keypoint heat soft, boundary and surface hard, weighted by confidence; no weight off
+    the imagery (``valid`` (B, H, W) false)."""
+    target = maps.clone()
+    target[:, 1:] = (maps[:, 1:] > 0.5).to(maps.dtype)
+    weight = (2 * maps - 1).abs() if settings.confidence_weighting else torch.ones_like(maps)
+    weight[:, 0] = 1.0
+    if settings.surface_anchor and maps.shape[1] > 2:
+        away = ~roadway_edge_near(maps[:, 2], settings.anchor_px) & (target[:, 1] > 0)
+        target[:, 1][away] = 0.0
+        weight[:, 1][away] = 1.0
+    return target, weight * valid[:, None].to(maps.dtype)
+
+
+def pseudo_label_loss(logits: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, config: TrainConfig) -> torch.Tensor:
+    """Weighted BCE of keypoint and boundary (with the recipe's positive weights) plus
+    ``surface_weight`` x the surface BCE, each normalised by its weights' sum."""
+    pos = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
+    maps = F.binary_cross_entropy_with_logits(logits[:, :2], target[:, :2], pos_weight=pos, reduction="none")
+    total = (maps * weight[:, :2]).sum() / weight[:, :2].sum().clamp(min=1)
+    if logits.shape[1] > 2 and target.shape[1] > 2:
+        road = F.binary_cross_entropy_with_logits(logits[:, 2], target[:, 2], reduction="none")
+        total = total + config.surface_weight * (road * weight[:, 2]).sum() / weight[:, 2].sum().clamp(min=1)
+    return total
+
+
+def paste_roadway(image: np.ndarray, target: np.ndarray, weight: np.ndarray, source: tuple, widen_px: int) -> float:
+    """Paste the roadway of a synthetic ``source`` sample (image, targets with a surface channel,
+    valid) into a target window, in place: image, targets and weights (C, H, W) take the
+    source's inside the widened roadway; returns the pasted share of the window."""
+    import cv2
+
+    src_image, src_target, src_valid = source
+    road = (src_target[2] > 0.5).astype(np.uint8)
+    if widen_px > 0 and road.any():
+        road = cv2.dilate(road, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * widen_px + 1, 2 * widen_px + 1)))
+    paste = road.astype(bool) & src_valid
+    image[:, paste] = src_image[:, paste]
+    target[:, paste] = src_target[:, paste]
+    weight[:, paste] = 1.0
+    return float(paste.mean())
+
+
+def _target_batch(imagery: UnlabelledImagery, rng: np.random.Generator, config: TrainConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    """Target windows as the teacher sees them: read, then flipped or turned."""
+    images, valids = [], []
+    for _ in range(AdaptConfig.from_dict(config.options.get("method", {})).target_batch):
+        image, valid = imagery.sample(rng, config.crop)
+        image, valid = flip_rotate90(rng, image, valid)
+        images.append(image)
+        valids.append(valid)
+    return torch.from_numpy(np.stack(images)), torch.from_numpy(np.stack(valids))
+
+
+def train_adapt(config: TrainConfig, imagery: UnlabelledImagery, out_dir: Path, device: torch.device, resume: str | None = None,
+                progress: bool = True) -> Path:
+    """Self-train the FPN ``config.init_fpn`` on ``imagery`` (settings in ``config.options["method"]``);
+    writes the run (``adapt-last.pt`` to resume, ``train.log``) and returns the adapted FPN
+    checkpoint ``fpn.pt`` (the teacher, or the student, as ``export`` says)."""
+    settings = AdaptConfig.from_dict(config.options.get("method", {}))
+    seed_everything(config.seed)
+    log = RunLog(out_dir / "train.log")
+    source_cities = training_cities(config)
+    valid_city = TrainingCity(config.valid_city.ensure(config.cache))
+    student, model_config = starting_fpn(config, device)
+    if not model_config.surface and (settings.mix or settings.surface_anchor):
+        raise ValueError("mixing and the surface anchor need an FPN with a road-surface head")
+    model = MeanTeacher(student)
+    add_style_mixing(student, config.style_mix, config.style_mix_alpha)
+    optimizer = torch.optim.Adam(fpn_parameter_groups(student, config), lr=config.lr, weight_decay=config.weight_decay)
+    rng = np.random.default_rng(config.seed)
+    valid_rng = np.random.default_rng(config.seed + 1)
+    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None, True) for _ in range(config.validation_samples)]
+    augmentation = model_config_with(AugmentConfig, config.augment)
+    step, history = resume_run(resume, "adapt", model, optimizer, rng)
+    log.write(event="start", model="adapt", step=step, code_version=run_code_version(), config=config.to_dict(),
+              init_fpn_sha256=file_sha256(config.init_fpn), target_pixels=imagery.pixels)
+    source_config = copy.copy(config)
+    source_config.batch = settings.source_batch
+
+    def loss_at(step: int):
+        model.update_teacher(settings.ema_decay if step > 0 else 0.0)
+        loss = torch.zeros((), device=device)
+        if settings.source_batch > 0:
+            image, target, valid = _fpn_batch(source_cities, rng, source_config, augmentation, True)
+            with autocast(config, device):
+                logits = student(image.to(device))
+            loss = loss + fpn_loss(logits.float(), target.to(device), valid.to(device), config, image.to(device))
+        image, valid = _target_batch(imagery, rng, config)
+        maps = model.pseudo_maps(image.to(device))
+        target, weight = pseudo_labels(maps, valid.to(device), settings)
+        image, target, weight = image.numpy().copy(), target.cpu().numpy(), weight.cpu().numpy()
+        pasted = []
+        for k in range(len(image)):
+            if settings.mix:
+                source = source_cities[int(rng.integers(len(source_cities)))].augmented_fpn_sample(rng, config.crop, augmentation, True)
+                pasted.append(paste_roadway(image[k], target[k], weight[k], source, settings.mix_widen_px))
+            if settings.strong_augment:
+                image[k] = photometric(rng, image[k], augmentation)
+        with autocast(config, device):
+            logits = student(torch.from_numpy(image).to(device))
+        loss = loss + settings.target_weight * pseudo_label_loss(logits.float(), torch.from_numpy(target).to(device),
+                                                                 torch.from_numpy(weight).to(device), config)
+        extras = {"pseudo_boundary": float((target[:, 1] > 0.5).mean()), "confident": float((weight[:, 1] > 0.8).mean())}
+        if pasted:
+            extras["pasted"] = float(np.mean(pasted))
+        return loss, extras
+
+    try:
+        optimize("adapt", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
+                 lambda step: validate_fpn(getattr(model, settings.export), valid_batches, device, config), progress)
+    finally:
+        for city in (*source_cities, valid_city):
+            city.close()
+    model.teacher.eval()  # validate_fpn leaves the network it scored in train mode
+    final = out_dir / "fpn.pt"
+    save_checkpoint(final, "fpn", fpn=getattr(model, settings.export).state_dict(), fpn_config=model_config.to_dict(),
+                    train_config=config.to_dict(), step=config.steps, validation=history, code_version_at_start=run_code_version())
+    return final
