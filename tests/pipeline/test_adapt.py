@@ -101,3 +101,24 @@ def test_a_tiny_adapt_writes_a_bundle_with_provenance_and_resumes_without_traini
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     with pytest.raises(InputError, match="other inputs or settings"):
         adapt([city], tmp_path / "other.pt", method=AdaptConfig(mix=False), **kwargs)
+
+
+def test_adapt_and_finetune_take_each_others_bundles(city, tmp_path):
+    """Either order works: finetune starts from an adapted bundle, adapt from a fine-tuned one,
+    and each provenance names the bundle it started from."""
+    from csboundary.models.checkpoint import file_sha256, load_checkpoint
+    from csboundary.pipeline.finetune import FinetuneBudget, finetune
+
+    cache = tmp_path / "synthetic"
+    adapt([city], tmp_path / "adapted.pt", work=tmp_path / "a", budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1, crop=128),
+          cache=cache, device="cpu", progress=False)
+    finetune([city], tmp_path / "adapted-tuned.pt", weights=tmp_path / "adapted.pt", work=tmp_path / "b",
+             budget=FinetuneBudget(fpn_steps=2, afanet_steps=1, synthetic_cities=1, crop=128, batch=2), cache=cache, device="cpu", progress=False)
+    tuned = load_checkpoint(tmp_path / "adapted-tuned.pt", ("bundle",))
+    assert tuned["provenance"]["finetune"]["base_sha256"] == file_sha256(tmp_path / "adapted.pt")
+    assert tuned["provenance"]["base"]["adapt"]["method"]["mix"] is True  # the adaptation stays on record
+    adapt([city], tmp_path / "tuned-adapted.pt", weights=tmp_path / "adapted-tuned.pt", work=tmp_path / "c",
+          budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1, crop=128), cache=cache, device="cpu", progress=False)
+    again = load_checkpoint(tmp_path / "tuned-adapted.pt", ("bundle",))
+    assert again["provenance"]["adapt"]["base_sha256"] == file_sha256(tmp_path / "adapted-tuned.pt")
+    assert all(torch.equal(again["afanet"][k], tuned["afanet"][k]) for k in tuned["afanet"])  # --afanet-steps 0 keeps the AfANet
