@@ -156,9 +156,4 @@ def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: 
             "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps}}
 
 
-def adapt_record(bundle: Path) -> dict | None:
-    """The ``adapt`` provenance of a bundle, or None when it was not adapted."""
-    return ((load_checkpoint(bundle, ("bundle",)).get("provenance") or {}).get("adapt")) or None
-
-
-__all__ = ["AdaptBudget", "adapt", "adapt_record", "imagery_groups"]
+__all__ = ["AdaptBudget", "adapt", "imagery_groups"]

@@ -165,11 +165,11 @@ def paste_roadway(image: np.ndarray, target: np.ndarray, weight: np.ndarray, sou
     return float(paste.mean())
 
 
-def _target_batch(imagery: UnlabelledImagery, rng: np.random.Generator, config: TrainConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    """Target windows as the teacher sees them: read, then flipped or turned."""
+def _target_batch(imagery: UnlabelledImagery, rng: np.random.Generator, count: int, crop: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """``count`` target windows as the teacher sees them: read, then flipped or turned."""
     images, valids = [], []
-    for _ in range(AdaptConfig.from_dict(config.options.get("method", {})).target_batch):
-        image, valid = imagery.sample(rng, config.crop)
+    for _ in range(count):
+        image, valid = imagery.sample(rng, crop)
         image, valid = flip_rotate90(rng, image, valid)
         images.append(image)
         valids.append(valid)
@@ -207,10 +207,11 @@ def train_adapt(config: TrainConfig, imagery: UnlabelledImagery, out_dir: Path, 
         loss = torch.zeros((), device=device)
         if settings.source_batch > 0:
             image, target, valid = _fpn_batch(source_cities, rng, source_config, augmentation, True)
+            image = image.to(device)
             with autocast(config, device):
-                logits = student(image.to(device))
-            loss = loss + fpn_loss(logits.float(), target.to(device), valid.to(device), config, image.to(device))
-        image, valid = _target_batch(imagery, rng, config)
+                logits = student(image)
+            loss = loss + fpn_loss(logits.float(), target.to(device), valid.to(device), config, image)
+        image, valid = _target_batch(imagery, rng, settings.target_batch, config.crop)
         maps = model.pseudo_maps(image.to(device))
         target, weight = pseudo_labels(maps, valid.to(device), settings, (config.pos_weight_keypoint, config.pos_weight_segmentation))
         image, target, weight = image.numpy().copy(), target.cpu().numpy(), weight.cpu().numpy()
