@@ -34,7 +34,7 @@ def evaluate(
     from csboundary.metrics import MetricConfig
     from csboundary.metrics import evaluate as run_metrics
     from csboundary.errors import InputError
-    from csboundary.metrics.io import grid_for, load_pair
+    from csboundary.metrics.io import frame_metres_per_px, grid_for, load_pair
     from csboundary.metrics.sampling import RasterTooLarge
 
     try:
@@ -52,7 +52,8 @@ def evaluate(
     grid = grid_for(frame, pred_graph, gt_graph) if scale == "patch" else None
     extent = (0, 0, frame.width, frame.height) if frame.width else None
     try:
-        result = run_metrics(pred_graph, gt_graph, scale=scale, grid=grid, apls=apls, seed=seed, config=config, extent=extent)
+        result = run_metrics(pred_graph, gt_graph, scale=scale, grid=grid, apls=apls, seed=seed, config=config, extent=extent,
+                             metres_per_px=frame_metres_per_px(frame))
     except RasterTooLarge as exc:
         raise InputError(f"{pred} / {gt}", f"{exc}; give --raster to clip to the imagery") from exc
     result["inputs"] = {"pred": str(pred), "gt": str(gt), "frame": frame.source, "crs": frame.crs}

@@ -26,12 +26,14 @@ from csboundary.metrics.apls import (
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.confidence import confidence_report, edge_truth
 from csboundary.metrics.pixel import rasterize, relaxed_scores
+from csboundary.metrics.review_time import ReviewCosts, review_report
 from csboundary.metrics.sampled_graph import resample
 from csboundary.metrics.segments import Segments, common_origin, flatten
 from csboundary.metrics.tlts import TltsResult, tlts_from_pairs
 
 __all__ = [
     "MetricConfig",
+    "ReviewCosts",
     "VARIANTS",
     "PairLengths",
     "SymmetricApls",
@@ -45,6 +47,7 @@ __all__ = [
     "evaluate_patches",
     "metric_names",
     "pixel_scores",
+    "review_report",
     "tlts",
 ]
 
@@ -97,11 +100,15 @@ def tlts(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricCo
 
 
 def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", grid=None, apls: str = "paper", seed: int = 0,
-             config: MetricConfig = MetricConfig(), extent: tuple[float, float, float, float] | None = None) -> dict:
+             config: MetricConfig = MetricConfig(), extent: tuple[float, float, float, float] | None = None,
+             review: ReviewCosts | None = ReviewCosts(), metres_per_px: float | None = None) -> dict:
     """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``);
     at city scale, ``extent`` (the imagery's pixel rectangle) clips both graphs first. When the
     prediction's edges carry scores, ``confidence`` says how well they tell true edges from
-    false ones (:func:`csboundary.metrics.confidence.confidence_report`, whole graphs)."""
+    false ones (:func:`csboundary.metrics.confidence.confidence_report`, whole graphs). At city
+    scale, ``review_effort`` is the simulated review at ``review`` costs
+    (:func:`csboundary.metrics.review_time.review_report`, whole graphs; per km of true boundary
+    when ``metres_per_px`` is known); ``review=None`` skips it."""
     if scale == "city":
         result = evaluate_city(pred, gt, apls=apls, seed=seed, config=config, extent=extent)
     elif scale == "patch":
@@ -112,4 +119,6 @@ def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", gri
         raise ValueError(f"scale must be 'city' or 'patch', got {scale!r}")
     if pred.edge_scores is not None and np.isfinite(np.asarray(pred.edge_scores, float)).any():
         result["confidence"] = confidence_report(pred.edge_scores, edge_truth(pred, gt), pred.edge_lengths())
+    if scale == "city" and review is not None and gt.n_edges:
+        result["review_effort"] = review_report(pred, gt, metres_per_px, review, seed)
     return result

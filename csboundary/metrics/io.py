@@ -24,6 +24,7 @@ from affine import Affine
 
 from csboundary.data import city as layout
 from csboundary.data.grid import PatchGrid
+from csboundary.data.units import geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import pixel_to_world, world_to_pixel
 from csboundary.errors import InputError
 from csboundary.graph.boundary_graph import FORMAT, BoundaryGraph
@@ -41,6 +42,15 @@ class Frame:
     width: int | None = None  # raster size when a raster defines the frame
     height: int | None = None
     source: str = "pixels"
+
+
+def frame_metres_per_px(frame: Frame) -> float | None:
+    """Metres per pixel of ``frame`` (geometric mean of east and north) where its CRS or units
+    say; None for a frame in pixels only."""
+    if frame.transform is None:
+        return None
+    units = ground_units(frame.crs, at=(frame.transform.c, frame.transform.f))
+    return geometric_mean(pixel_size_m(units, frame.transform)) if units is not None else None
 
 
 @dataclass

@@ -40,6 +40,23 @@ def format_table(result: dict) -> str:
     lines.append(f"{c['pairs']} sampled pairs (phi {result['config']['phi']:g}, snap < {result['config']['snap_radius']:g} px)")
     if "confidence" in result:
         lines.append(format_confidence(result["confidence"]))
+    if "review_effort" in result:
+        lines.append(format_review(result["review_effort"]))
+    return "\n".join(lines)
+
+
+def format_review(report: dict) -> str:
+    """:func:`csboundary.metrics.review_time.review_report` in a few lines, per km where known."""
+    km = report.get("true_boundary_km")
+    scale, unit = (1 / km, "min/km") if km else (1.0, "min")
+    target = report["costs"]["target_f1"]
+    lines = [f"review effort ({report['edges']} edges, {report['false_edges']} false; "
+             + (f"{km:.3f} km of true boundary" if km else f"{report['true_boundary_px']:.0f} px of true boundary") + "):",
+             f"  from scratch {_num(report['scratch_minutes'] * scale, 1)} {unit} ({report['scratch_clicks']} clicks)"]
+    for name, o in report["orders"].items():
+        lines.append(f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} (look {_num(o['look_minutes'] * scale, 1)}, "
+                     f"draw {_num(o['draw_minutes'] * scale, 1)}); F1@5 {_num(o['start_f1'], 3)} -> {_num(o['end_f1'], 3)}; "
+                     f"to F1@5 {target:g}: {_num(o['minutes_to_target_f1'] * scale, 1)} {unit}")
     return "\n".join(lines)
 
 

@@ -71,7 +71,7 @@ def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd:
 def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[str, Any]:
     """City-scale scores of ``model`` on one city of a set (see :func:`predicted_city`)."""
     result, lines = predicted_city(city_dir, model, assume_model_gsd=True)
-    scores = evaluate_run(result, lines, seed, scales=("city",))["city"]
+    scores = evaluate_run(result, lines, seed, scales=("city",), metres_per_px=getattr(model, "pixel_size_m", MODEL_GSD))["city"]
     scores["counts"] = {"pred_edges": int(result.graph.n_edges), "gt_lines": len(lines)}
     return scores
 
@@ -80,7 +80,7 @@ def evaluate_city(city_dir: str | Path, model: PatchModel, seed: int = 0, batch_
     """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
     ``model`` on a city directory with ground truth, without writing the prediction."""
     result, lines = predicted_city(city_dir, model, batch_size=batch_size, progress=progress)
-    scores = evaluate_run(result, lines, seed)
+    scores = evaluate_run(result, lines, seed, metres_per_px=getattr(model, "pixel_size_m", MODEL_GSD))
     for item in scores.values():
         item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}
     return scores
@@ -94,7 +94,26 @@ def evaluate_set(set_dir: str | Path, model: PatchModel, seed: int = 0, progress
         per_city[city_dir.name] = evaluate_city_dir(city_dir, model, seed)
     keys = per_city[cities[0].name]["metrics"].keys()
     mean = {k: _mean([s["metrics"][k] for s in per_city.values()]) for k in keys}
-    return {"set": str(set_dir), "cities": len(cities), "mean": mean, "per_city": per_city}
+    out = {"set": str(set_dir), "cities": len(cities), "mean": mean, "per_city": per_city}
+    reviews = [s["review_effort"] for s in per_city.values() if "review_effort" in s]
+    if reviews:
+        out["review_effort"] = set_review_effort(reviews)
+    return out
+
+
+def set_review_effort(reviews: list[dict]) -> dict[str, float]:
+    """The set's simulated review per km of true boundary: every city's minutes summed over all
+    their km (a long city weighs more than a short one). Minutes to the target F1 count only the
+    cities that reach it (``cities_reaching_target``)."""
+    km = sum(r["true_boundary_km"] or 0.0 for r in reviews)
+    out = {"true_boundary_km": km, "cities": len(reviews), "scratch_min_per_km": sum(r["scratch_minutes"] for r in reviews) / km if km else math.nan}
+    for order in reviews[0]["orders"]:
+        out[f"{order}_min_per_km"] = sum(r["orders"][order]["minutes"] for r in reviews) / km if km else math.nan
+        hit = [r for r in reviews if math.isfinite(r["orders"][order]["minutes_to_target_f1"])]
+        hit_km = sum(r["true_boundary_km"] or 0.0 for r in hit)
+        out[f"{order}_to_target_min_per_km"] = sum(r["orders"][order]["minutes_to_target_f1"] for r in hit) / hit_km if hit_km else math.nan
+        out[f"{order}_cities_reaching_target"] = len(hit)
+    return out
 
 
 def score_value(value) -> float:
@@ -113,4 +132,11 @@ def format_set(result: dict[str, Any]) -> str:
     rows = [(n, s["metrics"]) for n, s in result["per_city"].items()] + [(f"mean ({result['cities']})", result["mean"])]
     for name, m in rows:
         lines.append(f"{name:{width}s}" + "".join(f"{m.get(h, float('nan')):13.3f}" for h in HEADLINE))
+    review = result.get("review_effort")
+    if review:
+        lines.append(f"review effort over {review['true_boundary_km']:.2f} km of true boundary: from scratch "
+                     f"{review['scratch_min_per_km']:.1f} min/km; corrected map " + ", ".join(
+                         f"{o} order {review[o + '_min_per_km']:.1f} min/km (to the target F1@5 {review[o + '_to_target_min_per_km']:.1f} "
+                         f"min/km, {review[o + '_cities_reaching_target']} of {review['cities']} cities reach it)"
+                         for o in ("confidence", "random") if o + "_min_per_km" in review))
     return "\n".join(lines)

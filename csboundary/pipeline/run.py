@@ -248,10 +248,12 @@ def count_close_pairs(vertices: np.ndarray, radius: float = 1.0) -> int:
     return len(cKDTree(vertices).query_pairs(radius - 1e-12)) if len(vertices) > 1 else 0
 
 
-def evaluate_run(result: CityResult, ground_truth, seed: int = 0, scales: tuple[str, ...] = ("patch", "city")) -> dict[str, dict]:
+def evaluate_run(result: CityResult, ground_truth, seed: int = 0, scales: tuple[str, ...] = ("patch", "city"),
+                 metres_per_px: float | None = None) -> dict[str, dict]:
     """Scores against ``ground_truth`` (world LineStrings) at the paper's two scales, those in
     ``scales``: ``patch`` (each patch's own graph on its core, averaged; Table I) and ``city``
-    (the stitched graph as a whole; Table II)."""
+    (the stitched graph as a whole; Table II). ``metres_per_px`` (the frame's pixel size) puts
+    the city scale's review effort per km."""
     from csboundary.graph import BoundaryGraph
     from csboundary.metrics import evaluate
     from csboundary.pipeline.city import patch_scale_graph
@@ -259,6 +261,7 @@ def evaluate_run(result: CityResult, ground_truth, seed: int = 0, scales: tuple[
     gt = BoundaryGraph.from_world_lines(list(ground_truth), result.grid.transform)
     score = {
         "patch": lambda: evaluate(patch_scale_graph(result), gt, scale="patch", grid=result.grid, seed=seed),
-        "city": lambda: evaluate(result.graph, gt, scale="city", seed=seed, extent=(0, 0, result.grid.width, result.grid.height)),
+        "city": lambda: evaluate(result.graph, gt, scale="city", seed=seed, extent=(0, 0, result.grid.width, result.grid.height),
+                                metres_per_px=metres_per_px),
     }
     return {scale: score[scale]() for scale in scales}
