@@ -18,6 +18,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.review_edits import EditError, apply_edits
 from csboundary.pipeline.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
 from csboundary.pipeline.outputs import imagery_extent, read_district, write_graph_outputs
+from csboundary.metrics.review_time import ReviewCosts
 from csboundary.viz.review_page import write_review_page
 
 REVIEW_LOG = "review.json"
@@ -68,7 +69,7 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
             graph, ids = district.graph, (district.edge_ids, district.vertex_ids)
         lines = list(read_ground_truth(ground_truth, mosaic.crs, bbox=bounds).geometry) if ground_truth is not None else []
         page = write_review_page(graph, mosaic, out or prediction / "review", lines, progress=progress,
-                                 fingerprint=graph_fingerprint(prediction), ids=ids)
+                                 fingerprint=graph_fingerprint(prediction), ids=ids, review_costs=ReviewCosts().to_dict())
     return {"page": page, "edges": graph.n_edges, "ground_truth": ground_truth if lines else None}
 
 

@@ -95,11 +95,13 @@ def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=()
 
 
 def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, ground_truth=(), progress: bool = True,
-                      fingerprint: str | None = None, ids: tuple[np.ndarray, np.ndarray] | None = None) -> Path:
+                      fingerprint: str | None = None, ids: tuple[np.ndarray, np.ndarray] | None = None,
+                      review_costs: dict | None = None) -> Path:
     """The review folder ``out`` (``index.html``, ``data.js``, the scripts, ``tiles/``);
     ``fingerprint`` (of the graph's file) goes into every edits file the page exports. ``ids``
     (edge numbers, vertex numbers) are those of a district's edges and vertices in the whole
-    graph: the exported edits name those."""
+    graph: the exported edits name those. ``review_costs`` (seconds per look and per deletion,
+    :class:`csboundary.metrics.review_time.ReviewCosts`) price the minutes left the page shows."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tiles = out / "tiles"
@@ -108,6 +110,7 @@ def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, gro
     levels = write_pyramid(mosaic, tiles, progress)
     data = page_data(graph, mosaic, levels, ground_truth)
     data["graph_sha256"] = fingerprint
+    data["review_costs"] = review_costs
     if ids is not None:
         data["edge_ids"], data["vertex_ids"] = (np.asarray(i).tolist() for i in ids)
     with atomic_path(out / "data.js") as tmp:

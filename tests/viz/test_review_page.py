@@ -78,9 +78,19 @@ def test_delete_the_least_sure_edge_in_the_browser_and_apply_it(reviewed, browse
     shot = cv2.imdecode(np.frombuffer(browser.find_element(By.ID, "view").screenshot_as_png, np.uint8), cv2.IMREAD_COLOR)
     assert shot.std() > 20  # imagery and lines, not an empty canvas
 
+    left, minutes = browser.execute_script("return window.review.remaining()")
+    costs = {"look_s": 2.0, "delete_s": 1.0}  # ReviewCosts' defaults; each edge: a look, and a deletion as often as it is false
+    assert left == len(scores)
+    assert minutes == pytest.approx(sum(costs["look_s"] + costs["delete_s"] * (1 - s) for s in scores) / 60, rel=1e-6)
+    status = browser.find_element(By.ID, "status").text
+    assert f"{len(scores)} edges left to look at: about {minutes:.1f} min" in status
+
     rows[0].click()
     assert browser.execute_script("return window.review.state.selected") == lowest
     browser.find_element(By.ID, "delete").click()
+    left_after, minutes_after = browser.execute_script("return window.review.remaining()")
+    assert left_after == left - 1
+    assert minutes_after == pytest.approx(minutes - (costs["look_s"] + costs["delete_s"] * (1 - scores[lowest])) / 60, rel=1e-6)
     browser.find_element(By.ID, "export").click()
     edits = browser.find_element(By.ID, "export-text").get_attribute("value")
     collection = json.loads(edits)

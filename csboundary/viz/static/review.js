@@ -135,8 +135,23 @@
         ctx.fillRect(x - 4, y - 4, 8, 8);
       }
     }
+    const [left, minutes] = remaining();
     statusEl.textContent = `${D.edges.length} edges, ${state.deleted.size} deleted, ${state.accepted.size} accepted, ` +
-      `${state.moved.size} vertices moved, ${state.added.length} added, ${state.areas.length} areas complete`;
+      `${state.moved.size} vertices moved, ${state.added.length} added, ${state.areas.length} areas complete. ` +
+      `${left} edges left to look at: about ${minutes.toFixed(1)} min, then drawing what is missing`;
+  }
+
+  // Edges neither accepted nor deleted, and the minutes to look at them: each costs a look, and a
+  // deletion as often as its confidence says it is false (costs: docs/metrics.md, "Review effort").
+  function remaining() {
+    const costs = D.review_costs || { look_s: 2.0, delete_s: 1.0 };
+    let left = 0, seconds = 0;
+    for (const e of D.edges) {
+      if (state.deleted.has(e.id) || state.accepted.has(e.id)) continue;
+      left += 1;
+      seconds += costs.look_s + costs.delete_s * (e.score === null ? 0.5 : 1 - e.score);
+    }
+    return [left, seconds / 60];
   }
 
   function distanceToLine(p, line) {
@@ -323,5 +338,5 @@
   };
   const pendingTiles = () => [...tiles.values()].filter((img) => !img.complete).length;
   window.review = { state, select, fit: () => { fit(); render(); }, accept, remove, exportEdits, markViewComplete, loadedTiles, pendingTiles, render, drawNow, zoomAt,
-                    edgeCount: () => listEl.children.length };
+                    edgeCount: () => listEl.children.length, remaining };
 })();
