@@ -123,6 +123,9 @@ def finetune(
                                                     "cities of the weights' mix."),
     synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
     cache: Optional[Path] = typer.Option(None, help="Folder of the synthetic cities (default: in WORK)."),
+    refit_confidence: bool = typer.Option(True, "--refit-confidence/--keep-confidence",
+                                          help="Refit the edge confidence with the tuned networks on LABELLED and the synthetic cities, "
+                                               "when LABELLED gives enough edges (100, with 20 true and 20 false); else keep the weights'."),
     seed: int = typer.Option(0, min=0, help="Seed of the sample draws."),
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
@@ -133,12 +136,14 @@ def finetune(
     from csboundary.pipeline.finetune import default_work, finetune as run
 
     out_file(out, (".pt",))
-    budget = _budget(fpn_steps=fpn_steps, afanet_steps=afanet_steps, user_share=user_share, synthetic_cities=synthetic_cities)
+    budget = _budget(fpn_steps=fpn_steps, afanet_steps=afanet_steps, user_share=user_share, synthetic_cities=synthetic_cities,
+                     refit_confidence=refit_confidence)
     done = run(labelled, out, weights=weights, work=work or default_work(out), budget=budget, seed=seed, cache=cache, device=device,
                progress=not quiet)
     minutes = sum(done["seconds"].values()) / 60
     typer.echo(f"{out}: fine-tuned on {len(done['cities'])} labelled cities ({budget.fpn_steps} FPN + {budget.afanet_steps} AfANet steps, "
                f"{minutes:.1f} min); runs in {done['work']}")
+    typer.echo(f"edge confidence: {done['confidence']['reason']}")
 
 
 def adapt(

@@ -74,12 +74,15 @@ def check_learnable(cities: list[Path], per_city: list[CityEdges]) -> None:
 
 def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predictor: PatchPredictor, seed: int = 0,
                           progress: bool = True, n_trees: int = 200, depth: int = 2,
-                          assume_model_gsd: bool = False) -> tuple[EdgeConfidence, list[CityEdges]]:
+                          assume_model_gsd: bool = False, known: dict[Path, CityEdges] | None = None) -> tuple[EdgeConfidence, list[CityEdges]]:
     """Fit the confidence on ``cities`` with ``predictor`` (the bundle ``weights``) and write the
-    bundle with it to ``out``; returns the model and each city's labelled edges.
-    ``assume_model_gsd``: imagery without a pixel size is at the model's (imported crops)."""
+    bundle with it to ``out``; returns the model and each city's labelled edges (``known``:
+    those already predicted with ``predictor``, by city). ``assume_model_gsd``: imagery without
+    a pixel size is at the model's (imported crops)."""
     payload = load_checkpoint(weights, ("bundle",))
-    per_city = [city_edges(c, predictor, assume_model_gsd) for c in tqdm(cities, desc="predict cities", unit="city", disable=not progress)]
+    known = known or {}
+    per_city = [known[c] if c in known else city_edges(c, predictor, assume_model_gsd)
+                for c in tqdm(cities, desc="predict cities", unit="city", disable=not progress)]
     check_learnable(cities, per_city)
     per_city = [c for c in per_city if c.graph.n_edges]
     features = tuple(f for f in FEATURES if not ("surface" in f and not predictor.fpn.config.surface))
@@ -97,3 +100,31 @@ def fit_bundle_confidence(cities: list[Path], weights: Path, out: Path, predicto
     payload["confidence"] = model.to_dict()
     save_checkpoint(out, "bundle", **payload)
     return model, per_city
+
+
+MIN_REFIT_EDGES = 100  # labelled edges a refit needs before it can speak for the user's imagery ...
+MIN_REFIT_CLASS = 20  # ... with at least this many true and this many false among them
+
+
+def refit_for_tuned(bundle: Path, labelled: list[Path], synthetic: list[Path], device, seed: int = 0, progress: bool = True) -> dict:
+    """Refit the edge confidence of a tuned ``bundle`` (in place) on its ``labelled`` cities and
+    the ``synthetic`` cities it mixed in, predicted with the tuned networks, when the labelled
+    cities give enough edges (``MIN_REFIT_EDGES``, of each kind ``MIN_REFIT_CLASS``); otherwise
+    the bundle keeps the base's confidence. Returns what was done and why, for the provenance."""
+    predictor = PatchPredictor.load(bundle, device)
+    user = [city_edges(c, predictor, assume_model_gsd=True) for c in tqdm(labelled, desc="confidence: labelled cities", unit="city",
+                                                                          disable=not progress)]
+    edges = sum(c.graph.n_edges for c in user)
+    true = sum(int(c.positive.sum()) for c in user)
+    record = {"labelled_edges": edges, "labelled_true_edges": true, "labelled_cities": len(labelled), "synthetic_cities": len(synthetic)}
+    if edges < MIN_REFIT_EDGES or min(true, edges - true) < MIN_REFIT_CLASS:
+        record["refitted"] = False
+        record["reason"] = (f"the labelled cities give {edges} edges ({true} true, {edges - true} false); a refit needs at least "
+                            f"{MIN_REFIT_EDGES}, with {MIN_REFIT_CLASS} of each: the base bundle's confidence is kept")
+        return record
+    fit_bundle_confidence(list(labelled) + list(synthetic), bundle, bundle, predictor, seed=seed, progress=progress, assume_model_gsd=True,
+                          known=dict(zip(labelled, user)))
+    record["refitted"] = True
+    record["reason"] = (f"refitted with the tuned networks on {len(labelled)} labelled cities ({edges} edges, {true} true) "
+                        f"and {len(synthetic)} synthetic cities")
+    return record

@@ -45,6 +45,7 @@ class FinetuneBudget(Config):
     afanet_lr: float = 3e-4
     crop: int = 256
     batch: int = 4
+    refit_confidence: bool = True  # refit the edge confidence with the tuned networks when the labelled cities give enough edges
 
 
 FINETUNE_VALID = CitySpec(split="valid", seed=0, tiles=(1, 1), tile_size=1500)  # a small synthetic city: forgetting shows there
@@ -147,7 +148,7 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     tuned_fpn, tuned_afanet = load_checkpoint(fpn, ("fpn",)), load_checkpoint(afanet, ("afanet",))
     record = {"base_weights": str(base_path.resolve()), "base_sha256": file_sha256(base_path), "labelled": [labelled_record(c) for c in cities],
               "budget": budget.to_dict(), "seed": seed, "code_version": code_version(),
-              "edge_confidence": "the base bundle's, fitted on its own predictions (refit with csboundary fit-confidence)"}
+              "edge_confidence": {"refitted": False, "reason": "the base bundle's (refit switched off)"}}
     keys = ("code_version", "code_version_at_start", "train_config", "step", "validation")
     payload = {k: v for k, v in base.items() if k not in ("format", "kind", "code_version")}
     payload.update(fpn=tuned_fpn["fpn"], fpn_config=tuned_fpn["fpn_config"], afanet=tuned_afanet["afanet"],
@@ -155,4 +156,26 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
                    provenance={"fpn": {k: tuned_fpn.get(k) for k in keys}, "afanet": {k: tuned_afanet.get(k) for k in keys},
                                "base": base.get("provenance") or {}, "finetune": record})
     save_checkpoint(out, "bundle", **payload)
-    return {"out": out, "cities": cities, "work": work, "seconds": seconds, "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps}}
+    confidence = record["edge_confidence"]
+    if budget.refit_confidence:
+        start = time.perf_counter()
+        confidence = refit_tuned_confidence(out, cities, fpn_config, resolved, seed, progress)
+        seconds["confidence"] = time.perf_counter() - start
+    return {"out": out, "cities": cities, "work": work, "seconds": seconds, "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps},
+            "confidence": confidence}
+
+
+def refit_tuned_confidence(out: Path, cities: list[Path], fpn_config: TrainConfig, device, seed: int, progress: bool) -> dict:
+    """Refit the tuned bundle ``out``'s edge confidence on the labelled ``cities`` and the
+    synthetic cities the FPN mixed in, when they hold enough edges
+    (:func:`csboundary.pipeline.confidence_fit.refit_for_tuned`); the outcome goes into the
+    bundle's provenance either way."""
+    from csboundary.models.training.data import WorldsConfig
+    from csboundary.pipeline.confidence_fit import refit_for_tuned
+
+    synthetic = [spec.ensure(fpn_config.cache, progress=False) for spec in WorldsConfig.from_dict(fpn_config.worlds).specs()]
+    outcome = refit_for_tuned(out, cities, synthetic, device, seed=seed, progress=progress)
+    payload = load_checkpoint(out, ("bundle",))
+    payload["provenance"]["finetune"]["edge_confidence"] = outcome
+    save_checkpoint(out, "bundle", **{k: v for k, v in payload.items() if k not in ("format", "kind")})
+    return outcome

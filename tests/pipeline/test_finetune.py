@@ -146,6 +146,9 @@ def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_tra
     assert record["budget"]["fpn_steps"] == 2 and bundle["provenance"]["fpn"]["step"] == 2 and bundle["provenance"]["afanet"]["step"] == 2
     shipped = load_checkpoint(shipped_weights(), ("bundle",))
     assert bundle["inference"] == shipped["inference"] and bundle["confidence"] == shipped["confidence"]
+    # one 600 px city gives too few edges to refit the confidence on: kept, and said why
+    assert record["edge_confidence"]["refitted"] is False and "a refit needs at least 100" in record["edge_confidence"]["reason"]
+    assert done["confidence"] == record["edge_confidence"]
     assert not all(torch.equal(bundle["fpn"][k], shipped["fpn"][k]) for k in shipped["fpn"])  # the FPN did learn
     assert load_predictor(tmp_path / "tuned.pt", "cpu", engine="torch") is not None
     stamps = {p: p.stat().st_mtime_ns for p in (done["work"] / "fpn" / "fpn.pt", done["work"] / "afanet" / "afanet.pt")}
@@ -153,6 +156,30 @@ def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_tra
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     with pytest.raises(InputError, match="other inputs or settings"):
         finetune([city], tmp_path / "other.pt", **{**kwargs, "budget": FinetuneBudget(fpn_steps=3, afanet_steps=2, synthetic_cities=1)})
+
+
+def test_the_confidence_is_refitted_with_the_tuned_networks_only_on_enough_edges(city, tmp_path, monkeypatch):
+    """With enough labelled edges the bundle's confidence is refitted on the labelled and the
+    synthetic cities (its provenance names both); with too few it stays, byte for byte."""
+    import shutil
+
+    import csboundary.pipeline.confidence_fit as fit
+    from csboundary.models.checkpoint import load_checkpoint, shipped_weights
+
+    other = tmp_path / "synthetic"
+    synthesize_city(other, seed=4, split="valid", config=style_config("classic", tile_size=SIZE), progress=False)
+    bundle = tmp_path / "tuned.pt"
+    shutil.copy(shipped_weights(), bundle)
+    before = load_checkpoint(bundle, ("bundle",))["confidence"]
+    monkeypatch.setattr(fit, "MIN_REFIT_EDGES", 10**6)
+    kept = fit.refit_for_tuned(bundle, [city], [other], torch.device("cpu"), progress=False)
+    assert not kept["refitted"] and kept["labelled_edges"] > 0 and load_checkpoint(bundle, ("bundle",))["confidence"] == before
+    monkeypatch.setattr(fit, "MIN_REFIT_EDGES", 1)
+    monkeypatch.setattr(fit, "MIN_REFIT_CLASS", 0)
+    done = fit.refit_for_tuned(bundle, [city], [other], torch.device("cpu"), progress=False)
+    assert done["refitted"] and done["labelled_edges"] == kept["labelled_edges"]
+    after = load_checkpoint(bundle, ("bundle",))["confidence"]
+    assert after != before and [c["dir"] for c in after["provenance"]["cities"]] == [str(city), str(other)]
 
 
 def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_on_it(tmp_path, monkeypatch):
@@ -175,8 +202,12 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
         return {c.name: {"f1@5": 0.5 + (0.1 if tuned else 0.0) + 0.01 * "abcd".index(c.name), "apls": None if c.name == "d" else 0.4}
                 for c in cities}
 
+    def fake_confidence(cities, tuned, base, *args):  # per held-out city: one true edge and one false
+        return {"true": [True, False] * len(cities), "base": [0.4, 0.6] * len(cities), "tuned": [0.9, 0.2] * len(cities)}
+
     monkeypatch.setattr(cv, "finetune", fake_finetune)
     monkeypatch.setattr(cv, "_scores", fake_scores)
+    monkeypatch.setattr(cv, "_held_out_confidence", fake_confidence)
     result = cv.evaluate_finetune(tmp_path / "set", tmp_path / "cv", folds=2, progress=False)
     assert trained_on == {"fold-0": ["b", "d"], "fold-1": ["a", "c"]}
     assert {n: r["fold"] for n, r in result["per_city"].items()} == {"a": 0, "c": 0, "b": 1, "d": 1}
@@ -184,5 +215,8 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
     assert f1["base"] == pytest.approx(0.515) and f1["finetuned"] == pytest.approx(0.615) and f1["difference"] == pytest.approx(0.1)
     assert result["summary"]["apls"]["base"] == pytest.approx(0.3)  # undefined counts 0, as in evaluate-set
     assert "1.5 min" in cv.format_finetune(result)
+    confidence = result["confidence"]  # pooled over both folds' held-out edges
+    assert confidence["edges"] == 8 and confidence["base"]["auc"] == 0.0 and confidence["tuned"]["auc"] == 1.0
+    assert confidence["tuned"]["ece"] == pytest.approx((0.1 * 4 + 0.2 * 4) / 8)  # bins 0.9 (all true) and 0.2 (all false)
     monkeypatch.setattr(cv, "finetune", lambda *a, **k: pytest.fail("a finished fold ran again"))
     assert cv.evaluate_finetune(tmp_path / "set", tmp_path / "cv", folds=2, progress=False)["summary"] == result["summary"]
