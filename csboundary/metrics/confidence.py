@@ -9,7 +9,8 @@ truth (:func:`edge_truth`). Given each edge's confidence, :func:`confidence_repo
   and the share of true edges in ten equal-width confidence bins (0 is perfectly calibrated);
 * ``review``: the review-effort curve. Edges are reviewed least sure first; after the least
   sure 10 %, 20 % and 50 % of edges, the share of all false edges (``false_edges``) and of all
-  false boundary length (``false_length``) that the reviewer has seen.
+  false boundary length (``false_length``) that the reviewer has seen, and the same as a share
+  of what the best order could have shown in as many edges (``*_of_attainable``).
 
 Pure functions on arrays and graphs in one pixel frame.
 """
@@ -81,17 +82,25 @@ def expected_calibration_error(confidence: np.ndarray, positive: np.ndarray, bin
 
 
 def review_effort(confidence: np.ndarray, positive: np.ndarray, length: np.ndarray, shares=REVIEW_SHARES) -> dict[str, dict[str, float]]:
-    """Share of false edges and of false length seen after reviewing the least sure ``share`` of
-    edges (by count, rounded up), for each share. Equal confidences are reviewed in edge order."""
+    """After reviewing the least sure ``share`` of edges (by count, rounded up), for each share:
+    the share of all false edges and of all false length seen (``false_edges``,
+    ``false_length``), and the share of what any order could have put there
+    (``*_of_attainable``): of min(false edges, k) edges, and of the length of the k longest
+    false edges. Where most edges are false no order finds them all in k; this one still can
+    reach 1. Equal confidences are reviewed in edge order."""
     confidence, positive, length = np.asarray(confidence, float), np.asarray(positive, bool), np.asarray(length, float)
     order = np.argsort(confidence, kind="stable")
     false = ~positive[order]
     false_len = np.where(false, length[order], 0.0)
+    longest_false = np.sort(length[~positive])[::-1]
     out = {}
     for share in shares:
         k = math.ceil(share * len(order) - 1e-9)
+        best_edges, best_length = min(int(false.sum()), k), float(longest_false[:k].sum())
         out[f"{share:g}"] = {"false_edges": float(false[:k].sum() / false.sum()) if false.any() else float("nan"),
-                             "false_length": float(false_len[:k].sum() / false_len.sum()) if false_len.sum() > 0 else float("nan")}
+                             "false_length": float(false_len[:k].sum() / false_len.sum()) if false_len.sum() > 0 else float("nan"),
+                             "false_edges_of_attainable": float(false[:k].sum() / best_edges) if best_edges else float("nan"),
+                             "false_length_of_attainable": float(false_len[:k].sum() / best_length) if best_length > 0 else float("nan")}
     return out
 
 

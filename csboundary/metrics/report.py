@@ -62,7 +62,9 @@ def format_review(report: dict) -> str:
 
 def format_confidence(report: dict) -> str:
     """:func:`csboundary.metrics.confidence.confidence_report` in two lines."""
-    review = ", ".join(f"{float(share):.0%} -> {_num(r['false_length'], 2)} of false length ({_num(r['false_edges'], 2)} of false edges)"
+    review = ", ".join(f"{float(share):.0%} -> {_num(r['false_length'], 2)} of false length ({_num(r['false_edges'], 2)} of false edges; "
+                       f"of what any order could show: {_num(r.get('false_length_of_attainable'), 2)} by length, "
+                       f"{_num(r.get('false_edges_of_attainable'), 2)} by edges)"
                        for share, r in report["review"].items())
     return (f"confidence: {report['edges']} edges ({_num(report['share_true'], 2)} true), AUC {_num(report['auc'], 3)}, "
             f"ECE {_num(report['ece'], 3)}\nreviewing the least sure {review}")
