@@ -7,11 +7,12 @@ A reviewer turns a predicted graph into a correct map in two passes:
    :func:`csboundary.metrics.confidence.edge_truth` says);
 2. **draw** what is still missing: every run of ground truth farther than 5 px from the kept
    edges, traced as a polyline that stays within ``trace_tolerance_px`` of it
-   (Douglas-Peucker), longest run first. An end of a run that meets a kept line snaps onto it and
-   costs no click; a run costs at least one click.
+   (Douglas-Peucker), longest run first. Each run costs a look (to find where it starts) and its
+   clicks; an end of a run that meets a kept line snaps onto it and costs no click; a run costs
+   at least one click.
 
-Drawing the same map from scratch costs the vertices of every ground-truth boundary traced
-the same way. F1@5 is tracked after every action on 1 px rasters, as
+Drawing the same map from scratch costs a look and the clicks of every ground-truth boundary
+traced the same way. F1@5 is tracked after every action on 1 px rasters, as
 :func:`csboundary.metrics.pixel.relaxed_scores` defines it, so the curve starts at the
 prediction's F1@5. The reviewer may stop looking early and draw from there (the point of a
 confidence: the sure edges need no look); ``minutes_to_f1`` is the cheapest such plan that
@@ -176,16 +177,25 @@ class _State:
                 self.cover[g] += 1
 
 
-def missing_runs(gt: BoundaryGraph, kept_pixels: np.ndarray, within_px: float) -> list[tuple[np.ndarray, int]]:
-    """Runs of ``gt``'s boundaries (1 px samples) farther than ``within_px`` from every kept
-    pixel, each with how many of its two ends meet a kept line (and so snap onto it)."""
-    tree = cKDTree(kept_pixels) if len(kept_pixels) else None
+def boundary_samples(gt: BoundaryGraph) -> list[np.ndarray]:
+    """Points every 1 px along each boundary of ``gt`` (chains through degree-2 vertices)."""
+    samples = [points_along(chain.polyline, 1.0)[0] for chain in merge_chains(gt)]
+    return [pts for pts in samples if len(pts) >= 2]
+
+
+def missing_runs(samples: list[np.ndarray], kept_pixels: np.ndarray, within_px: float) -> list[tuple[np.ndarray, int]]:
+    """Runs of the boundaries ``samples`` (:func:`boundary_samples`) farther than ``within_px``
+    from every kept pixel, each with how many of its two ends meet a kept line (and so snap onto
+    it)."""
+    if not samples:
+        return []
+    sizes = [len(pts) for pts in samples]
+    if len(kept_pixels):
+        far_all = cKDTree(kept_pixels).query(np.floor(np.concatenate(samples)), k=1, distance_upper_bound=within_px)[0] >= within_px
+    else:
+        far_all = np.ones(sum(sizes), bool)
     runs = []
-    for chain in merge_chains(gt):
-        pts, _ = points_along(chain.polyline, 1.0)
-        if len(pts) < 2:
-            continue
-        far = np.ones(len(pts), bool) if tree is None else tree.query(np.floor(pts), k=1, distance_upper_bound=within_px)[0] >= within_px
+    for pts, far in zip(samples, np.split(far_all, np.cumsum(sizes)[:-1])):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], far.astype(np.int8), [0]])))
         for start, stop in zip(edges[::2], edges[1::2]):
             lo, hi = max(start - 1, 0), min(stop + 1, len(pts))  # reach back onto the kept line it leaves
@@ -211,20 +221,23 @@ class ReviewTrace:
         return self.total_s - self.look_s
 
 
-def _draw(state: _State, gt: BoundaryGraph, seconds: list[float], f1: list[float], costs: ReviewCosts, within_px: float) -> ReviewTrace:
-    """Trace every missing run into ``state`` (changed in place), longest first, extending the
-    ``seconds`` and ``f1`` of the look pass."""
+def _draw(state: _State, samples: list[np.ndarray], seconds: list[float], f1: list[float], costs: ReviewCosts, within_px: float,
+          until: float = np.inf) -> ReviewTrace:
+    """Trace the missing runs into ``state`` (changed in place), longest first, extending the
+    ``seconds`` and ``f1`` of the look pass; stop once F1@5 reaches ``until``."""
     look_s, clicks = seconds[-1], 0
-    for run, snapped in sorted(missing_runs(gt, state.kept_pixels(), within_px), key=lambda r: -len(r[0])):
+    for run, snapped in sorted(missing_runs(samples, state.kept_pixels(), within_px), key=lambda r: -len(r[0])):
+        if f1[-1] >= until:
+            break
         n = max(1, clicks_to_trace(run, costs.trace_tolerance_px) - snapped)
         clicks += n
         state.draw(_line_pixels(run))
-        seconds.append(seconds[-1] + n * costs.vertex_s)
+        seconds.append(seconds[-1] + costs.look_s + n * costs.vertex_s)  # find where it starts, then trace it
         f1.append(state.f1())
     return ReviewTrace(np.asarray(seconds), np.asarray(f1), look_s, clicks)
 
 
-def simulate_review(state: _State, false: np.ndarray, gt: BoundaryGraph, order: np.ndarray, costs: ReviewCosts, within_px: float,
+def simulate_review(state: _State, false: np.ndarray, samples: list[np.ndarray], order: np.ndarray, costs: ReviewCosts, within_px: float,
                     stops: int = STOPS) -> tuple[ReviewTrace, float]:
     """Look at every edge of ``order`` (deleting the false ones), then draw: the full review's
     trace; and the seconds of the cheapest plan "look at the first k edges, then draw runs until
@@ -232,11 +245,14 @@ def simulate_review(state: _State, false: np.ndarray, gt: BoundaryGraph, order: 
     plan reaches it). ``state`` is used up."""
     stop_at = set(np.linspace(0, len(order), stops + 1).round().astype(int).tolist())
     seconds, f1 = [0.0], [state.f1()]
+    target = costs.target_f1 - 1e-12
     best = np.inf
     for i in range(len(order) + 1):
-        if i in stop_at and i < len(order):
-            trace = _draw(state.copy(), gt, list(seconds), list(f1), costs, within_px)
-            hit = np.flatnonzero(trace.f1 >= costs.target_f1 - 1e-12)
+        if f1[-1] >= target:
+            best = min(best, seconds[-1])
+        elif i in stop_at and i < len(order) and seconds[-1] < best:  # a later stop has looked longer: it can only win by drawing less
+            trace = _draw(state.copy(), samples, list(seconds), list(f1), costs, within_px, until=target)
+            hit = np.flatnonzero(trace.f1 >= target)
             best = min(best, float(trace.seconds[hit[0]])) if len(hit) else best
         if i == len(order):
             break
@@ -247,8 +263,8 @@ def simulate_review(state: _State, false: np.ndarray, gt: BoundaryGraph, order: 
             cost += costs.delete_s
         seconds.append(seconds[-1] + cost)
         f1.append(state.f1())
-    full = _draw(state, gt, seconds, f1, costs, within_px)
-    hit = np.flatnonzero(full.f1 >= costs.target_f1 - 1e-12)
+    full = _draw(state, samples, seconds, f1, costs, within_px)
+    hit = np.flatnonzero(full.f1 >= target)
     best = min(best, float(full.seconds[hit[0]])) if len(hit) else best
     return full, (best if np.isfinite(best) else float("nan"))
 
@@ -272,16 +288,17 @@ def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float |
     ``costs.target_f1``, each also per km of true boundary when ``metres_per_px`` is given, the
     action counts, and the F1@5 curve against minutes (``curve_points`` points per order)."""
     gt_pixels = rasterize(flatten(gt))
+    samples = boundary_samples(gt)
     false = edge_truth(pred, gt, within_px) < TRUE_SHARE if pred.n_edges else np.zeros(0, bool)
     gt_length_px = float(gt.edge_lengths().sum()) if gt.n_edges else 0.0
-    scratch_s = scratch_clicks(gt, costs.trace_tolerance_px) * costs.vertex_s
+    scratch_s = len(samples) * costs.look_s + scratch_clicks(gt, costs.trace_tolerance_px) * costs.vertex_s
     km = gt_length_px * metres_per_px / 1000 if metres_per_px else None
     out = {"costs": costs.to_dict(), "edges": int(pred.n_edges), "false_edges": int(false.sum()),
            "true_boundary_px": gt_length_px, "true_boundary_km": km,
            "scratch_minutes": scratch_s / 60, "scratch_clicks": scratch_clicks(gt, costs.trace_tolerance_px), "orders": {}}
     for name in ORDERS:
         order = review_order(pred, name, seed)
-        trace, to_target = simulate_review(_State(pred, gt_pixels, within_px), false, gt, order, costs, within_px)
+        trace, to_target = simulate_review(_State(pred, gt_pixels, within_px), false, samples, order, costs, within_px)
         pick = np.unique(np.linspace(0, len(trace.seconds) - 1, curve_points).round().astype(int))
         out["orders"][name] = {"minutes": trace.total_s / 60, "look_minutes": trace.look_s / 60, "draw_minutes": trace.draw_s / 60,
                                "clicks": trace.clicks, "start_f1": float(trace.f1[0]), "end_f1": float(trace.f1[-1]),

@@ -8,10 +8,10 @@ lines, y = 10 and y = 60, x 0 -> 200 (400 px). The prediction:
 * one edge along y = 150, x 0 -> 100 (false), the least sure.
 
 A full review looks at 6 edges and deletes 1: 6 x 3 + 1 = 19 s. What is missing is the second
-line from x = 100 to 200: one run whose left end meets the kept edge (snapped, free) and whose
-straight run needs its right end only: 1 click, 1.5 s. Drawing from scratch is 2 lines of 2
-clicks: 6 s. Least sure first, the reviewer finds the false edge first (4 s), may stop there and
-draw (1.5 s): F1@5 1 after 5.5 s.
+line from x = 100 to 200: one run, found with a look (3 s), whose left end meets the kept edge
+(snapped, free) and whose straight run needs its right end only: 1 click, 1.5 s. Drawing from
+scratch is 2 lines, each a look and 2 clicks: 12 s. Least sure first, the reviewer finds the
+false edge first (4 s), may stop there and draw (4.5 s): F1@5 1 after 8.5 s.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics import evaluate, pixel_scores
-from csboundary.metrics.review_time import ReviewCosts, clicks_to_trace, missing_runs, review_order, review_report, scratch_clicks
+from csboundary.metrics.review_time import ReviewCosts, boundary_samples, clicks_to_trace, missing_runs, review_order, review_report, scratch_clicks
 
 
 HAND = ReviewCosts(look_s=3.0, delete_s=1.0, vertex_s=1.5, trace_tolerance_px=2.0)
@@ -45,14 +45,14 @@ def test_hand_case_costs():
     pred = graph(PRED_LINES, [0.9, 0.8, 0.9, 0.7, 0.6, 0.1])
     r = review_report(pred, GT, metres_per_px=0.2, costs=HAND)
     assert r["false_edges"] == 1 and r["scratch_clicks"] == 4
-    assert r["scratch_minutes"] == pytest.approx(6 / 60)
+    assert r["scratch_minutes"] == pytest.approx(12 / 60)
     assert r["true_boundary_km"] == pytest.approx(400 * 0.2 / 1000)
     conf = r["orders"]["confidence"]
     assert conf["look_minutes"] == pytest.approx(19 / 60)
-    assert conf["clicks"] == 1 and conf["draw_minutes"] == pytest.approx(1.5 / 60)
-    assert conf["minutes_to_target_f1"] == pytest.approx(5.5 / 60)
+    assert conf["clicks"] == 1 and conf["draw_minutes"] == pytest.approx(4.5 / 60)
+    assert conf["minutes_to_target_f1"] == pytest.approx(8.5 / 60)
     assert conf["end_f1"] == pytest.approx(1.0)
-    assert r["per_km"]["scratch_minutes"] == pytest.approx(6 / 60 / 0.08)
+    assert r["per_km"]["scratch_minutes"] == pytest.approx(12 / 60 / 0.08)
     # both orders look at every edge for the fully corrected map; only the way there differs
     assert r["orders"]["random"]["minutes"] == pytest.approx(conf["minutes"])
     assert r["orders"]["random"]["minutes_to_target_f1"] >= conf["minutes_to_target_f1"]
@@ -98,7 +98,7 @@ def test_scratch_clicks_follow_chains_through_degree_two_vertices():
 
 def test_missing_runs_snap_to_kept_lines():
     kept = np.stack([np.arange(0, 101), np.full(101, 60)], axis=1)  # x 0..100 on y = 60
-    runs = missing_runs(graph([[[0, 60], [200, 60]]]), kept, 5.0)
+    runs = missing_runs(boundary_samples(graph([[[0, 60], [200, 60]]])), kept, 5.0)
     assert len(runs) == 1
     run, snapped = runs[0]
     assert snapped == 1  # the left end meets the kept line, the right end is free
