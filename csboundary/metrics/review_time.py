@@ -4,7 +4,9 @@ A reviewer turns a predicted graph into a correct map in two passes:
 
 1. **look** at edges in an order (least sure first, or a random order), deleting each false edge
    (one with less than half its length within 5 px of the ground truth, as
-   :func:`csboundary.metrics.confidence.edge_truth` says);
+   :func:`csboundary.metrics.confidence.edge_truth` says) and moving a vertex of a true edge
+   that strays ``fix_px`` pixels or more off the truth onto it (one click; its pixels off the
+   truth go);
 2. **draw** what is still missing: every run of ground truth farther than 5 px from the kept
    edges, traced as a polyline that stays within ``trace_tolerance_px`` of it
    (Douglas-Peucker), longest run first. Each run costs a look (to find where it starts) and its
@@ -51,6 +53,7 @@ class ReviewCosts(Config):
     delete_s: float = 1.0  # delete an edge judged false (one more key)
     vertex_s: float = 1.75  # one click on a visible point (extreme clicking: 7 s for 4 clicks)
     trace_tolerance_px: float = 2.0  # a drawn polyline stays this close to the true boundary
+    fix_px: float = 5.0  # a true edge with this many pixels off the truth gets a vertex moved (one click) onto it
     target_f1: float = 0.95
 
     def __post_init__(self) -> None:
@@ -149,8 +152,21 @@ class _State:
         r = self.covered / self.gt_count if self.gt_count else float("nan")
         return f1_score(p, r)
 
-    def delete(self, k: int) -> None:
-        for pixel in np.unique(self.pixel_of_row[self.rows_of_edge[k]]).tolist():
+    def edge_pixels(self, k: int) -> np.ndarray:
+        """Indices of edge ``k``'s distinct pixels."""
+        return np.unique(self.pixel_of_row[self.rows_of_edge[k]])
+
+    def off_truth_px(self, k: int) -> int:
+        """Pixels of edge ``k`` farther than ``within_px`` from the ground truth."""
+        return int(np.count_nonzero(~self.pixel_true[self.edge_pixels(k)]))
+
+    def delete(self, k: int, off_truth_only: bool = False) -> None:
+        """Take edge ``k`` out, or only its pixels off the ground truth (a vertex moved onto the
+        boundary: what stays is what was on it)."""
+        pixels = self.edge_pixels(k)
+        if off_truth_only:
+            pixels = pixels[~self.pixel_true[pixels]]
+        for pixel in pixels.tolist():
             self.owners[pixel] -= 1
             if self.owners[pixel] == 0:
                 self.kept -= 1
@@ -261,6 +277,9 @@ def simulate_review(state: _State, false: np.ndarray, samples: list[np.ndarray],
         if false[k]:
             state.delete(k)
             cost += costs.delete_s
+        elif state.off_truth_px(k) >= costs.fix_px:
+            state.delete(k, off_truth_only=True)
+            cost += costs.vertex_s
         seconds.append(seconds[-1] + cost)
         f1.append(state.f1())
     full = _draw(state, samples, seconds, f1, costs, within_px)

@@ -82,6 +82,21 @@ def test_an_empty_draft_is_drawn_from_scratch():
     assert r["orders"]["random"]["minutes"] == pytest.approx(r["scratch_minutes"])
 
 
+def test_a_true_edge_that_strays_gets_a_vertex_moved_onto_the_truth():
+    """Along y = 10 for 150 px, then 30 px down a side street that is not there: true (150 of
+    180 px on the truth), but 25 px stray. The reviewer moves one vertex (a look and a click);
+    what stays is on the truth, so precision is 1."""
+    gt = graph([[[0, 10], [200, 10]]])
+    pred = BoundaryGraph(np.array([[0.0, 11.0], [150.0, 40.0]]), [[0, 1]], edge_scores=np.array([0.7]),
+                         edge_polylines=[np.array([[0.0, 11.0], [150.0, 11.0], [150.0, 40.0]])])  # one edge, bent
+    r = review_report(pred, gt, costs=HAND)
+    conf = r["orders"]["confidence"]
+    assert r["false_edges"] == 0
+    assert conf["look_minutes"] == pytest.approx((3.0 + 1.5) / 60)
+    assert conf["end_f1"] == pytest.approx(1.0)
+    assert pixel_scores(pred, gt)[5.0][0] < 0.9  # before: the stray pixels count against precision
+
+
 def test_clicks_to_trace():
     assert clicks_to_trace(np.array([[0, 0], [50, 0.5], [100, 0]]), 2.0) == 2  # within tolerance of a straight line
     assert clicks_to_trace(np.array([[0, 0], [50, 0], [50, 50]]), 2.0) == 3  # a corner
