@@ -82,7 +82,7 @@ def evaluate_model(
     min_confidence: ConfidenceOption = None,
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     engine: EngineOption = "auto",
-    precision: PrecisionOption = "float32",
+    precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
 ) -> None:
@@ -123,7 +123,7 @@ def evaluate_set_cmd(
     min_fragment_length: FragmentOption = None,
     min_confidence: ConfidenceOption = None,
     engine: EngineOption = "auto",
-    precision: PrecisionOption = "float32",
+    precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
 ) -> None:

@@ -23,7 +23,8 @@ ATTACH_BACKED_HELP = ("Join a dangling end of a window's graph to the nearest li
 FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all; default: the weights')."
 THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
 ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
-PRECISION_HELP = ("float32 | bfloat16 | int8: the FPN's arithmetic. bfloat16 runs it in PyTorch under autocast: 2.5x faster on CPUs "
+PRECISION_HELP = ("auto | float32 | bfloat16 | int8: the FPN's arithmetic. auto (default): int8 where this CPU runs it faster "
+                  "than float32 on ONNX Runtime (timed once per machine and weights file), else float32. bfloat16 runs it in PyTorch under autocast: 2.5x faster on CPUs "
                   "with AMX (Intel Xeon 4th generation and later), slower on CPUs without bfloat16 units. int8 runs it quantized on "
                   "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.5-2.8x faster on CPUs with VNNI or AMX. "
                   "Scores move a little with either (docs/cpu-inference.md).")

@@ -40,7 +40,7 @@ def predict(
     workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
     threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
     engine: EngineOption = "auto",
-    precision: PrecisionOption = "float32",
+    precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
 ) -> None:
@@ -62,7 +62,7 @@ def predict(
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {counted(len(plan), 'patch')} ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
-                   f"at {predictor.pixel_size_m:g} m", err=True)
+                   f"at {predictor.pixel_size_m:g} m; FPN in {predictor.precision_choice or predictor.precision}", err=True)
 
     summary = predict_to_folder(inputs, out, predictor, weights=weights, gsd=gsd, batch_size=batch_size, write_maps=write_maps,
                                 lanelet2=lanelet2, restart=restart, scheduler=scheduler, workers=workers, threads=threads,
@@ -92,7 +92,7 @@ def predict_patch(
     max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
     gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of an image without a CRS."),
     engine: EngineOption = "auto",
-    precision: PrecisionOption = "float32",
+    precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
 ) -> None:
     """Predict the road-boundary graph of one image of at most 1100x1100 px exactly as `predict`
@@ -207,7 +207,7 @@ def demo(
     out: Path = typer.Option(Path("out/demo"), help="Output directory."),
     seed: int = typer.Option(0, min=0, help="City seed (test split)."),
     engine: EngineOption = "auto",
-    precision: PrecisionOption = "float32",
+    precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
 ) -> None:
     """The main job on an embedded default: a small test-split city, predicted and scored.

@@ -137,6 +137,15 @@ class OnnxNetworks:
         networks.tuned_for = machine_key(networks.thread_count)
         return networks
 
+    def fpn_seconds(self) -> dict[str, float]:
+        """The fastest timed run of each network at its chosen level on this machine, from the
+        tuning record (``fpn``, ``fpn-int8`` when made, ``afanet``)."""
+        from csboundary.models.onnx_tuning import recorded_seconds
+
+        if self.tuning_path is None:
+            return {}
+        return recorded_seconds(self.tuning_path, self.thread_count, self.levels)
+
     def _levels_here(self) -> None:
         """The levels for this process's machine and thread count, if they were tuned for others
         (an instance unpickled on a Dask worker): read from the tuning record, else timed here."""

@@ -89,6 +89,18 @@ def _recorded(path: Path, key: str) -> dict:
     return {"levels": valid, "seconds": {name: seconds.get(name) for name in valid}}
 
 
+def recorded_seconds(path: Path, threads: int, levels: dict[str, str]) -> dict[str, float]:
+    """Each network's fastest timed run at its level ``levels[name]`` on this machine, as
+    recorded in ``path``; networks without a valid record are left out."""
+    seconds = _recorded(path, machine_key(threads)).get("seconds", {})
+    out = {}
+    for name, level in levels.items():
+        value = (seconds.get(name) or {}).get(level) if isinstance(seconds.get(name), dict) else None
+        if isinstance(value, (int, float)) and math.isfinite(value) and value > 0:
+            out[name] = float(value)
+    return out
+
+
 def tuned_levels(path: Path, models: dict[str, bytes], threads: int) -> dict[str, str]:
     """Each network's level for this machine (``models``: name -> ONNX model): read from
     ``path``, else timed and added to it (only the networks not recorded yet are timed)."""

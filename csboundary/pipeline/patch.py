@@ -62,6 +62,7 @@ class PatchPredictor:
     attach_px: float = 0.0  # city graph: dangling ends joined to the line ahead within this (graph/end_attachment.py; 0 = off)
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
     precision: str = "float32"  # the FPN's arithmetic, see use_precision
+    precision_choice: str | None = None  # how ``auto`` chose it, in words (None: asked for by name)
     folded_fpn: torch.nn.Module | None = field(default=None, repr=False)  # the FPN with batch norms folded, for bfloat16
     confidence: EdgeConfidence | None = None  # the city graph's edge confidence (models/confidence.py; None: scores as found)
     min_confidence: float = 0.0  # city graph: edges less sure than this are dropped (0 = keep all)
@@ -87,6 +88,8 @@ class PatchPredictor:
             if self.precision == "int8":
                 raise InputError("--precision", "int8 runs the FPN on ONNX Runtime: use --engine onnx or auto "
                                                 "(on a CPU, with onnxruntime installed: pip install 'csboundary[onnx]')")
+            if self.precision == "auto":
+                self.precision, self.precision_choice = "float32", "float32: the torch engine runs the FPN in float32"
             self.onnx = None
             return "torch"
         from csboundary.models.checkpoint import file_sha256
@@ -97,17 +100,24 @@ class PatchPredictor:
             import hashlib
 
             digest = hashlib.sha256((digest + file_sha256(fpn_weights)).encode()).hexdigest()
-        self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet, int8=self.precision == "int8")
+        self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet, int8=self.precision in ("int8", "auto"))
+        if self.precision == "auto":
+            self.precision, self.precision_choice = faster_fpn(self.onnx.fpn_seconds())
         return "onnx"
 
     def use_precision(self, precision: str) -> None:
-        """``float32``, ``bfloat16`` (the FPN in PyTorch under bfloat16 autocast, whatever the
+        """``auto`` (int8 where this CPU runs the quantized FPN faster than the float32 one on
+        ONNX Runtime, timed on first use; else float32: :func:`faster_fpn`), ``float32``, ``bfloat16`` (the FPN in PyTorch under bfloat16 autocast, whatever the
         engine: ONNX Runtime has no bfloat16 convolutions on a CPU; AfANet stays float32 on the
         engine chosen) or ``int8`` (the FPN quantized on ONNX Runtime: made by ``use_engine``,
         which must come after, and which refuses the torch engine). Warns where the hardware has
         no bfloat16 units, as bfloat16 is slower there."""
-        if precision not in PRECISIONS:
-            raise InputError("--precision", f"unknown precision {precision!r} (float32, bfloat16 or int8)")
+        if precision not in PRECISIONS and precision != "auto":
+            raise InputError("--precision", f"unknown precision {precision!r} (auto, float32, bfloat16 or int8)")
+        self.precision_choice = precision if precision != "auto" else None
+        if precision == "auto":  # resolved by use_engine, which must come after
+            self.precision, self.folded_fpn = "auto", None
+            return
         if precision == "int8" and self.device.type != "cpu":
             raise InputError("--precision", f"int8 runs the FPN on ONNX Runtime on the CPU, not {self.device}; use --device cpu")
         if precision == "bfloat16" and not bfloat16_hardware(self.device):
@@ -267,6 +277,17 @@ def inference_settings(settings, path: str | Path) -> dict:
             kind = "an integer" if integer else "a number"
             raise InputError(path, f"inference setting {key} = {value!r} must be {kind} from {low:g} to {high:g}")
     return settings
+
+
+def faster_fpn(seconds: dict[str, float]) -> tuple[str, str]:
+    """``int8`` or ``float32``, whichever FPN ran faster when ONNX Runtime's levels were timed on
+    this machine (``seconds``: the fastest run of ``fpn`` and ``fpn-int8``), and why, in words."""
+    f32, q8 = seconds.get("fpn"), seconds.get("fpn-int8")
+    if not f32 or not q8:
+        return "float32", "float32 (the FPN was not timed in int8 on this machine)"
+    if q8 < f32:
+        return "int8", f"int8: its FPN ran in {q8 * 1000:.0f} ms against {f32 * 1000:.0f} ms in float32 on this CPU (--precision float32 forces float32)"
+    return "float32", f"float32: its FPN ran in {f32 * 1000:.0f} ms against {q8 * 1000:.0f} ms in int8 on this CPU"
 
 
 def load_predictor(weights: str | Path | None = None, device: str = "auto", *, edge_threshold: float | None = None,

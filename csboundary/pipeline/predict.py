@@ -99,6 +99,7 @@ def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Pat
         settings["attach_max_px"] = predictor.attach_px
     if predictor.precision != "float32":  # likewise
         settings["precision"] = predictor.precision
+    settings["precision_choice"] = predictor.precision_choice or predictor.precision  # --precision auto: what it chose, and why
     if predictor.surface.active:  # only then: a run interrupted before the check existed still resumes
         settings["surface_check"] = [predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px]
         if predictor.surface.both_sides > 0:  # likewise

@@ -49,7 +49,8 @@ from csboundary.pipeline.outputs import GraphWriter, read_prediction_graph
 ORANGE = (255, 140, 0)
 OVERVIEW_PX = 2000  # longest side of overview.png
 SUMMARY = "summary.json"
-RUN_ONLY_SETTINGS = {"cluster"}  # how the work is spread, not what it computes: a run may resume on another cluster
+RUN_ONLY_SETTINGS = {"cluster", "precision_choice"}  # how the work is spread or why a setting was chosen, not what it computes:
+# a run may resume on another cluster
 PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
 
 
