@@ -1,12 +1,13 @@
-"""FPN alone against the whole pipeline, for the torch and onnx engines, in one run (issue 15).
+"""FPN alone against the whole pipeline, for the default engine (what ``predict`` runs: ``--engine
+auto --precision auto``), the torch engine, float32 ONNX and int8 ONNX, in one run.
 
-    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE] [--bfloat16] [--int8] [--fpn-threads 1]
+    .venv/bin/python benchmarks/engine_speed.py [CITY] [--repeat 1] [--weights BUNDLE] [--bfloat16] [--fpn-threads 1]
 
 CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synthesized if
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
 beforehand, batch 1: the network's time and nothing else), then ``run_prediction`` end to end on
 the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, every output
-file). ``--bfloat16`` and ``--int8`` add a row each: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
+file). ``--bfloat16`` adds a row: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
 table, the core seconds per patch of both (every thread of the process: what the rest of the
 pipeline costs beside the FPN, and the lowest ratio a perfect overlap could reach on this
 machine's cores), the core seconds per patch of each stage (``--fpn-threads 1``: the FPN on one
@@ -55,7 +56,6 @@ def main() -> None:
     parser.add_argument("--weights", default=None, help="weights bundle (default: the shipped one)")
     parser.add_argument("--bfloat16", action="store_true",
                         help="also the onnx engine with --precision bfloat16 (the FPN in PyTorch under bfloat16 autocast)")
-    parser.add_argument("--int8", action="store_true", help="also the onnx engine with --precision int8 (the FPN quantized on ONNX Runtime)")
     parser.add_argument("--fpn-threads", type=int, default=None,
                         help="threads for the networks (1: the FPN on one core, the rest of the pipeline on another)")
     args = parser.parse_args()
@@ -68,11 +68,16 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp, Mosaic.open(args.city / "tiles") as mosaic:
         grid = PatchGrid.for_mosaic(mosaic)
         images = [mosaic.read(p.expanded).data for p in grid]
-        extra = tuple(f"onnx+{precision}" for precision in ("bfloat16", "int8") if getattr(args, precision))
-        for engine in ("torch", "onnx") + extra:
+        extra = ("onnx+int8",) + (("onnx+bfloat16",) if args.bfloat16 else ())
+        for engine in ("default", "torch", "onnx") + extra:
             predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-            predictor.use_precision(engine.split("+")[1] if "+" in engine else "float32")  # before the engine: int8 is made there
-            predictor.use_engine(engine.split("+")[0], args.weights)
+            if engine == "default":  # as predict runs with no option given
+                predictor.use_precision("auto")
+                predictor.use_engine("auto", args.weights)
+                print(f"default: the {predictor.engine} engine, FPN in {predictor.precision_choice}", flush=True)
+            else:
+                predictor.use_precision(engine.split("+")[1] if "+" in engine else "float32")  # before the engine: int8 is made there
+                predictor.use_engine(engine.split("+")[0], args.weights)
             fpn, fpn_cores = fpn_only(predictor, images, args.repeat)
             out = Path(tmp) / engine
             cores = time.process_time()
@@ -94,7 +99,7 @@ def main() -> None:
                   flush=True)
     (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
     print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
-    for engine in extra:
+    for engine in ("default",) + extra:
         ef, _, es, _ = rows[engine]
         print(f"{engine} / torch end-to-end throughput: {es['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / ef:.2f}x faster")
     if tg == og:

@@ -61,6 +61,16 @@ def main() -> None:
         print(city.name.ljust(30) + "".join(f"{cell:>26s}" for cell in cells), flush=True)
     for c in configs[1:]:
         print(f"largest |change| {c} against {configs[0]}: " + ", ".join(f"{m} {v:.3f}" for m, v in worst[c].items()))
+    from csboundary.metrics.compare import paired_bootstrap
+
+    for c in configs[1:]:  # the decision's criterion: the mean change over cities, with its 95 % paired-bootstrap interval
+        cells = []
+        for m in METRICS:
+            a = [scores(city, configs[0], args.out)[m] for city in args.cities]
+            b = [scores(city, c, args.out)[m] for city in args.cities]
+            diff, low, high, _ = paired_bootstrap(a, b, seed=0)
+            cells.append(f"{m} {diff:+.4f} [{low:+.4f}, {high:+.4f}]")
+        print(f"mean change {c} - {configs[0]} over {len(args.cities)} cities: " + ", ".join(cells))
 
 
 if __name__ == "__main__":
