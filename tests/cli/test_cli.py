@@ -107,3 +107,7 @@ def test_demo_predicts_and_scores_a_city_with_the_shipped_weights(tmp_path):
     assert "patch" in result.stdout and "city" in result.stdout and "km2/h" in result.stdout
     for name in ("overview.png", "detail.png", "boundaries.gpkg", "boundaries.geojson", "graph.json", "summary.json"):
         assert (tmp_path / "demo" / "prediction" / name).stat().st_size > 0
+    settings = json.loads((tmp_path / "demo" / "prediction" / "summary.json").read_text())["settings"]
+    # the default precision is chosen on this machine: what it chose and why is recorded
+    assert settings["engine"] == "onnx" and settings.get("precision", "float32") in ("int8", "float32")
+    assert settings["precision_choice"].startswith(settings.get("precision", "float32") + ": its FPN ran in")

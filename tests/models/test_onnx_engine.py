@@ -153,6 +153,34 @@ def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors,
     assert onnx_engine.onnx.fpn_int8_model is None  # float32 again: the float export only
 
 
+def test_auto_precision_runs_whichever_fpn_was_timed_faster_here_and_says_why(predictors, monkeypatch):
+    from csboundary.models import onnx_quantization
+    from csboundary.pipeline.patch import faster_fpn
+
+    monkeypatch.setattr(onnx_quantization, "CALIBRATION_STYLES", ("classic",))  # a faster test
+    torch_engine, onnx_engine, weights = predictors
+    onnx_engine.use_precision("auto")
+    try:
+        assert onnx_engine.precision == "auto"  # resolved by the engine
+        onnx_engine.use_engine("onnx", weights)
+        seconds = onnx_engine.onnx.fpn_seconds()  # both FPNs timed at their levels on this machine, read back from the record
+        assert set(seconds) == {"fpn", "fpn-int8", "afanet"} and all(v > 0 for v in seconds.values())
+        faster = "int8" if seconds["fpn-int8"] < seconds["fpn"] else "float32"
+        assert onnx_engine.precision == faster and onnx_engine.precision_choice.startswith(f"{faster}: its FPN ran in")
+    finally:
+        onnx_engine.use_precision("float32")
+        onnx_engine.use_engine("onnx", weights)
+    torch_engine.use_precision("auto")
+    try:
+        torch_engine.use_engine("torch", weights)
+        assert torch_engine.precision == "float32" and "torch engine" in torch_engine.precision_choice
+    finally:
+        torch_engine.use_precision("float32")
+    assert faster_fpn({"fpn": 0.40, "fpn-int8": 0.15})[0] == "int8"
+    assert faster_fpn({"fpn": 0.15, "fpn-int8": 0.40}) == ("float32", "float32: its FPN ran in 150 ms against 400 ms in int8 on this CPU")
+    assert faster_fpn({"fpn": 0.15})[0] == "float32"  # not timed in int8: float32
+
+
 def test_int8_is_refused_where_onnx_runtime_does_not_run_it(predictors, patch_image):
     import warnings
 
