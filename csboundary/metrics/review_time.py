@@ -17,7 +17,7 @@ Drawing the same map from scratch costs a look and the clicks of every ground-tr
 traced the same way. F1@5 is tracked after every action on 1 px rasters, as
 :func:`csboundary.metrics.pixel.relaxed_scores` defines it, so the curve starts at the
 prediction's F1@5. The reviewer may stop looking early and draw from there (the point of a
-confidence: the sure edges need no look); ``minutes_to_f1`` is the cheapest such plan that
+confidence: the sure edges need no look); ``minutes_to_target_f1`` is the cheapest such plan that
 reaches the target, searched over stopping points.
 
 Pure functions on graphs in one pixel frame; costs are parameters (:class:`ReviewCosts`).
@@ -57,7 +57,7 @@ class ReviewCosts(Config):
     target_f1: float = 0.95
 
     def __post_init__(self) -> None:
-        if min(self.look_s, self.delete_s, self.vertex_s) < 0 or self.trace_tolerance_px <= 0 or not 0 < self.target_f1 <= 1:
+        if min(self.look_s, self.delete_s, self.vertex_s, self.fix_px) < 0 or self.trace_tolerance_px <= 0 or not 0 < self.target_f1 <= 1:
             raise ValueError("review costs must be >= 0, the tolerance > 0 and the target F1 in (0, 1]")
 
 
@@ -310,11 +310,12 @@ def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float |
     samples = boundary_samples(gt)
     false = edge_truth(pred, gt, within_px) < TRUE_SHARE if pred.n_edges else np.zeros(0, bool)
     gt_length_px = float(gt.edge_lengths().sum()) if gt.n_edges else 0.0
-    scratch_s = len(samples) * costs.look_s + scratch_clicks(gt, costs.trace_tolerance_px) * costs.vertex_s
+    clicks = scratch_clicks(gt, costs.trace_tolerance_px)
+    scratch_s = len(samples) * costs.look_s + clicks * costs.vertex_s
     km = gt_length_px * metres_per_px / 1000 if metres_per_px else None
     out = {"costs": costs.to_dict(), "edges": int(pred.n_edges), "false_edges": int(false.sum()),
            "true_boundary_px": gt_length_px, "true_boundary_km": km,
-           "scratch_minutes": scratch_s / 60, "scratch_clicks": scratch_clicks(gt, costs.trace_tolerance_px), "orders": {}}
+           "scratch_minutes": scratch_s / 60, "scratch_clicks": clicks, "orders": {}}
     for name in ORDERS:
         order = review_order(pred, name, seed)
         trace, to_target = simulate_review(_State(pred, gt_pixels, within_px), false, samples, order, costs, within_px)
