@@ -172,7 +172,9 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
     from csboundary.pipeline.run import run_prediction
 
     predictor = PatchPredictor.load(None, torch.device("cpu"))
-    predictor.use_engine("auto")  # as the command line does: the engine travels to the workers
+    # the precision the command line chose for the reference on this machine (--precision auto), and its engine: both travel to the workers
+    predictor.use_precision(json.loads((reference / "summary.json").read_text())["settings"].get("precision", "float32"))
+    predictor.use_engine("auto")
     out = tmp_path / "pred"
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40) as cluster, \
             Client(cluster) as client, Mosaic.open(city / "tiles") as mosaic:
