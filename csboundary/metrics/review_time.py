@@ -316,9 +316,10 @@ def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float |
     out = {"costs": costs.to_dict(), "edges": int(pred.n_edges), "false_edges": int(false.sum()),
            "true_boundary_px": gt_length_px, "true_boundary_km": km,
            "scratch_minutes": scratch_s / 60, "scratch_clicks": clicks, "orders": {}}
+    draft = _State(pred, gt_pixels, within_px)  # rasterised and paired once; each order works on a copy
     for name in ORDERS:
         order = review_order(pred, name, seed)
-        trace, to_target = simulate_review(_State(pred, gt_pixels, within_px), false, samples, order, costs, within_px)
+        trace, to_target = simulate_review(draft.copy(), false, samples, order, costs, within_px)
         pick = np.unique(np.linspace(0, len(trace.seconds) - 1, curve_points).round().astype(int))
         out["orders"][name] = {"minutes": trace.total_s / 60, "look_minutes": trace.look_s / 60, "draw_minutes": trace.draw_s / 60,
                                "clicks": trace.clicks, "start_f1": float(trace.f1[0]), "end_f1": float(trace.f1[-1]),

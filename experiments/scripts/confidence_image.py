@@ -80,18 +80,23 @@ def image_evidence(graph, channels: dict[str, np.ndarray]) -> np.ndarray:
     return out
 
 
-def city_record(city: Path, predictor, cache: Path, prefix: str) -> Path:
-    target = cache / f"{prefix}-{city.name}.npz"
-    if target.exists():
-        return target
-    edges = city_edges(city, predictor, assume_model_gsd=True)
+def model_image(city: Path, predictor) -> tuple[np.ndarray, np.ndarray]:
+    """A labelled city's whole imagery as the model sees it (its pixel size): (4, H, W) uint8 and valid (H, W)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mosaic, _ = open_imagery([city])
         view = model_view(mosaic, model_gsd=predictor.pixel_size_m, assume_model_gsd=True)
     with view.mosaic as m:
         read = m.read(m.window)
-    data, valid = np.asarray(read.data), np.asarray(read.valid)
+    return np.asarray(read.data), np.asarray(read.valid)
+
+
+def city_record(city: Path, predictor, cache: Path, prefix: str) -> Path:
+    target = cache / f"{prefix}-{city.name}.npz"
+    if target.exists():
+        return target
+    edges = city_edges(city, predictor, assume_model_gsd=True)
+    data, valid = model_image(city, predictor)
     channels = image_channels(data[:3], valid)
     evidence = edges.evidence if edges.graph.n_edges else np.zeros((0, len(FEATURES)))
     np.savez(target, evidence=evidence, image=image_evidence(edges.graph, channels), truth_share=edges.truth_share,

@@ -14,14 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from csboundary.data.inputs import open_imagery
-from csboundary.data.model_view import model_view
 from csboundary.metrics.compare import paired_bootstrap
 from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.maps import predict_probabilities
@@ -33,14 +30,11 @@ LAST = {0: ("head.1.weight", "head.1.bias", 0), 1: ("head.1.weight", "head.1.bia
 
 def logits(predictor: PatchPredictor, city: Path) -> np.ndarray:
     """(C, N) logits of the valid pixels of a city's imagery, in the model's frame."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        mosaic, _ = open_imagery([city])
-        view = model_view(mosaic, model_gsd=predictor.pixel_size_m, assume_model_gsd=True)
-    with view.mosaic as m:
-        read = m.read(m.window)
-    p = predict_probabilities(predictor.fpn, np.asarray(read.data), torch.device("cpu"))
-    p = np.clip(p[:, np.asarray(read.valid)], 1e-6, 1 - 1e-6)
+    from confidence_image import model_image  # a sibling script (main puts this folder on the path)
+
+    data, valid = model_image(city, predictor)
+    p = predict_probabilities(predictor.fpn, data, torch.device("cpu"))
+    p = np.clip(p[:, valid], 1e-6, 1 - 1e-6)
     return np.log(p / (1 - p))
 
 
