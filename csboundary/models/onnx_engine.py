@@ -88,6 +88,8 @@ class OnnxNetworks:
     def __init__(self, fpn_model: bytes, afanet_model: bytes, threads: int | None = None, levels: dict[str, str] | None = None,
                  fpn_int8_model: bytes | None = None):
         self.fpn_model, self.afanet_model, self.fpn_int8_model, self.threads = fpn_model, afanet_model, fpn_int8_model, threads
+        # leave one core to the rest of the pipeline (see spare_a_core)
+        self.spare_core = False
         self.levels = dict(levels or {})  # graph optimisation level per network (see onnx_tuning)
         # where the levels were timed and for which machine key: a Dask worker on another CPU or
         # with another thread count looks its own up (or times them) when it opens a session
@@ -105,7 +107,19 @@ class OnnxNetworks:
 
     @property
     def thread_count(self) -> int:
-        return self.threads or torch.get_num_threads()
+        """Threads per network: ``threads`` (default: torch's), one fewer with ``spare_core``."""
+        threads = self.threads or torch.get_num_threads()
+        return max(1, threads - 1) if self.spare_core else threads
+
+    def spare_a_core(self) -> None:
+        """Run the networks on one thread fewer than the process has cores for. The int8 FPN
+        costs about what the rest of a patch's work costs (0.17-0.18 core-s each on the 64-patch
+        seed-7 city), so the rest, on the thread that calls the networks, needs a core of its
+        own: on 2 cores the city ran at 229.5 km2/h with the int8 FPN on both, 282.5-308.8 with
+        it on one (docs/cpu-inference.md). Before the sessions are opened."""
+        if self._sessions:
+            raise RuntimeError("spare_a_core after a session was opened: its thread count is fixed")
+        self.spare_core = True
 
     @classmethod
     def for_weights(cls, weights: Path, digest: str, fpn, afanet, int8: bool = False) -> "OnnxNetworks":

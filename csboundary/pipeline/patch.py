@@ -103,6 +103,8 @@ class PatchPredictor:
         self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet, int8=self.precision in ("int8", "auto"))
         if self.precision == "auto":
             self.precision, self.precision_choice = faster_fpn(self.onnx.fpn_seconds())
+        if self.precision == "int8":
+            self.onnx.spare_a_core()
         return "onnx"
 
     def use_precision(self, precision: str) -> None:

@@ -181,6 +181,35 @@ def test_auto_precision_runs_whichever_fpn_was_timed_faster_here_and_says_why(pr
     assert faster_fpn({"fpn": 0.15})[0] == "float32"  # not timed in int8: float32
 
 
+def test_the_int8_fpn_leaves_a_core_to_the_rest_of_the_pipeline(predictors, monkeypatch):
+    """int8 makes the FPN cost what the rest of a patch costs: the networks take one thread fewer
+    than the process has, never fewer than one; float32 keeps them all."""
+    _, onnx_engine, weights = predictors
+    networks = OnnxNetworks(b"", b"", threads=3)
+    assert networks.thread_count == 3
+    networks.spare_a_core()
+    assert networks.thread_count == 2
+    assert OnnxNetworks(b"", b"", threads=1).thread_count == 1
+    lone = OnnxNetworks(b"", b"", threads=1)
+    lone.spare_a_core()
+    assert lone.thread_count == 1
+    opened = OnnxNetworks(b"", b"", threads=2)
+    opened._sessions["fpn"] = object()
+    with pytest.raises(RuntimeError, match="after a session was opened"):
+        opened.spare_a_core()
+
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 4)
+    assert onnx_engine.onnx.spare_core is False and onnx_engine.onnx.thread_count == 4  # float32: every core
+    onnx_engine.use_precision("int8")
+    try:
+        onnx_engine.use_engine("onnx", weights)
+        assert onnx_engine.onnx.spare_core is True and onnx_engine.onnx.thread_count == 3
+    finally:
+        onnx_engine.use_precision("float32")
+        onnx_engine.use_engine("onnx", weights)
+    assert onnx_engine.onnx.spare_core is False
+
+
 def test_int8_is_refused_where_onnx_runtime_does_not_run_it(predictors, patch_image):
     import warnings
 
