@@ -35,8 +35,8 @@ from csboundary.pipeline.run_store import RunStore  # noqa: E402
 
 def written(result, store, model, block: int, one_pass: bool, folder: Path) -> dict:
     grid = result.grid
-    recipe = CityGraphRecipe(StitchConfig(), result.graph.crs, model.min_fragment_px, model.attach_px, model.confidence,
-                             model.min_confidence, True, block=block)
+    recipe = CityGraphRecipe(StitchConfig(), result.graph.crs, model.settings.min_fragment_px, model.settings.attach_px, model.confidence,
+                             model.settings.min_confidence, True, block=block)
     files = {"gpkg": folder / "boundaries.gpkg", "geojson": folder / "boundaries.geojson", "graph_json": folder / "graph.json"}
     writer = GraphWriter(files, result.graph.crs, grid.transform, mosaic_units(store.mosaic))
     sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)

@@ -9,8 +9,8 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, ConfidenceOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
-                                    QuietOption, WeightsOption, finite, out_dir, out_file, readable_inputs)
+from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file, readable_inputs, with_graph_options)
+from csboundary.graph.settings import GraphOverrides
 
 
 def evaluate(
@@ -63,23 +63,13 @@ def evaluate(
         typer.echo(f"wrote {json_out}")
 
 
+@with_graph_options
 def evaluate_model(
     city: Path = typer.Argument(..., help="A city directory with ground truth (e.g. a valid-split synthetic city)."),
     weights: WeightsOption = None,
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    edge_threshold: EdgeThresholdOption = None,
-    min_edge_support: EdgeSupportOption = None,
-    max_edge_length: EdgeLengthOption = None,
-    max_edge_gap: EdgeGapOption = None,
-    fill_min_length: FillOption = None,
-    join_ends: JoinOption = None,
-    attach_ends: AttachOption = None,
-    attach_backed: AttachBackedOption = None,
-    surface_check: SurfaceOption = None,
-    surface_gate: GateOption = None,
-    min_fragment_length: FragmentOption = None,
-    min_confidence: ConfidenceOption = None,
+    graph: GraphOverrides = GraphOverrides(),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch."),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "auto",
@@ -95,8 +85,7 @@ def evaluate_model(
     from csboundary.pipeline.evaluate_set import evaluate_city
     from csboundary.pipeline.patch import load_predictor
 
-    predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
+    predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
     scores = evaluate_city(city, predictor, seed, batch_size=batch_size, progress=not quiet)
     for item in scores.values():
         item["inputs"]["pred"] = f"{weights or 'shipped weights'} on {city}"
@@ -105,23 +94,13 @@ def evaluate_model(
         write_scores(json_out, scores)
 
 
+@with_graph_options
 def evaluate_set_cmd(
     set_dir: Path = typer.Argument(..., help="A folder of labelled cities (import-masks output, or city directories)."),
     weights: WeightsOption = None,
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write per-city and mean scores as JSON here."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
-    edge_threshold: EdgeThresholdOption = None,
-    min_edge_support: EdgeSupportOption = None,
-    max_edge_length: EdgeLengthOption = None,
-    max_edge_gap: EdgeGapOption = None,
-    fill_min_length: FillOption = None,
-    join_ends: JoinOption = None,
-    attach_ends: AttachOption = None,
-    attach_backed: AttachBackedOption = None,
-    surface_check: SurfaceOption = None,
-    surface_gate: GateOption = None,
-    min_fragment_length: FragmentOption = None,
-    min_confidence: ConfidenceOption = None,
+    graph: GraphOverrides = GraphOverrides(),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
@@ -135,8 +114,7 @@ def evaluate_set_cmd(
 
     if json_out is not None:
         out_file(json_out, (".json",))
-    predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
+    predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
     result = evaluate_set(set_dir, predictor, seed=seed, progress=not quiet)
     result["weights"] = str(weights or "shipped")
     typer.echo(format_set(result))

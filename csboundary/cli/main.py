@@ -10,6 +10,7 @@ function.
 
 from __future__ import annotations
 
+import inspect
 import os
 import signal
 import sys
@@ -50,6 +51,56 @@ for _name, _command in COMMANDS:
     app.command(_name)(_command)
 
 
+def help_as_read(group):
+    """The help screens tidied: each command's text re-flowed to the terminal (its docstring's
+    line breaks dropped, paragraphs kept) and summed up in the command list by its first
+    sentence; flags without a value shown bare (typer writes ``<bool>``), arguments by name in
+    capitals (``IMAGERY...``, not ``{inputs}... <list[Path]>``). Typer has no setting for the last
+    two, so its help methods are replaced on these objects alone."""
+    for command in (group, *group.commands.values()):
+        if command is not group and command.help:
+            paragraphs = inspect.cleandoc(command.help).split("\n\n")
+            command.help = "\n\n".join(" ".join(p.split()) for p in paragraphs)
+            command.short_help = first_sentence(command.help)
+        for param in command.params:
+            if param.param_type_name == "option" and param.is_flag:
+                param.metavar = ""
+            elif param.param_type_name == "option" and param.metavar is None:
+                param.display_type_rich = lambda ctx, shown=param.display_type_rich: value_name(shown(ctx))
+            elif param.param_type_name == "argument":
+                name = param.metavar or param.name.upper() + ("..." if param.nargs != 1 else "")
+                param.metavar = name
+                param.display_type_rich = lambda ctx: None
+                param.get_usage_pieces = lambda ctx, name=name, required=param.required: [name if required else f"[{name}]"]
+        command.get_help_option = _bare_flag(command.get_help_option)
+    return group
+
+
+VALUE_NAMES = {"<path>": "PATH", "<int>": "N", "<int range>": "N", "<float>": "NUMBER", "<float range>": "NUMBER", "<str>": "TEXT"}
+
+
+def value_name(typed: str | None) -> str | None:
+    """``PATH`` for typer's ``<path>``, ``N`` for ``<int range>`` and the like."""
+    return VALUE_NAMES.get(typed, typed)
+
+
+def _bare_flag(get_option):
+    def bare(ctx):
+        option = get_option(ctx)
+        if option is not None:
+            option.metavar = ""
+        return option
+    return bare
+
+
+def first_sentence(text: str) -> str:
+    """Up to the first full stop that ends a sentence (not one inside ``0.03`` or ``e.g.``)."""
+    for k in range(len(text) - 1):
+        if text[k] == "." and text[k + 1] == " " and not text[max(0, k - 3):k + 1].endswith(("e.g.", "i.e.", "Fig.")):
+            return text[:k + 1]
+    return text
+
+
 def _format_warning(message, category, filename, lineno, line=None) -> str:
     return f"warning: {message}\n"
 
@@ -75,7 +126,7 @@ def main() -> None:
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
     try:
-        code = app(standalone_mode=False)
+        code = help_as_read(typer.main.get_command(app))(standalone_mode=False)
     except typer.Abort:
         typer.echo("aborted", err=True)
         sys.exit(1)

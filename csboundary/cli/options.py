@@ -3,32 +3,35 @@ output checks made before any work, and the help texts of options several comman
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import inspect
 import math
 from pathlib import Path
-from typing import Annotated, Optional, Sequence
+from typing import Annotated, Callable, Optional, Sequence
 
 import typer
 
 from csboundary.errors import InputError
 
-SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check; default: the weights')."
-LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit; default: the weights')."
-GAP_HELP = "Longest stretch of an AfANet edge, in pixels, where the boundary map is below the gap level (0 = no check; default: the weights')."
-FILL_HELP = "Fill in segmentation-skeleton stretches at least this long that no edge covers, in pixels (0 = off; default: the weights')."
-JOIN_HELP = "Join two dangling ends at most this many pixels apart that head towards each other over boundary (0 = off; default: the weights')."
+SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check)."
+LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit)."
+GAP_HELP = "Longest stretch of an AfANet edge, in pixels, where the boundary map is below the gap level (0 = no check)."
+FILL_HELP = "Fill in segmentation-skeleton stretches at least this long that no edge covers, in pixels (0 = off)."
+JOIN_HELP = "Join two dangling ends at most this many pixels apart that head towards each other over boundary (0 = off)."
 ATTACH_HELP = ("City graph: join a dangling end to the nearest line of another piece at most this many pixels ahead of it "
-               "(0 = off; default: the weights').")
+               "(0 = off).")
 ATTACH_BACKED_HELP = ("Join a dangling end of a window's graph to the nearest line of another piece at most this many pixels ahead "
-                      "of it where the boundary map backs the join, as --join-ends (0 = off; default: the weights').")
-FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all; default: the weights')."
-THRESHOLD_HELP = "Adjacency probability for an edge (default: the weights')."
-ENGINE_HELP = "auto | torch | onnx: the networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
-PRECISION_HELP = ("auto | float32 | bfloat16 | int8: the FPN's arithmetic. auto (default): int8 where this CPU runs it faster "
+                      "of it where the boundary map backs the join, as --join-ends (0 = off).")
+FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all)."
+THRESHOLD_HELP = "Adjacency probability for an edge."
+ENGINE_HELP = "The networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
+PRECISION_HELP = ("The FPN's arithmetic. auto: int8 where this CPU runs it faster "
                   "than float32 on ONNX Runtime (timed once per machine and weights file), else float32. bfloat16 runs it in PyTorch under autocast: 2.5x faster on CPUs "
                   "with AMX (Intel Xeon 4th generation and later), slower on CPUs without bfloat16 units. int8 runs it quantized on "
                   "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.5-2.8x faster on CPUs with VNNI or AMX. "
                   "Scores move a little with either (docs/cpu-inference.md).")
-DEVICE_HELP = "auto | cpu | cuda."
+DEVICE_HELP = "Where the networks run (auto: CUDA when present)."
 WEIGHTS_HELP = "Weights bundle (default: the shipped weights)."
 
 
@@ -49,29 +52,71 @@ def positive(value: float | None) -> float | None:
 
 
 # Options several commands take, declared once (``name: WeightsOption = None``).
-WeightsOption = Annotated[Optional[Path], typer.Option(help=WEIGHTS_HELP)]
-EdgeThresholdOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=THRESHOLD_HELP)]
-EdgeSupportOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, max=1.0, help=SUPPORT_HELP)]
-EdgeLengthOption = Annotated[Optional[float], typer.Option(callback=finite, min=0.0, help=LENGTH_HELP)]
-EdgeGapOption = Annotated[Optional[float], typer.Option("--max-edge-gap", callback=finite, min=0.0, help=GAP_HELP)]
+WeightsOption = Annotated[Optional[Path], typer.Option(metavar="FILE", help=WEIGHTS_HELP)]
+EngineOption = Annotated[str, typer.Option(metavar="auto|torch|onnx", help=ENGINE_HELP)]
+PrecisionOption = Annotated[str, typer.Option(metavar="auto|float32|bfloat16|int8", help=PRECISION_HELP)]
+DeviceOption = Annotated[str, typer.Option(metavar="auto|cpu|cuda", help=DEVICE_HELP)]
+QuietOption = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
+
 SURFACE_HELP = ("Road-surface check: an edge needs this mean road-surface probability beside it, or a connected edge that has it "
-                "(0 = off; default: the weights'; the FPN needs a surface head).")
-SurfaceOption = Annotated[Optional[float], typer.Option("--surface-check", callback=finite, min=0.0, max=1.0, help=SURFACE_HELP)]
+                "(0 = off; the FPN needs a surface head).")
 GATE_HELP = ("Surface gate: keypoint and boundary maps are kept only within this many pixels of a change of the road surface "
-             "(roofs, lots and rows of parked cars lose their outlines; 0 = off; default: the weights'; the FPN needs a surface head).")
-GateOption = Annotated[Optional[float], typer.Option("--surface-gate", callback=finite, min=0.0, max=200.0, help=GATE_HELP)]
-FillOption = Annotated[Optional[float], typer.Option("--fill-min-length", callback=finite, min=0.0, help=FILL_HELP)]
-JoinOption = Annotated[Optional[float], typer.Option("--join-ends", callback=finite, min=0.0, help=JOIN_HELP)]
-AttachOption = Annotated[Optional[float], typer.Option("--attach-ends", callback=finite, min=0.0, help=ATTACH_HELP)]
-AttachBackedOption = Annotated[Optional[float], typer.Option("--attach-backed", callback=finite, min=0.0, help=ATTACH_BACKED_HELP)]
+             "(roofs, lots and rows of parked cars lose their outlines; 0 = off; the FPN needs a surface head).")
 CONFIDENCE_HELP = ("Drop the city graph's edges whose confidence (the calibrated probability that an edge is a true boundary) is "
                    "below this (0 = keep all; docs/confidence.md shows precision and recall against it).")
-ConfidenceOption = Annotated[Optional[float], typer.Option("--min-confidence", callback=finite, min=0.0, max=1.0, help=CONFIDENCE_HELP)]
-FragmentOption = Annotated[Optional[float], typer.Option("--min-fragment-length", callback=finite, min=0.0, help=FRAGMENT_HELP)]
-EngineOption = Annotated[str, typer.Option(help=ENGINE_HELP)]
-PrecisionOption = Annotated[str, typer.Option(help=PRECISION_HELP)]
-DeviceOption = Annotated[str, typer.Option(help=DEVICE_HELP)]
-QuietOption = Annotated[bool, typer.Option(help="No progress bar.")]
+DEGREE_HELP = "Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."
+GRAPH_PANEL = "Graph settings (default: the weights')"
+
+
+def _graph_option(flag: str, metavar: str, help: str, low: float = 0.0, high: float | None = None, kind: type = float):
+    return Annotated[Optional[kind], typer.Option(flag, metavar=metavar, callback=finite if kind is float else None, min=low, max=high,
+                                                  help=help, rich_help_panel=GRAPH_PANEL)]
+
+
+# The graph options: one per field of GraphOverrides, declared here only. Commands take them as one
+# ``graph: GraphOverrides`` parameter through ``with_graph_options``.
+GRAPH_OPTIONS = {
+    "edge_threshold": _graph_option("--edge-threshold", "P", THRESHOLD_HELP, high=1.0),
+    "min_edge_support": _graph_option("--min-edge-support", "P", SUPPORT_HELP, high=1.0),
+    "max_edge_length": _graph_option("--max-edge-length", "PX", LENGTH_HELP),
+    "max_edge_gap": _graph_option("--max-edge-gap", "PX", GAP_HELP),
+    "fill_min_length": _graph_option("--fill-min-length", "PX", FILL_HELP),
+    "join_ends": _graph_option("--join-ends", "PX", JOIN_HELP),
+    "attach_ends": _graph_option("--attach-ends", "PX", ATTACH_HELP),
+    "attach_backed": _graph_option("--attach-backed", "PX", ATTACH_BACKED_HELP),
+    "surface_check": _graph_option("--surface-check", "P", SURFACE_HELP, high=1.0),
+    "surface_gate": _graph_option("--surface-gate", "PX", GATE_HELP, high=200.0),
+    "max_degree": _graph_option("--max-degree", "N", DEGREE_HELP, low=0, kind=int),
+    "min_fragment_length": _graph_option("--min-fragment-length", "PX", FRAGMENT_HELP),
+    "min_confidence": _graph_option("--min-confidence", "P", CONFIDENCE_HELP, high=1.0),
+}
+
+
+def with_graph_options(command: Callable) -> Callable:
+    """``command`` with its ``graph: GraphOverrides`` parameter shown to the command line as the
+    graph options (:data:`GRAPH_OPTIONS`, one help panel) and handed back to it as one object."""
+    from csboundary.graph.settings import GraphOverrides
+
+    signature = inspect.signature(command, eval_str=True)
+    if set(GRAPH_OPTIONS) != {f.name for f in dataclasses.fields(GraphOverrides)}:
+        raise RuntimeError("GRAPH_OPTIONS and GraphOverrides name different options")
+    parameters = []
+    for parameter in signature.parameters.values():
+        if parameter.name == "graph":
+            parameters += [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=annotation)
+                           for name, annotation in GRAPH_OPTIONS.items()]
+        else:
+            parameters.append(parameter.replace(kind=inspect.Parameter.KEYWORD_ONLY))
+
+    @functools.wraps(command)
+    def wrapper(**values):
+        graph = GraphOverrides(**{name: values.pop(name) for name in GRAPH_OPTIONS})
+        return command(graph=graph, **values)
+
+    del wrapper.__wrapped__  # typer reads the signature below, not the command's
+    wrapper.__signature__ = signature.replace(parameters=parameters)
+    wrapper.__annotations__ = {p.name: p.annotation for p in parameters}
+    return wrapper
 
 
 def parse_tiles(text: str) -> tuple[int, int]:

@@ -10,27 +10,17 @@ from typing import Optional
 import numpy as np
 import typer
 
-from csboundary.cli.options import (AttachBackedOption, AttachOption, DeviceOption, EdgeGapOption, EdgeLengthOption, EdgeSupportOption, EdgeThresholdOption, EngineOption, FillOption, ConfidenceOption, FragmentOption, GateOption, JoinOption, PrecisionOption, SurfaceOption,
-                                    QuietOption, WeightsOption, finite, positive, out_dir, out_file, parse_numbers, readable_inputs)
+from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, positive, readable_inputs, with_graph_options)
 from csboundary.errors import InputError, InputWarning
+from csboundary.graph.settings import GraphOverrides
 
 
+@with_graph_options
 def predict(
-    inputs: list[Path] = typer.Argument(..., help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
+    inputs: list[Path] = typer.Argument(..., metavar="IMAGERY...", help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
     out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
     weights: WeightsOption = None,
-    edge_threshold: EdgeThresholdOption = None,
-    min_edge_support: EdgeSupportOption = None,
-    max_edge_length: EdgeLengthOption = None,
-    max_edge_gap: EdgeGapOption = None,
-    fill_min_length: FillOption = None,
-    join_ends: JoinOption = None,
-    attach_ends: AttachOption = None,
-    attach_backed: AttachBackedOption = None,
-    surface_check: SurfaceOption = None,
-    surface_gate: GateOption = None,
-    min_fragment_length: FragmentOption = None,
-    min_confidence: ConfidenceOption = None,
+    graph: GraphOverrides = GraphOverrides(),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
     write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
     lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
@@ -57,8 +47,7 @@ def predict(
     from csboundary.pipeline.predict import predict_to_folder
     from csboundary.pipeline.run import counted, stage_table, written_files
 
-    predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, engine=engine, precision=precision)
+    predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
 
     def announce(plan, view) -> None:
         typer.echo(f"{out}: {counted(len(plan), 'patch')} ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
@@ -72,24 +61,13 @@ def predict(
                f"{stage_table(summary)}\nwrote {out}: {written_files(out)}")
 
 
+@with_graph_options
 def predict_patch(
     image: Path = typer.Argument(..., help="One image: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
     out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
     weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
-    edge_threshold: EdgeThresholdOption = None,
-    min_edge_support: EdgeSupportOption = None,
-    max_edge_length: EdgeLengthOption = None,
-    max_edge_gap: EdgeGapOption = None,
-    fill_min_length: FillOption = None,
-    join_ends: JoinOption = None,
-    attach_ends: AttachOption = None,
-    attach_backed: AttachBackedOption = None,
-    surface_check: SurfaceOption = None,
-    surface_gate: GateOption = None,
-    min_fragment_length: FragmentOption = None,
-    min_confidence: ConfidenceOption = None,
-    max_degree: Optional[int] = typer.Option(None, min=0, help="Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."),
+    graph: GraphOverrides = GraphOverrides(),
     gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of an image without a CRS."),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "auto",
@@ -103,11 +81,10 @@ def predict_patch(
     from csboundary.pipeline.patch import load_predictor
     from csboundary.pipeline.predict import predict_patch_to_folder
 
-    predictor = load_predictor(weights, device, edge_threshold=edge_threshold, min_edge_support=min_edge_support,
-                               max_edge_length=max_edge_length, max_edge_gap=max_edge_gap, fill_min_length=fill_min_length, join_ends=join_ends, attach_ends=attach_ends, attach_backed=attach_backed, surface_check=surface_check, surface_gate=surface_gate, min_fragment_length=min_fragment_length, min_confidence=min_confidence, max_degree=max_degree, fpn_weights=fpn_weights, engine=engine, precision=precision)
-    graph = predict_patch_to_folder(image, out, predictor, gsd)
-    kinds = graph.edge_kinds or []
-    typer.echo(f"{out}: {graph.n_vertices} vertices, {graph.n_edges} edges ({kinds.count('corner')} corner, "
+    predictor = load_predictor(weights, device, graph, fpn_weights=fpn_weights, engine=engine, precision=precision)
+    drawn = predict_patch_to_folder(image, out, predictor, gsd)
+    kinds = drawn.edge_kinds or []
+    typer.echo(f"{out}: {drawn.n_vertices} vertices, {drawn.n_edges} edges ({kinds.count('corner')} corner, "
                f"{kinds.count('skeleton')} filled in from the segmentation)")
 
 

@@ -24,6 +24,7 @@ recipe) in training samples: ``area / (batch * crop^2)`` steps for the dense net
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from dataclasses import dataclass
 from datetime import datetime
@@ -75,7 +76,8 @@ def _ablation(variant: str):
 
         predictor = PatchPredictor.load(_repository_weights(weights_dir / "ablation" / f"afanet-{variant}.pt"), device,
                                        fpn_weights=_repository_weights(weights_dir / FIRST_FPN))
-        predictor.edge_threshold, predictor.max_degree = FIRST_INFERENCE["edge_threshold"], FIRST_INFERENCE["max_degree"]
+        predictor.settings = dataclasses.replace(predictor.settings, edge_threshold=FIRST_INFERENCE["edge_threshold"],
+                                                 max_degree=FIRST_INFERENCE["max_degree"])
         return predictor
 
     return load

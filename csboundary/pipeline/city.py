@@ -40,7 +40,9 @@ from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.graph_stream import StreamBoundary, StreamPiece
+from csboundary.graph.settings import GraphSettings
 from csboundary.graph.stitching import StitchConfig, to_mosaic
+from csboundary.models.confidence import EdgeConfidence
 from csboundary.pipeline.city_blocks import BLOCK, CityCollector, CityGraphRecipe, stream_city_graph
 from csboundary.pipeline.edge_confidence import core_sampler
 from csboundary.pipeline.map_stitching import Index, WindowSchedule, stitch_window
@@ -74,6 +76,16 @@ _trim_heap = _heap_trimmer()
 
 
 class PatchModel(Protocol):
+    """What the city pipeline runs: three steps per patch, the graph settings the city graph
+    reads (``min_fragment_px``, ``attach_px``, ``min_confidence``), an edge confidence (None:
+    scores as found), whether to keep the maps the edges' evidence is read from, and the pixel size
+it takes imagery at."""
+
+    settings: GraphSettings
+    confidence: EdgeConfidence | None
+    collect_evidence: bool
+    pixel_size_m: float  # the pixel size the model takes imagery at
+
     def patch_maps(self, patches: list[Patch], images: list[np.ndarray]) -> list[np.ndarray]:
         """(C, S, S) probabilities per patch (C = 2: keypoint and segmentation)."""
 
@@ -237,7 +249,7 @@ def empty_graph(patch: Patch) -> BoundaryGraph:
 def reads_evidence(model: PatchModel) -> bool:
     """Whether the run keeps every core's maps to read the edges' evidence from (a model with an
     edge confidence, or one collecting evidence to fit it)."""
-    return getattr(model, "confidence", None) is not None or bool(getattr(model, "collect_evidence", False))
+    return model.confidence is not None or model.collect_evidence
 
 
 def fpn_batches(grid: PatchGrid, batch_size: int) -> list[list[Index]]:
@@ -346,9 +358,9 @@ class CityRun:
             raise RuntimeError(f"{missing} window(s) have no graph: the run did not finish")
         grid, mosaic, store, model = self.job.grid, self.job.mosaic, self.job.store, self.job.model
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
-        recipe = CityGraphRecipe(stitch, crs, getattr(model, "min_fragment_px", 0.0), getattr(model, "attach_px", 0.0),
-                                 getattr(model, "confidence", None), getattr(model, "min_confidence", 0.0), reads_evidence(model),
-                                 block=block)
+        settings = model.settings
+        recipe = CityGraphRecipe(stitch, crs, settings.min_fragment_px, settings.attach_px, model.confidence, settings.min_confidence,
+                                 reads_evidence(model), block=block)
         sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS) if recipe.evidence else None
         counted: dict[Index, int] = {}
 

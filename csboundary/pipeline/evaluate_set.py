@@ -19,7 +19,6 @@ from tqdm import tqdm
 from csboundary.data import city as layout
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import model_view
-from csboundary.data.units import MODEL_GSD
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph.stitching import StitchConfig
 from csboundary.labels.mask_import import SET_FILE
@@ -62,7 +61,7 @@ def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd:
         if assume_model_gsd:
             warnings.simplefilter("ignore", InputWarning)
         mosaic, lines = open_imagery([city_dir])
-        view = model_view(mosaic, model_gsd=getattr(model, "pixel_size_m", MODEL_GSD), assume_model_gsd=assume_model_gsd)
+        view = model_view(mosaic, model_gsd=model.pixel_size_m, assume_model_gsd=assume_model_gsd)
     with view.mosaic:
         result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress, stitch=stitch)
     return result, lines
@@ -71,7 +70,7 @@ def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd:
 def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[str, Any]:
     """City-scale scores of ``model`` on one city of a set (see :func:`predicted_city`)."""
     result, lines = predicted_city(city_dir, model, assume_model_gsd=True)
-    scores = evaluate_run(result, lines, seed, scales=("city",), metres_per_px=getattr(model, "pixel_size_m", MODEL_GSD))["city"]
+    scores = evaluate_run(result, lines, seed, scales=("city",), metres_per_px=model.pixel_size_m)["city"]
     scores["counts"] = {"pred_edges": int(result.graph.n_edges), "gt_lines": len(lines)}
     return scores
 
@@ -80,7 +79,7 @@ def evaluate_city(city_dir: str | Path, model: PatchModel, seed: int = 0, batch_
     """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
     ``model`` on a city directory with ground truth, without writing the prediction."""
     result, lines = predicted_city(city_dir, model, batch_size=batch_size, progress=progress)
-    scores = evaluate_run(result, lines, seed, metres_per_px=getattr(model, "pixel_size_m", MODEL_GSD))
+    scores = evaluate_run(result, lines, seed, metres_per_px=model.pixel_size_m)
     for item in scores.values():
         item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}
     return scores

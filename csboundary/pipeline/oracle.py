@@ -9,14 +9,16 @@ whole across patch seams.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from csboundary.data.grid import Patch
+from csboundary.data.units import MODEL_GSD
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
+from csboundary.graph.settings import GraphSettings
+from csboundary.graph.vertex_extraction import extract_vertices
 from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.writer import CityLabels
@@ -26,7 +28,10 @@ from csboundary.models.decoding import graph_from_adjacency
 @dataclass
 class OracleModel:
     labels: CityLabels
-    vertices: VertexConfig = VertexConfig()
+    settings: GraphSettings = field(default_factory=lambda: GraphSettings(max_degree=None))  # every labelled edge, no degree cap
+    confidence = None  # the labels are sure
+    collect_evidence = False
+    pixel_size_m = MODEL_GSD
 
     @classmethod
     def from_lines(cls, lines, mosaic: Mosaic, config: LabelConfig = LabelConfig()) -> "OracleModel":
@@ -37,10 +42,10 @@ class OracleModel:
         return [self.labels.network_targets(p.expanded) for p in patches]
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
-        return extract_vertices(maps[0], self.vertices)
+        return extract_vertices(maps[0], self.settings.vertices)
 
     def connect(self, patch: Patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
         offset = np.array([patch.expanded.col_off, patch.expanded.row_off], float)
         lab = self.labels
         adjacency = adjacency_label(found.vertices + offset, lab.boundaries, lab.bounds, patch.expanded, lab.config.snap_tolerance_px)
-        return graph_from_adjacency(found, adjacency.astype(np.float32), 0.5, None)
+        return graph_from_adjacency(found, adjacency.astype(np.float32), self.settings.edge_threshold, self.settings.max_degree)

@@ -84,28 +84,29 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
 
 def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Path | None, batch_size: int) -> dict:
     """The model and how it is run, for the run's manifest (JSON-ready)."""
+    graph = predictor.settings
     settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
-                "edge_threshold": predictor.edge_threshold, "support": [predictor.support.min_support, predictor.support.max_length_px],
-                "max_gap": [predictor.support.max_gap_px, predictor.support.gap_level],
-                "min_fragment_px": predictor.min_fragment_px, "fill_min_length_px": predictor.fill.min_length_px,
+                "edge_threshold": graph.edge_threshold, "support": [graph.support.min_support, graph.support.max_length_px],
+                "max_gap": [graph.support.max_gap_px, graph.support.gap_level],
+                "min_fragment_px": graph.min_fragment_px, "fill_min_length_px": graph.fill.min_length_px,
                 "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
                 "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
                 "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
-    if predictor.join.active:  # only then: a run interrupted before end joining existed still resumes
-        settings["join_max_px"] = predictor.join.max_px
-        if predictor.join.attach_px > 0:
-            settings["join_attach_px"] = predictor.join.attach_px
-    if predictor.attach_px > 0:  # likewise
-        settings["attach_max_px"] = predictor.attach_px
+    if graph.join.active:  # only then: a run interrupted before end joining existed still resumes
+        settings["join_max_px"] = graph.join.max_px
+        if graph.join.attach_px > 0:
+            settings["join_attach_px"] = graph.join.attach_px
+    if graph.attach_px > 0:  # likewise
+        settings["attach_max_px"] = graph.attach_px
     if predictor.precision != "float32":  # likewise
         settings["precision"] = predictor.precision
     settings["precision_choice"] = predictor.precision_choice or predictor.precision  # --precision auto: what it chose, and why
-    if predictor.surface.active:  # only then: a run interrupted before the check existed still resumes
-        settings["surface_check"] = [predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px]
-        if predictor.surface.both_sides > 0:  # likewise
-            settings["surface_both_sides"] = predictor.surface.both_sides
-    if predictor.gate.active:  # likewise
-        settings["surface_gate"] = [predictor.gate.radius_px, predictor.gate.full_change, predictor.gate.min_piece_px]
+    if graph.surface.active:  # only then: a run interrupted before the check existed still resumes
+        settings["surface_check"] = [graph.surface.strong, graph.surface.weak, graph.surface.offset_px]
+        if graph.surface.both_sides > 0:  # likewise
+            settings["surface_both_sides"] = graph.surface.both_sides
+    if graph.gate.active:  # likewise
+        settings["surface_gate"] = [graph.gate.radius_px, graph.gate.full_change, graph.gate.min_piece_px]
     return settings
 
 

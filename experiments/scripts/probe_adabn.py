@@ -54,10 +54,10 @@ def main() -> None:
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.onnx = None  # the PyTorch path, whose batch norms can be switched
     if args.vertex_threshold is not None:
-        predictor.vertices = dataclasses.replace(predictor.vertices, threshold=args.vertex_threshold)
+        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices, threshold=args.vertex_threshold))
     if args.scope != "off":
         patch_module.predict_probabilities = window_statistics_probabilities(args.scope)
-    print(f"scope {args.scope} vertex threshold {predictor.vertices.threshold:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)))
+    print(f"scope {args.scope} vertex threshold {predictor.settings.vertices.threshold:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)))
 
 
 if __name__ == "__main__":

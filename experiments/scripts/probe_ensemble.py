@@ -65,8 +65,8 @@ def main() -> None:
     if args.views > 1:
         single = flipped_probabilities(single, args.views)
     patch_module.predict_probabilities = averaged_probabilities(others, single)
-    for vthr in [float(v) for v in args.vertex_threshold.split(",")] if args.vertex_threshold else [predictor.vertices.threshold]:
-        predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
+    for vthr in [float(v) for v in args.vertex_threshold.split(",")] if args.vertex_threshold else [predictor.settings.vertices.threshold]:
+        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices, threshold=vthr))
         print(f"with {len(others)} FPNs, vertex threshold {vthr:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)), flush=True)
 
 

@@ -52,7 +52,7 @@ def main() -> None:
 
         metrics.evaluate = functools.partial(metrics.evaluate, apls="symmetric")
     predictor = PatchPredictor.load(args.bundle, torch.device("cpu"))
-    predictor.surface = dataclasses.replace(predictor.surface, strong=1e-9)  # active: the maps carry the surface channel
+    predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=1e-9))  # active: the maps carry the surface channel
 
     def finished(self, patch, maps, graph):  # the bundle's own check replaced by the rule
         graph = self.filled(patch, maps, graph)

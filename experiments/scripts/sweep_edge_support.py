@@ -61,43 +61,43 @@ def main() -> None:
     parser.add_argument("--join-turn", type=float, default=None, help="largest turn from an end's heading, degrees (default: EndJoinConfig's)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-    predictor.crossings = dataclasses.replace(predictor.crossings, spacing_px=args.crossings)
+    predictor.settings = dataclasses.replace(predictor.settings, crossings=dataclasses.replace(predictor.settings.crossings, spacing_px=args.crossings))
     for name, value in (("cover_px", args.fill_cover), ("snap_px", args.fill_snap), ("threshold", args.fill_threshold)):
         if value is not None:
-            predictor.fill = dataclasses.replace(predictor.fill, **{name: value})
+            predictor.settings = dataclasses.replace(predictor.settings, fill=dataclasses.replace(predictor.settings.fill, **{name: value}))
     for name, value in (("min_support", args.join_support), ("max_turn_deg", args.join_turn), ("max_gap_px", args.join_gap)):
         if value is not None:
-            predictor.join = dataclasses.replace(predictor.join, **{name: value})
-    gap_level = predictor.support.gap_level if args.gap_level is None else args.gap_level
+            predictor.settings = dataclasses.replace(predictor.settings, join=dataclasses.replace(predictor.settings.join, **{name: value}))
+    gap_level = predictor.settings.support.gap_level if args.gap_level is None else args.gap_level
     if args.surface_offset is not None:
-        predictor.surface = dataclasses.replace(predictor.surface, offset_px=args.surface_offset)
+        predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, offset_px=args.surface_offset))
     print("edge vthr support length gap fill surface weak join  frag attach gate both " + " ".join(f"{Path(s).name[:14]:>14s}:F1@5/APLS/TLTS" for s in args.sets))
 
     def values(arg: str, bundle_value: float) -> list[float]:
         """A comma-separated list from the command line, or the bundle's own setting."""
         return [float(v) for v in arg.split(",")] if arg else [float(bundle_value)]
 
-    support = predictor.support
-    grid = [(e, t, s, n, g, f, r, w, j, m, a, gr, b) for e in values(args.edge_threshold, predictor.edge_threshold)
-            for t in values(args.vertex_threshold, predictor.vertices.threshold) for s in values(args.support, support.min_support)
+    support = predictor.settings.support
+    grid = [(e, t, s, n, g, f, r, w, j, m, a, gr, b) for e in values(args.edge_threshold, predictor.settings.edge_threshold)
+            for t in values(args.vertex_threshold, predictor.settings.vertices.threshold) for s in values(args.support, support.min_support)
             for n in values(args.length, support.max_length_px) for g in values(args.gap, support.max_gap_px)
-            for f in values(args.fill, predictor.fill.min_length_px)
-            for r in values(args.surface, predictor.surface.strong) for w in values(args.surface_weak, predictor.surface.weak)
-            for j in values(args.join, predictor.join.max_px) for m in values(args.fragments, predictor.min_fragment_px)
-            for a in values(args.attach_backed, predictor.join.attach_px)
-            for gr in values(args.gate, predictor.gate.radius_px) for b in values(args.both_sides, predictor.surface.both_sides)]
+            for f in values(args.fill, predictor.settings.fill.min_length_px)
+            for r in values(args.surface, predictor.settings.surface.strong) for w in values(args.surface_weak, predictor.settings.surface.weak)
+            for j in values(args.join, predictor.settings.join.max_px) for m in values(args.fragments, predictor.settings.min_fragment_px)
+            for a in values(args.attach_backed, predictor.settings.join.attach_px)
+            for gr in values(args.gate, predictor.settings.gate.radius_px) for b in values(args.both_sides, predictor.settings.surface.both_sides)]
     for edge, vthr, support, length, gap, fill, strong, weak, join, fragment, attach, gate, both in grid:
         if (gate > 0 or strong > 0) and not predictor.fpn.config.surface:
             raise SystemExit("the surface check and gate need an FPN with a surface head")
-        predictor.gate = dataclasses.replace(predictor.gate, radius_px=gate)
-        predictor.min_fragment_px = fragment
-        predictor.join = dataclasses.replace(predictor.join, max_px=join, attach_px=attach)
-        predictor.surface = dataclasses.replace(predictor.surface, strong=strong, weak=weak, both_sides=both)
-        predictor.fill = dataclasses.replace(predictor.fill, min_length_px=fill)
-        predictor.edge_threshold = edge
-        predictor.vertices = dataclasses.replace(predictor.vertices, threshold=vthr)
-        predictor.support = dataclasses.replace(predictor.support, min_support=support, max_length_px=length,
-                                                max_gap_px=gap, gap_level=gap_level)
+        predictor.settings = dataclasses.replace(predictor.settings, gate=dataclasses.replace(predictor.settings.gate, radius_px=gate))
+        predictor.settings = dataclasses.replace(predictor.settings, min_fragment_px=fragment)
+        predictor.settings = dataclasses.replace(predictor.settings, join=dataclasses.replace(predictor.settings.join, max_px=join, attach_px=attach))
+        predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=strong, weak=weak, both_sides=both))
+        predictor.settings = dataclasses.replace(predictor.settings, fill=dataclasses.replace(predictor.settings.fill, min_length_px=fill))
+        predictor.settings = dataclasses.replace(predictor.settings, edge_threshold=edge)
+        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices, threshold=vthr))
+        predictor.settings = dataclasses.replace(predictor.settings, support=dataclasses.replace(predictor.settings.support, min_support=support, max_length_px=length,
+                                                max_gap_px=gap, gap_level=gap_level))
         row = score_row(args.sets, predictor)
         print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} {join:4.0f}  {fragment:5.0f} {attach:6.0f} {gate:4.0f} {both:4.2f} " + " ".join(f"{r:>29s}" for r in row), flush=True)
 

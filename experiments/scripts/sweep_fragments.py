@@ -10,6 +10,7 @@ folder of cities from ``csboundary import-masks``, by the mean over its cities, 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,7 @@ def main() -> None:
     parser.add_argument("--lengths", default="0,40,80,120,160,240")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
-    predictor.min_fragment_px = 0.0  # the sweep sets it
+    predictor.settings = dataclasses.replace(predictor.settings, min_fragment_px=0.0)  # the sweep sets it
     lengths = [float(v) for v in args.lengths.split(",")]
     table = {}
     for s in args.sets:

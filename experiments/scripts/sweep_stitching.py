@@ -56,8 +56,8 @@ def main() -> None:
             gt = BoundaryGraph.from_world_lines(lines, run.grid.transform)
             parts = []
             for text, (stitch, attach) in zip(rows, settings):
-                graph = city_graph(run.patch_graphs, run.grid, stitch, run.graph.crs, predictor.min_fragment_px,
-                                   predictor.attach_px if attach is None else attach)
+                graph = city_graph(run.patch_graphs, run.grid, stitch, run.graph.crs, predictor.settings.min_fragment_px,
+                                   predictor.settings.attach_px if attach is None else attach)
                 m = evaluate(graph, gt, scale="city", seed=0, extent=(0, 0, run.grid.width, run.grid.height))["metrics"]
                 rows[text].append(np.array([m["f1@5"], m["apls"], m["tlts"]]))
                 parts.append(f"{text}: {m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
@@ -10,6 +12,7 @@ from hypothesis import strategies as st
 from helpers import bundle_without, shipped_parts
 
 from csboundary.graph.edge_support import EdgeSupportConfig, longest_gap, segment_support, unsupported_pairs, widened
+from csboundary.graph.settings import GraphOverrides
 
 
 def line_map() -> np.ndarray:
@@ -112,8 +115,8 @@ def test_predictor_applies_the_check(tmp_path):
     maps[0, 200:204, 20:240:30] = 1.0  # and along another row, 160 px below
     maps[1, 41:43, :] = 1.0  # only the first row is a boundary
     found = predictor.extract(maps)
-    predictor.edge_threshold = 0.0  # every pair is a candidate
-    predictor.support = EdgeSupportConfig(min_support=0.5)
+    predictor.settings = dataclasses.replace(predictor.settings, edge_threshold=0.0)  # every pair is a candidate
+    predictor.settings = dataclasses.replace(predictor.settings, support=EdgeSupportConfig(min_support=0.5))
     graph = predictor.connect(None, image, maps, found)
     normal = [(u, v) for (u, v), kind in zip(graph.edges, graph.edge_kinds) if kind == "normal"]
     assert normal  # the row on the boundary keeps its edges
@@ -128,9 +131,9 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4)
-    support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).support
+    support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.support
     assert (support.min_support, support.max_gap_px, support.gap_level) == (0.2, 50, 0.4)
-    assert load_predictor(tmp_path / "b.pt", "cpu", max_edge_gap=0, engine="torch").support.max_gap_px == 0
+    assert load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(max_edge_gap=0), engine="torch").settings.support.max_gap_px == 0
     # a bundle from before the check (no such settings) loads with the check off
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("max_gap_px", "gap_level"))
-    assert PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).support.max_gap_px == 0
+    assert PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.support.max_gap_px == 0

@@ -11,6 +11,7 @@ from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.end_attachment import attach_ends, dangling_ends
 from csboundary.graph.fragments import fragment_lengths
+from csboundary.graph.settings import GraphOverrides
 from csboundary.graph.stitching import StitchConfig
 from csboundary.pipeline.city_blocks import CityGraphRecipe, city_graph
 
@@ -114,12 +115,12 @@ def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", attach_max_px=40)
-    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).attach_px == 40
-    assert load_predictor(tmp_path / "b.pt", "cpu", attach_ends=0, engine="torch").attach_px == 0
+    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.attach_px == 40
+    assert load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(attach_ends=0), engine="torch").settings.attach_px == 0
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
     assert "attach_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
-    assert PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).attach_px == 0
-    assert load_predictor(tmp_path / "off.pt", "cpu", attach_ends=25, engine="torch").attach_px == 25
+    assert PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).settings.attach_px == 0
+    assert load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(attach_ends=25), engine="torch").settings.attach_px == 25
 
 
 @settings(max_examples=60, deadline=None)

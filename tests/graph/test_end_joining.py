@@ -16,6 +16,7 @@ from csboundary.graph.end_joining import (
     join_candidates,
     join_ends,
 )
+from csboundary.graph.settings import GraphOverrides, GraphSettings
 
 ON = EndJoinConfig(max_px=20)
 
@@ -135,12 +136,12 @@ def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_pa
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", **{key: 40})
-    assert getattr(PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).join, field) == 40
-    assert not load_predictor(tmp_path / "b.pt", "cpu", engine="torch", **{option: 0}).join.active
+    assert getattr(PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.join, field) == 40
+    assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(**{option: 0}), engine="torch").settings.join.active
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
     assert key not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
-    assert not PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).join.active
-    assert getattr(load_predictor(tmp_path / "off.pt", "cpu", engine="torch", **{option: 25}).join, field) == 25
+    assert not PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).settings.join.active
+    assert getattr(load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(**{option: 25}), engine="torch").settings.join, field) == 25
 
 
 def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
@@ -148,7 +149,7 @@ def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
 
     maps = np.zeros((2, 100, 100), np.float32)
     maps[1] = line_map()
-    predictor = PatchPredictor(None, None, None, join=ON)
+    predictor = PatchPredictor(None, None, None, settings=GraphSettings(join=ON))
     joined = predictor.finished(None, maps, two_pieces())
     assert joined.edge_kinds[-1] == JOIN and sorted(joined.edges[-1].tolist()) == [1, 2]
     assert PatchPredictor(None, None, None).finished(None, maps, two_pieces()).n_edges == 2

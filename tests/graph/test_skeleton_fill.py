@@ -12,6 +12,7 @@ from helpers import bundle_without, shipped_parts
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.polyline import polyline_length
+from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.graph.skeleton_fill import SKELETON, FillConfig, fill_from_skeleton, long_stretches, pieces, uncovered_skeleton
 
 ON = FillConfig(min_length_px=30)
@@ -169,10 +170,10 @@ def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path)
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", fill_min_length_px=55)
-    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).fill.min_length_px == 55
-    assert not load_predictor(tmp_path / "b.pt", "cpu", fill_min_length=0, engine="torch").fill.active
+    assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.fill.min_length_px == 55
+    assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(fill_min_length=0), engine="torch").settings.fill.active
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("fill_min_length_px",))  # a bundle from before the fill
-    assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).fill.active
+    assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.fill.active
 
 
 def test_the_predictor_fills_a_window_only_inside_its_core_and_one_pixel_beyond():
@@ -183,7 +184,7 @@ def test_the_predictor_fills_a_window_only_inside_its_core_and_one_pixel_beyond(
 
     maps = np.zeros((2, 120, 240), np.float32)
     maps[1] = row_map()
-    host = SimpleNamespace(fill=ON)
+    host = SimpleNamespace(settings=GraphSettings(fill=ON))
     core = SimpleNamespace(core_local=PixelWindow(col_off=10, row_off=10, width=100, height=100))
     out = PatchPredictor.filled(host, core, maps, graph([], []))
     xs = np.concatenate([out.edge_polyline(k)[:, 0] for k in range(out.n_edges)])

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.end_joining import EndJoinConfig
+from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.graph.surface_check import SurfaceCheckConfig, kept_by_hysteresis, side_surface, surface_checked
 
 
@@ -78,7 +79,7 @@ def test_the_predictor_checks_only_maps_that_carry_a_surface_channel():
     from csboundary.pipeline.patch import PatchPredictor
 
     g = graph([[10, 20], [50, 20], [10, 80], [50, 80]], [[0, 1], [2, 3]])
-    host = SimpleNamespace(fill=SimpleNamespace(active=False), join=EndJoinConfig(), surface=SurfaceCheckConfig(strong=0.5))
+    host = SimpleNamespace(settings=GraphSettings(join=EndJoinConfig(), surface=SurfaceCheckConfig(strong=0.5)))
     host.filled = lambda patch, maps, graph: graph
     two = np.zeros((2, 100, 100), np.float32)
     assert PatchPredictor.finished(host, None, two, g).n_edges == 2  # an FPN without the surface head
@@ -100,16 +101,16 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     fpn_path, afanet_path = shipped_parts(tmp_path)  # the shipped FPN has the head
     shipped = load_checkpoint(fpn_path, ("fpn",))
     assert shipped["fpn_config"]["surface"]
-    assert load_predictor(None, "cpu", surface_check=0.5, engine="torch").surface.strong == 0.5  # the option works on the shipped weights
-    assert load_predictor(None, "cpu", engine="torch").surface.strong == 0.5  # on by default since the model card's choice
-    assert not load_predictor(None, "cpu", surface_check=0.0, engine="torch").surface.active  # and 0 turns it off
+    assert load_predictor(None, "cpu", GraphOverrides(surface_check=0.5), engine="torch").settings.surface.strong == 0.5  # the option works on the shipped weights
+    assert load_predictor(None, "cpu", engine="torch").settings.surface.strong == 0.5  # on by default since the model card's choice
+    assert not load_predictor(None, "cpu", GraphOverrides(surface_check=0.0), engine="torch").settings.surface.active  # and 0 turns it off
     plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}  # an FPN from before the head
     save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
     with pytest.raises(InputError, match="surface head"):
         make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_strong=0.5)
     make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "plain-bundle.pt")
     with pytest.raises(InputError, match="surface head"):
-        load_predictor(tmp_path / "plain-bundle.pt", "cpu", surface_check=0.5, engine="torch")
+        load_predictor(tmp_path / "plain-bundle.pt", "cpu", GraphOverrides(surface_check=0.5), engine="torch")
     config = {**shipped["fpn_config"], "surface": True}
     model = fpn_for_weights(config)
     missing, _ = model.load_state_dict(plain, strict=False)
@@ -117,12 +118,12 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     save_checkpoint(tmp_path / "fpn-surface.pt", "fpn", fpn=model.state_dict(), fpn_config=FPNConfig.from_dict(config).to_dict())
     make_bundle(tmp_path / "fpn-surface.pt", afanet_path, tmp_path / "b.pt", surface_strong=0.6, surface_weak=0.25)
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
-    assert (predictor.surface.strong, predictor.surface.weak, predictor.surface.offset_px) == (0.6, 0.25, 8.0)
+    assert (predictor.settings.surface.strong, predictor.settings.surface.weak, predictor.settings.surface.offset_px) == (0.6, 0.25, 8.0)
     assert predictor.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
-    off = load_predictor(tmp_path / "b.pt", "cpu", surface_check=0, engine="torch")
-    assert not off.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)  # nothing reads the surface
+    off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_check=0), engine="torch")
+    assert not off.settings.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)  # nothing reads the surface
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_strong", "surface_weak", "surface_offset_px"))
-    assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).surface.active
+    assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.surface.active
 
 
 def _side_surface_per_edge(g: BoundaryGraph, surface: np.ndarray, offset_px: float) -> np.ndarray:

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from csboundary.graph.settings import GraphOverrides
 from csboundary.graph.surface_gate import SurfaceGateConfig, gated_maps, roadway_pieces_kept, surface_change
 
 
@@ -77,12 +78,12 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
     fpn_path, afanet_path = shipped_parts(tmp_path)
     make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", surface_strong=0.5, surface_both_sides=0.7, surface_gate_px=8)
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
-    assert predictor.gate.radius_px == 8.0 and predictor.surface.both_sides == 0.7
+    assert predictor.settings.gate.radius_px == 8.0 and predictor.settings.surface.both_sides == 0.7
     # the gate alone needs the surface channel: it is carried with the check off
-    gated = load_predictor(tmp_path / "b.pt", "cpu", surface_check=0, engine="torch")
-    assert not gated.surface.active and gated.gate.active
+    gated = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_check=0), engine="torch")
+    assert not gated.settings.surface.active and gated.settings.gate.active
     assert gated.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
-    assert not load_predictor(tmp_path / "b.pt", "cpu", surface_gate=0, engine="torch").gate.active
+    assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_gate=0), engine="torch").settings.gate.active
     shipped = load_checkpoint(fpn_path, ("fpn",))
     plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}
     save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})

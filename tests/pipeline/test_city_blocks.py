@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 
@@ -44,7 +45,7 @@ def _files(folder) -> dict[str, object]:
 def test_blocks_give_the_files_of_one_pass(city, tmp_path, block):
     mosaic, lines = city
     model = OracleModel.from_lines(lines, mosaic)
-    model.min_fragment_px, model.attach_px = 60.0, 40.0  # the city steps that reach beyond an edge
+    model.settings = dataclasses.replace(model.settings, min_fragment_px=60.0, attach_px=40.0)  # the city steps that reach beyond an edge
     one, _ = run_prediction(mosaic, model, tmp_path / "one", progress=False, block=block, one_pass=True)
     banded, summary = run_prediction(mosaic, model, tmp_path / "blocks", progress=False, block=block)
     assert one.graph.n_edges > 100 and summary["counts"]["boundaries"] > 10

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import threading
 
@@ -21,6 +22,7 @@ from csboundary.data.synth.config import SynthConfig
 from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.fragments import fragment_lengths
+from csboundary.graph.settings import GraphSettings
 from csboundary.graph.skeleton_fill import FillConfig
 from csboundary.metrics import evaluate
 from csboundary.models.fpn import FPN, FPNConfig
@@ -64,7 +66,7 @@ def test_a_model_s_shortest_fragment_is_dropped_from_the_city_graph_only(city):
     piece, length = fragment_lengths(whole.graph)
     limit = float(np.median(length))
     assert (length < limit).any() and (length >= limit).any()
-    model.min_fragment_px = limit
+    model.settings = dataclasses.replace(model.settings, min_fragment_px=limit)
     kept = predict_city(mosaic, model, progress=False)
     assert kept.graph.n_edges == int((length[piece] >= limit).sum())
     assert np.isclose(kept.graph.edge_lengths().sum(), length[length >= limit].sum())
@@ -73,6 +75,11 @@ def test_a_model_s_shortest_fragment_is_dropped_from_the_city_graph_only(city):
 
 class _TinyModel:
     """A random small FPN behind the :class:`PatchModel` steps (maps only matter here)."""
+
+    settings = GraphSettings()
+    confidence = None
+    collect_evidence = False
+    pixel_size_m = 0.5
 
     def __init__(self):
         torch.manual_seed(0)
@@ -178,9 +185,8 @@ def test_the_last_windows_are_connected_side_by_side_with_the_same_graph(city):
 
 
 class _SkeletonOnlyOracle(OracleModel):
-    """The ground truth's segmentation and no vertex at all: every boundary comes from the fill."""
-
-    fill = FillConfig(min_length_px=20)
+    """The ground truth's segmentation and no vertex at all: every boundary comes from the fill
+    (``settings.fill`` on)."""
 
     def extract(self, maps):
         return BoundaryGraph()
@@ -191,7 +197,9 @@ class _SkeletonOnlyOracle(OracleModel):
 
 def test_skeleton_fill_alone_rebuilds_the_ground_truth_across_seams(city):
     mosaic, lines = city
-    result = predict_city(mosaic, _SkeletonOnlyOracle.from_lines(lines, mosaic), progress=False)
+    model = _SkeletonOnlyOracle.from_lines(lines, mosaic)
+    model.settings = dataclasses.replace(model.settings, fill=FillConfig(min_length_px=20))
+    result = predict_city(mosaic, model, progress=False)
     gt = BoundaryGraph.from_world_lines(lines, mosaic.transform)
     scores = evaluate(result.graph, gt, scale="city", seed=0)["metrics"]
     assert set(result.graph.edge_kinds) == {"skeleton"}

@@ -25,16 +25,18 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from csboundary.config import Config
+from csboundary.data.units import MODEL_GSD
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.settings import GraphSettings
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
 from csboundary.labels.rasterize import orientation_label
 from csboundary.models.checkpoint import load_checkpoint, restore_model
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.models.training.config import TrainConfig, model_config_with
-from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
-from csboundary.config import Config
-from csboundary.models.training.data import TrainingCity
 from csboundary.models.maps import image_tensor
+from csboundary.models.training.config import TrainConfig, model_config_with
+from csboundary.models.training.data import TrainingCity
+from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
 
 KIND = "orientation-refine"
 IGNORE = -100
@@ -221,6 +223,11 @@ class _Pair(torch.nn.Module):
 class Model:
     """OrientationRefine behind the city pipeline's ``PatchModel`` steps: maps = the refined
     segmentation probability; the graph = its skeleton."""
+
+    settings = GraphSettings()  # the city graph's steps all off
+    confidence = None
+    collect_evidence = False
+    pixel_size_m = MODEL_GSD
 
     def __init__(self, pair: _Pair, device: torch.device):
         self.pair, self.device = pair.eval(), device

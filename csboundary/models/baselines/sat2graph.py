@@ -36,9 +36,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from csboundary.data.units import MODEL_GSD
 from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.vertex_extraction import VertexConfig, extract_vertices
+from csboundary.graph.settings import GraphSettings
+from csboundary.graph.vertex_extraction import extract_vertices
 from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
 from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
@@ -307,7 +309,10 @@ class Model:
     keypoint_fpn: FPN
     device: torch.device
     options: Sat2GraphOptions = field(default_factory=Sat2GraphOptions)
-    vertices: VertexConfig = field(default_factory=VertexConfig)
+    settings: GraphSettings = field(default_factory=GraphSettings)  # its vertices, and the city graph's steps (all off)
+    confidence = None
+    collect_evidence = False
+    pixel_size_m = MODEL_GSD
 
     @classmethod
     def load(cls, path: str | Path, device: torch.device, keypoint_weights: str | Path | None = None) -> "Model":
@@ -327,7 +332,7 @@ class Model:
 
     def extract(self, maps: np.ndarray) -> BoundaryGraph:
         """csBoundary's vertices and corner edges from the keypoint channel."""
-        return extract_vertices(maps[0], self.vertices)
+        return extract_vertices(maps[0], self.settings.vertices)
 
     def connect(self, patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
         """``found``'s vertices and corner edges plus the decoded Sat2Graph edges (kind ``normal``)."""

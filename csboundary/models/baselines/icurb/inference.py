@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from csboundary.data.units import MODEL_GSD
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.settings import GraphSettings
 from csboundary.models.baselines.icurb.agent import Agent
 from csboundary.models.baselines.icurb.config import KIND, ICurbConfig
 from csboundary.models.baselines.icurb.tracing import Traces, border_starts, rollout
@@ -25,6 +27,11 @@ def segmentation_fpn(path: str | Path | None, device: torch.device) -> FPN:
 
 class Model:
     """Enhanced-iCurb as a :class:`~csboundary.pipeline.city.PatchModel`."""
+
+    settings = GraphSettings()  # the city graph's steps all off
+    confidence = None
+    collect_evidence = False
+    pixel_size_m = MODEL_GSD
 
     def __init__(self, agent: Agent, config: ICurbConfig, fpn: FPN, device: torch.device):
         self.agent, self.config, self.fpn, self.device = agent.eval(), config, fpn, device
