@@ -1,4 +1,4 @@
-# Two entry points: `make demo` (the main job) and `make test`; `make wheel-check` installs the built
+# Two entry points: `make demo` (the main job) and `make test` (`make lint`, then the tests); `make wheel-check` installs the built
 # wheel alone in a fresh environment and runs the demo outside the checkout (CI runs all three).
 # Both create and reuse a virtual environment in .venv on first use.
 PYTHON ?= python3.11
@@ -6,18 +6,23 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test wheel-check clean
+.PHONY: demo test lint wheel-check clean
 
 $(STAMP): pyproject.toml constraints.txt
+	@echo "installing csboundary and its dependencies (PyTorch CPU, ONNX Runtime, GDAL's rasterio, ...) into $(VENV): once, about 1.5 min"
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet -c constraints.txt -e '.[test]'
 	touch $(STAMP)
+	@echo "installed into $(VENV)"
 
 demo: $(STAMP)
 	$(BIN)/csboundary demo --out out/demo
 
-test: $(STAMP)
+test: $(STAMP) lint
 	$(BIN)/pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check csboundary tests benchmarks experiments scripts
 
 wheel-check: $(STAMP)
 	rm -rf build/wheel-check && mkdir -p build/wheel-check

@@ -19,7 +19,7 @@ import torch
 
 from csboundary.models.batchnorm_folding import fold_batch_norms
 from csboundary.models.device import bfloat16_hardware
-from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
 def main() -> None:

@@ -21,9 +21,9 @@ from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.models.device import resolve_device
-from csboundary.pipeline.oracle import OracleModel
-from csboundary.pipeline.patch import PatchPredictor
-from csboundary.pipeline.run import evaluate_run, run_prediction, stage_table
+from csboundary.pipeline.evaluation.oracle import OracleModel
+from csboundary.pipeline.prediction.patch import PatchPredictor
+from csboundary.pipeline.prediction.run import evaluate_run, run_prediction, stage_table
 
 
 def main() -> None:

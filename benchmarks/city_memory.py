@@ -22,8 +22,8 @@ CHILD = """
 import json, os, resource, sys, time
 from csboundary.data.raster import Mosaic
 from csboundary.models.device import resolve_device
-from csboundary.pipeline.patch import PatchPredictor
-from csboundary.pipeline.run import run_prediction
+from csboundary.pipeline.prediction.patch import PatchPredictor
+from csboundary.pipeline.prediction.run import run_prediction
 start = time.perf_counter()
 with Mosaic.open(sys.argv[1]) as mosaic:
     _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2], progress=False, keep_graphs=False)
@@ -61,7 +61,8 @@ def main() -> None:
         print(f"{row['tiles']:>4s} tiles of {args.tile_size} px: {row['patches']:4d} patches, peak RSS {row['peak_rss_mb']:7.1f} MB "
               f"(after the city pipeline {row['peak_rss_prediction_mb']:7.1f} MB; maps stored {row['map_store_peak_mb']:5.1f} MB), "
               f"{row['seconds']:6.1f} s; {row['edges']} edges; s/patch graph stitching {row['seconds_per_patch']['graph_stitching']}, "
-              f"confidence {row['seconds_per_patch']['confidence']}; outputs {row['outputs_s']:.1f} s; files (MB) {row['files_mb']}", flush=True)
+              f"confidence {row['seconds_per_patch']['confidence']}; outputs {row['outputs_s']:.1f} s; files (MB) {row['files_mb']}",
+              flush=True)
     if len(rows) > 1:
         growth = rows[-1]["peak_rss_mb"] / rows[0]["peak_rss_mb"] - 1
         print(f"peak RSS growth {rows[0]['tiles']} -> {rows[-1]['tiles']}: {100 * growth:+.1f} % (limit +20 %)")

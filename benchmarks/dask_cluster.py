@@ -51,7 +51,8 @@ def predict_killing_a_worker(city: Path, out: Path, address: str, threads: int) 
         victim = sorted(client.run(os.getpid).values())[0]
     start = time.perf_counter()
     job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), "--device", "cpu", "--quiet",
-                            "--restart", "--scheduler", address, "--threads", str(threads)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            "--restart", "--scheduler", address, "--threads", str(threads)], stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL)
     graphs = out / ".csboundary-run" / "graphs"
     while not graphs.exists() or len(list(graphs.glob("*.npz"))) < 12:
         time.sleep(0.05)

@@ -7,11 +7,13 @@ CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synth
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
 beforehand, batch 1: the network's time and nothing else), then ``run_prediction`` end to end on
 the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, every output
-file). ``--bfloat16`` adds a row: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage
+file). ``--bfloat16`` adds a row: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at
+most 1.2), km2/h, the stage
 table, the core seconds per patch of both (every thread of the process: what the rest of the
 pipeline costs beside the FPN, and the lowest ratio a perfect overlap could reach on this
 machine's cores), the core seconds per patch of each stage (``--fpn-threads 1``: the FPN on one
-core, everything else on the other, every stage's work on the thread that ran it), and whether the two engines' graph.json are identical (and the largest difference in
+core, everything else on the other, every stage's work on the thread that ran it), and whether the two engines' graph.json are identical
+(and the largest difference in
 vertex count and edge count when not).
 """
 
@@ -30,8 +32,8 @@ import torch
 
 from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
-from csboundary.pipeline.patch import PatchPredictor
-from csboundary.pipeline.run import run_prediction, stage_table
+from csboundary.pipeline.prediction.patch import PatchPredictor
+from csboundary.pipeline.prediction.run import run_prediction, stage_table
 
 
 def fpn_only(predictor: PatchPredictor, images: list, repeat: int) -> tuple[float, float]:

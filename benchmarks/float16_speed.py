@@ -4,7 +4,7 @@
 
 Times, for one (3, 1100, 1100) patch: storing it as float16 and adding a (3, 1050, 1050) float16
 view into a float32 window sum, each by NumPy, by one PyTorch call (which wakes PyTorch's thread
-pool) and by :mod:`csboundary.pipeline.float16` (pieces PyTorch runs on the calling thread).
+pool) and by :mod:`csboundary.pipeline.prediction.float16` (pieces PyTorch runs on the calling thread).
 First with the machine idle, then with a thread multiplying matrices beside it, as the FPN does
 in the city pipeline. Prints the median and the largest of 25 runs, in milliseconds.
 """
@@ -17,7 +17,7 @@ import time
 import numpy as np
 import torch
 
-from csboundary.pipeline.float16 import add_float32, to_float16
+from csboundary.pipeline.prediction.float16 import add_float32, to_float16
 
 
 def timed(fn, runs: int = 25) -> str:

@@ -57,7 +57,8 @@ def write_tiles(source: Path, out: Path, tile: int | None) -> int:
 
 def predict(tiles: Path, out: Path, nofile: int) -> dict:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "csboundary", "predict", str(tiles), "--out", str(out), "--device", "cpu", "--quiet", "--restart"],
+    subprocess.run([sys.executable, "-m", "csboundary", "predict", str(tiles), "--out", str(out), "--device", "cpu", "--quiet",
+                    "--restart"],
                    check=True, preexec_fn=_limit(nofile), capture_output=True, text=True)
     summary = json.loads((out / "summary.json").read_text())
     summary["wall_s"] = time.perf_counter() - start
@@ -82,7 +83,8 @@ def main() -> None:
         n = summary["patches"]
         rows[name] = summary
         print(f"{name:>11s} (ulimit -n {args.nofile}): {n} patches, {summary['seconds']['total'] / n:.3f} s/patch "
-              f"(read {summary['seconds']['read'] / n:.3f}), {summary['km2_per_hour']} km2/h, peak RSS {summary['peak_rss_mb']['total']:.0f} MB",
+              f"(read {summary['seconds']['read'] / n:.3f}), {summary['km2_per_hour']} km2/h, peak RSS "
+              f"{summary['peak_rss_mb']['total']:.0f} MB",
               flush=True)
     (a, b) = rows.values()
     ratio = (b["seconds"]["total"] / b["patches"]) / (a["seconds"]["total"] / a["patches"])

@@ -1,7 +1,8 @@
 """Time APLS (both variants) and TLTS at city scale on a ~20,000-vertex synthetic city graph.
 
 The ground truth is a synthetic test city's road boundaries (``plan_city``, 2x3 tiles of
-5000 px at 0.152 m/px, no rendering) resampled to 20,000 vertices (about one every 33 px); the prediction is a perturbed copy: vertices jittered by 1.5 px,
+5000 px at 0.152 m/px, no rendering) resampled to 20,000 vertices (about one every 33 px); the prediction is a perturbed copy: vertices
+jittered by 1.5 px,
 3 % of edges cut out (gaps), 300 false links between nearby boundaries and 200 spurious 60 px
 boundaries. Usage:
 

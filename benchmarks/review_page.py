@@ -79,15 +79,18 @@ def main() -> None:
         driver.get(page.as_uri())
         wait(driver, ALL_VISIBLE_TILES_DRAWN)
         opened = driver.execute_script("return performance.now()")
-        print(f"open: {opened / 1000:.2f} s until the page is built and the first view's {driver.execute_script('return window.review.loadedTiles()')} "
+        print(f"open: {opened / 1000:.2f} s until the page is built and the first view's "
+              f"{driver.execute_script('return window.review.loadedTiles()')} "
               "tiles are drawn")
         lowest = int(driver.execute_script("return +document.querySelector('#edge-list li').dataset.edge"))
         times = {}
         for name, factor in (("whole city", 1), ("zoom 8x", 8), ("zoom 64x", 64)):
             driver.execute_script("const r = window.review; r.select(null);")
             if factor > 1:
-                driver.execute_script(f"""const r = window.review, e = REVIEW_DATA.edges[{lowest}], p = e.line[Math.floor(e.line.length / 2)];
-                    const c = document.getElementById('view'); r.state.scale = Math.min(c.width / REVIEW_DATA.width, c.height / REVIEW_DATA.height) * {factor};
+                driver.execute_script(f"""const r = window.review, e = REVIEW_DATA.edges[{lowest}], p = e.line[Math.floor(e.line.length /
+                2)];
+                    const c = document.getElementById('view'); r.state.scale = Math.min(c.width / REVIEW_DATA.width, c.height /
+                    REVIEW_DATA.height) * {factor};
                     r.state.ox = p[0] - c.width / 2 / r.state.scale; r.state.oy = p[1] - c.height / 2 / r.state.scale; r.render();""")
                 time.sleep(0.5)  # let the tiles of that view load
             samples = driver.execute_script("const r = window.review; return Array.from({length: 20}, () => r.drawNow());")

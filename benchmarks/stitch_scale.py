@@ -59,8 +59,8 @@ def one(n: int, one_pass: bool, keep: bool, block: int | None = None) -> dict:
 
     from csboundary.data.grid import PatchGrid
     from csboundary.data.units import ground_units
-    from csboundary.pipeline.city_blocks import CityCollector, CityGraphRecipe, stream_city_graph
-    from csboundary.pipeline.outputs import GraphWriter
+    from csboundary.pipeline.prediction.city_blocks import CityCollector, CityGraphRecipe, stream_city_graph
+    from csboundary.pipeline.outputs.prediction_files import GraphWriter
 
     side = max(1, round(math.sqrt(n)))
     transform = Affine(PIXEL_M, 0, 580000, 0, -PIXEL_M, 4510000)
@@ -95,7 +95,8 @@ def main() -> None:
     for n in sizes:
         out = subprocess.run([sys.executable, __file__, "--one", str(n), *flags], check=True, capture_output=True, text=True).stdout
         r = json.loads(out.strip().splitlines()[-1])
-        print(f"{r['patches']:7d}  {r['seconds']:7.1f}  {r['ms_per_patch']:8.2f}  {r['vertices']:8d}  {r['edges']:7d}  {r['boundaries']:10d}"
+        print(f"{r['patches']:7d}  {r['seconds']:7.1f}  {r['ms_per_patch']:8.2f}  {r['vertices']:8d}  {r['edges']:7d}  "
+              f"{r['boundaries']:10d}"
               f"  {r['held_peak']:9d}  {r['files_mb']['gpkg']:7.1f}  {r['files_mb']['graph_json']:7.1f}  {r['peak_rss_mb']:11.1f}",
               flush=True)
 

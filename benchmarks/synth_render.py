@@ -34,7 +34,8 @@ def main() -> None:
     city = plan_city(config, "test", args.seed, (rows, cols))
     plan = time.perf_counter() - t0
     print(f"plan {rows}x{cols} city ({city.size_m[0]:.0f} x {city.size_m[1]:.0f} m): {plan:.2f} s "
-          f"({plan / (rows * cols):.2f} s per tile); {len(city.scene.buildings)} buildings, {len(city.scene.trees)} trees, {len(city.scene.cars)} cars")
+          f"({plan / (rows * cols):.2f} s per tile); {len(city.scene.buildings)} buildings, {len(city.scene.trees)} trees, "
+          f"{len(city.scene.cars)} cars")
     with tempfile.TemporaryDirectory() as tmp:
         for row in range(rows):
             for col in range(cols):

@@ -25,12 +25,13 @@ from csboundary.data import city as layout  # noqa: E402
 from csboundary.data.model_view import mosaic_units  # noqa: E402
 from csboundary.data.raster import Mosaic  # noqa: E402
 from csboundary.graph.stitching import StitchConfig  # noqa: E402
-from csboundary.pipeline.city import DEFAULT_CHANNELS, predict_city  # noqa: E402
-from csboundary.pipeline.city_blocks import CityGraphRecipe, stream_city_graph  # noqa: E402
-from csboundary.pipeline.edge_confidence import core_sampler  # noqa: E402
-from csboundary.pipeline.outputs import GraphWriter  # noqa: E402
-from csboundary.pipeline.patch import load_predictor  # noqa: E402
-from csboundary.pipeline.run_store import RunStore  # noqa: E402
+from csboundary.pipeline.prediction.city_job import DEFAULT_CHANNELS  # noqa: E402
+from csboundary.pipeline.prediction.city import predict_city  # noqa: E402
+from csboundary.pipeline.prediction.city_blocks import CityGraphRecipe, stream_city_graph  # noqa: E402
+from csboundary.pipeline.prediction.edge_confidence import core_sampler  # noqa: E402
+from csboundary.pipeline.outputs.prediction_files import GraphWriter  # noqa: E402
+from csboundary.pipeline.prediction.patch import load_predictor  # noqa: E402
+from csboundary.pipeline.prediction.run_store import RunStore  # noqa: E402
 
 
 def written(result, store, model, block: int, one_pass: bool, folder: Path) -> dict:
@@ -42,7 +43,8 @@ def written(result, store, model, block: int, one_pass: bool, folder: Path) -> d
     sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
     stream_city_graph(result.patch_graphs.__getitem__, grid, recipe, sample, writer.add, one_pass=one_pass)
     counts = writer.close()
-    layers = {f"layer {layer}": pyogrio.read_dataframe(files["gpkg"], layer=layer).to_wkt().to_csv() for layer in ("road_boundaries", "edges")}
+    layers = {f"layer {layer}": pyogrio.read_dataframe(files["gpkg"], layer=layer).to_wkt().to_csv() for layer in ("road_boundaries",
+                                                                                                                   "edges")}
     return {"edges": counts["edges"], "boundaries": counts["boundaries"],
             **{name: hashlib.sha256(files[name].read_bytes()).hexdigest() for name in ("graph_json", "geojson")}, **layers}
 

@@ -26,7 +26,7 @@ import numpy as np
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.chains import edge_line
-from csboundary.pipeline.evaluate_set import set_cities
+from csboundary.pipeline.evaluation.evaluate_set import set_cities
 
 
 def cli(*args: str) -> float:
@@ -74,7 +74,8 @@ def main() -> None:
     seconds["apply-review district"] = time.perf_counter() - start
     cache = ["--cache", args.cache] if args.cache else []
     seconds["finetune"] = cli("finetune", *[str(out / "pred" / c.name) for c in district], "--out", str(out / "tuned.pt"), *cache)
-    seconds["predict rest (tuned)"] = sum(cli("predict", str(c), "--out", str(out / "pred-tuned" / c.name), "--weights", str(out / "tuned.pt"),
+    seconds["predict rest (tuned)"] = sum(cli("predict", str(c), "--out", str(out / "pred-tuned" / c.name), "--weights",
+                                              str(out / "tuned.pt"),
                                               "--quiet") for c in rest)
     rest_set = out / "rest"
     rest_set.mkdir(exist_ok=True)

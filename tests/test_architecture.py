@@ -1,6 +1,6 @@
 """The package's layers only import downward, so data can be followed one way:
 
-    errors < config < data < graph < labels, metrics, viz < models < pipeline < cli
+    errors < config < data < graph < labels, metrics, viz < models < pipeline < api, cli
 
 Every ``import`` of every module is read (top-level and inside functions alike); an import of a
 higher layer, or between the three peers of one layer, fails with the module and line named.
@@ -15,7 +15,8 @@ import pytest
 
 import csboundary
 
-LAYERS = {"errors": 0, "config": 1, "data": 2, "graph": 3, "labels": 4, "metrics": 4, "viz": 4, "models": 5, "pipeline": 6, "cli": 7, "__main__": 8}
+LAYERS = {"errors": 0, "config": 1, "data": 2, "graph": 3, "labels": 4, "metrics": 4, "viz": 4, "models": 5, "pipeline": 6, "api": 7, "cli": 7,
+          "__main__": 8}
 PACKAGE = Path(csboundary.__file__).parent
 
 
@@ -65,11 +66,11 @@ def test_every_import_points_down():
 def test_an_upward_import_is_caught(tmp_path):
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / "fine.py").write_text("from csboundary.errors import InputError\n")
-    (tmp_path / "data" / "bad.py").write_text("def f():\n    from csboundary.pipeline.run import run_prediction\n")
+    (tmp_path / "data" / "bad.py").write_text("def f():\n    from csboundary.pipeline.prediction.run import run_prediction\n")
     (tmp_path / "viz").mkdir()
     (tmp_path / "viz" / "peer.py").write_text("import csboundary.metrics.apls\n")
     assert upward_imports(tmp_path) == [
-        "data/bad.py:2 imports csboundary.pipeline.run: pipeline is not below data",
+        "data/bad.py:2 imports csboundary.pipeline.prediction.run: pipeline is not below data",
         "viz/peer.py:1 imports csboundary.metrics.apls: metrics is not below viz",
     ]
 

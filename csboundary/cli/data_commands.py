@@ -19,7 +19,9 @@ def synth(
     tile_size: int = typer.Option(5000, min=64, help="Tile side in pixels."),
     gsd: float = typer.Option(0.152, callback=finite, min=0.01, help="Ground sampling distance, metres per pixel."),
     split: str = typer.Option("train", help="train | valid | test."),
-    style: str = typer.Option("classic", help="City style: classic, grid, downtown, suburb, rural, irregular, residential, leafy, or mix (one drawn from the seed); see docs/styles.md."),
+    style: str = typer.Option("classic",
+                              help="City style: classic, grid, downtown, suburb, rural, irregular, residential, leafy, or mix (one drawn "
+                              "from the seed); see docs/styles.md."),
     quiet: QuietOption = False,
 ) -> None:
     """Synthesize an aerial city with exact vector road-boundary ground truth."""
@@ -47,7 +49,9 @@ def import_topo_boundary_cmd(
     out: Path = typer.Option(..., "--out", help="Output folder: one city directory per 6-digit tile id."),
     patch_size: int = typer.Option(1000, min=1, help="Patch side in pixels (the benchmark's is 1000)."),
     splits: int = typer.Option(5, min=1, help="Patches per tile side (the benchmark's is 5)."),
-    placement: bool = typer.Option(True, "--placement/--no-placement", help="Place tiles without georeference on the map from their 6-digit ids (an inference, docs/city-inference.md) and write one city per split."),
+    placement: bool = typer.Option(True, "--placement/--no-placement",
+                                   help="Place tiles without georeference on the map from their 6-digit ids (an inference, "
+                                   "docs/city-inference.md) and write one city per split."),
     quiet: QuietOption = False,
 ) -> None:
     """Reassemble Topo-boundary patches into 5000x5000 tiles with vector ground truth, and the
@@ -68,7 +72,8 @@ def import_topo_boundary_cmd(
 def import_masks_cmd(
     source: Path = typer.Argument(..., help="Folder of images and their label masks."),
     out: Path = typer.Option(..., "--out", help="Folder for one city per image, plus set.json listing them."),
-    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size of the images in metres (needed when they carry no georeference)."),
+    gsd: Optional[float] = typer.Option(None, callback=positive,
+                                        help="Pixel size of the images in metres (needed when they carry no georeference)."),
     target_gsd: float = typer.Option(0.152, callback=positive, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
     image_pattern: str = typer.Option("{id}_image.png", help="Image file names; {id} is the part shared with the mask."),
     mask_pattern: str = typer.Option("{id}_edge.png", help="Mask file names."),
@@ -101,7 +106,8 @@ def import_masks_cmd(
 
 def make_city_cmd(
     tiles: list[Path] = typer.Argument(..., help="GeoTIFF tile(s) or a folder of them (one pixel grid, one CRS)."),
-    ground_truth: Path = typer.Option(..., "--ground-truth", help="Road boundaries as lines (GeoPackage, GeoJSON, Shapefile...) with a CRS."),
+    ground_truth: Path = typer.Option(..., "--ground-truth",
+                                      help="Road boundaries as lines (GeoPackage, GeoJSON, Shapefile...) with a CRS."),
     out: Path = typer.Option(..., "--out", help="City directory to write (tiles are linked, not copied)."),
 ) -> None:
     """Your own GeoTIFFs + vector road boundaries -> a city directory, for evaluate-model,
@@ -110,7 +116,8 @@ def make_city_cmd(
 
     no_file_at(out)
     meta = make_city(tiles, ground_truth, out)
-    typer.echo(f"{out}: {len(meta['tiles'])} tile(s), {meta['width']}x{meta['height']} px at {meta['pixel_m']:.3g} m, {meta['boundaries']} boundaries")
+    typer.echo(f"{out}: {len(meta['tiles'])} tile(s), {meta['width']}x{meta['height']} px at {meta['pixel_m']:.3g} m, "
+               f"{meta['boundaries']} boundaries")
 
 
 def labels(
@@ -128,11 +135,13 @@ def labels(
     from csboundary.labels.config import LabelConfig
     from csboundary.labels.writer import write_city_labels
 
-    config = LabelConfig(grid=GridConfig(core, margin), aux_spacing_px=aux_spacing, segmentation_width=segmentation_width, heat_sigma_px=heat_sigma)
+    config = LabelConfig(grid=GridConfig(core, margin), aux_spacing_px=aux_spacing, segmentation_width=segmentation_width,
+                         heat_sigma_px=heat_sigma)
     out_dir(out)
     manifest = write_city_labels(city, out, config, progress=not quiet)
     c = manifest["counts"]
-    typer.echo(f"{out}: {c['patches']} patches, {c['vertices']} vertices, {c['edges']} edges ({c['corner_edges']} corner) in {manifest['seconds']['total']:.1f} s")
+    typer.echo(f"{out}: {c['patches']} patches, {c['vertices']} vertices, {c['edges']} edges ({c['corner_edges']} corner) in "
+               f"{manifest['seconds']['total']:.1f} s")
 
 
 def show(
@@ -150,7 +159,7 @@ def show(
     from csboundary.data.grid import GridConfig
     from csboundary.data.inputs import open_imagery
     from csboundary.data.windows import PixelWindow
-    from csboundary.pipeline.show import labels_grid, patch_of, render_patch_labels, render_view
+    from csboundary.pipeline.outputs.show import labels_grid, patch_of, render_patch_labels, render_view
     from csboundary.viz.overlay import write_png
 
     if sum(x is not None for x in (window, bounds, patch)) > 1:

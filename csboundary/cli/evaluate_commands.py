@@ -9,19 +9,24 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file, readable_inputs, with_graph_options)
+from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file,
+                                    readable_inputs, with_graph_options)
 from csboundary.graph.settings import GraphOverrides
 
 
 def evaluate(
     pred: Path = typer.Argument(..., help="Predicted boundaries: csboundary graph JSON, GeoPackage or GeoJSON LineStrings."),
-    gt: Path = typer.Argument(..., help="Ground truth: graph JSON, GeoPackage/GeoJSON, or a city directory (its ground_truth.gpkg and tiles)."),
+    gt: Path = typer.Argument(...,
+                              help="Ground truth: graph JSON, GeoPackage/GeoJSON, or a city directory (its ground_truth.gpkg and tiles)."),
     scale: str = typer.Option("city", help="city (whole graphs) | patch (1000 px patch cores, averaged)."),
     apls: str = typer.Option("paper", help="APLS variant: paper (Topo-boundary/csBoundary) | symmetric (SpaceNet style)."),
     seed: int = typer.Option(0, min=0, help="Seed of the sampled vertex pairs; equal seeds give identical results."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Also write every number (and per-patch scores) to this JSON file."),
-    raster: Optional[Path] = typer.Option(None, help="City directory, GeoTIFF(s) or tile directory whose pixel grid is the frame (world -> pixels)."),
-    gsd: Optional[float] = typer.Option(None, callback=finite, help="Without a raster: pixel size (world units) of a frame at the inputs' top-left corner."),
+    raster: Optional[Path] = typer.Option(None,
+                                          help="City directory, GeoTIFF(s) or tile directory whose pixel grid is the frame (world -> "
+                                          "pixels)."),
+    gsd: Optional[float] = typer.Option(None, callback=finite,
+                                        help="Without a raster: pixel size (world units) of a frame at the inputs' top-left corner."),
     pixels: bool = typer.Option(False, "--pixels", help="The inputs' coordinates are pixels (col, row), not world coordinates."),
     tau: str = typer.Option("2,5,10", help="Relaxation radii in pixels for precision/recall/F1, comma-separated."),
 ) -> None:
@@ -82,8 +87,8 @@ def evaluate_model(
         out_file(json_out, (".json",))
     readable_inputs([city])
     from csboundary.metrics.report import format_rows, write_scores
-    from csboundary.pipeline.evaluate_set import evaluate_city
-    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.evaluation.evaluate_set import evaluate_city
+    from csboundary.pipeline.prediction.patch import load_predictor
 
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
     scores = evaluate_city(city, predictor, seed, batch_size=batch_size, progress=not quiet)
@@ -109,8 +114,8 @@ def evaluate_set_cmd(
     """Score a model on every city of a validation set (city scale) and print the per-city and
     mean scores: how to select and compare models on real labelled imagery."""
     from csboundary.metrics.report import write_scores
-    from csboundary.pipeline.evaluate_set import evaluate_set, format_set
-    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.evaluation.evaluate_set import evaluate_set, format_set
+    from csboundary.pipeline.prediction.patch import load_predictor
 
     if json_out is not None:
         out_file(json_out, (".json",))
@@ -123,10 +128,15 @@ def evaluate_set_cmd(
 
 
 def benchmark(
-    out: Path = typer.Option(Path("docs/benchmark"), help="Folder for tables.md, table*.csv, fig7-comparison.png, benchmark.json, predictions/."),
-    city: Optional[Path] = typer.Option(None, help="Test city with ground truth (default: the test-split city seed 1, 1x1 tile of 5000 px, built on first use)."),
+    out: Path = typer.Option(Path("docs/benchmark"),
+                             help="Folder for tables.md, table*.csv, fig7-comparison.png, benchmark.json, predictions/."),
+    city: Optional[Path] = typer.Option(None,
+                                        help="Test city with ground truth (default: the test-split city seed 1, 1x1 tile of 5000 px, "
+                                        "built on first use)."),
     weights_dir: Optional[Path] = typer.Option(None, help="Weights folder (default: the package's shipped weights)."),
-    methods: Optional[str] = typer.Option(None, help="Comma-separated subset of: " + "csboundary, orientation-refine, sat2graph, icurb, ablation-full, no-global, no-local."),
+    methods: Optional[str] = typer.Option(None,
+                                          help="Comma-separated subset of: " + "csboundary, orientation-refine, sat2graph, icurb, "
+                                          "ablation-full, no-global, no-local."),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
     device: DeviceOption = "auto",
     quiet: bool = typer.Option(False, help="No progress bars."),
@@ -134,7 +144,7 @@ def benchmark(
     """The paper's comparison (Tables I-IV, Fig. 7): every method predicts one test city through the
     same pipeline and metrics; training times come from the logs beside the weights."""
     from csboundary.models.device import resolve_device
-    from csboundary.pipeline.benchmark import benchmark_to_folder, unknown_methods
+    from csboundary.pipeline.evaluation.benchmark import benchmark_to_folder, unknown_methods
 
     chosen = [m.strip() for m in methods.split(",")] if methods else None
     if unknown_methods(chosen):

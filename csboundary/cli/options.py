@@ -27,7 +27,8 @@ FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in p
 THRESHOLD_HELP = "Adjacency probability for an edge."
 ENGINE_HELP = "The networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
 PRECISION_HELP = ("The FPN's arithmetic. auto: int8 where this CPU runs it faster "
-                  "than float32 on ONNX Runtime (timed once per machine and weights file), else float32. bfloat16 runs it in PyTorch under autocast: 2.5x faster on CPUs "
+                  "than float32 on ONNX Runtime (timed once per machine and weights file), else float32. bfloat16 runs it in PyTorch "
+                  "under autocast: 2.5x faster on CPUs "
                   "with AMX (Intel Xeon 4th generation and later), slower on CPUs without bfloat16 units. int8 runs it quantized on "
                   "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.5-2.8x faster on CPUs with VNNI or AMX. "
                   "Scores move a little with either (docs/cpu-inference.md).")

@@ -10,7 +10,8 @@ from typing import Optional
 import numpy as np
 import typer
 
-from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file, parse_numbers, positive, readable_inputs, with_graph_options)
+from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file,
+                                    parse_numbers, positive, readable_inputs, with_graph_options)
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph.settings import GraphOverrides
 
@@ -22,11 +23,15 @@ def predict(
     weights: WeightsOption = None,
     graph: GraphOverrides = GraphOverrides(),
     batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
-    write_maps: bool = typer.Option(False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
-    lanelet2: bool = typer.Option(False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
+    write_maps: bool = typer.Option(False, "--write-maps",
+                                    help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
+    lanelet2: bool = typer.Option(False, "--lanelet2",
+                                  help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
     gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of imagery without a CRS (needed then)."),
     restart: bool = typer.Option(False, "--restart", help="Discard the unfinished run in --out instead of resuming it."),
-    scheduler: Optional[str] = typer.Option(None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."),
+    scheduler: Optional[str] = typer.Option(None,
+                                            help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers "
+                                            "share."),
     workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
     threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
     engine: EngineOption = "auto",
@@ -43,9 +48,9 @@ def predict(
         raise typer.BadParameter("give --scheduler or --workers, not both")
     readable_inputs(inputs)
     out_dir(out, inputs)
-    from csboundary.pipeline.patch import load_predictor
-    from csboundary.pipeline.predict import predict_to_folder
-    from csboundary.pipeline.run import counted, stage_table, written_files
+    from csboundary.pipeline.prediction.patch import load_predictor
+    from csboundary.pipeline.prediction.predict import predict_to_folder
+    from csboundary.pipeline.prediction.run import counted, stage_table, written_files
 
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
 
@@ -78,8 +83,8 @@ def predict_patch(
     the maps and the graph over the image."""
     out_dir(out, [image] if image.is_dir() else [])
     readable_inputs([image])
-    from csboundary.pipeline.patch import load_predictor
-    from csboundary.pipeline.predict import predict_patch_to_folder
+    from csboundary.pipeline.prediction.patch import load_predictor
+    from csboundary.pipeline.prediction.predict import predict_patch_to_folder
 
     predictor = load_predictor(weights, device, graph, fpn_weights=fpn_weights, engine=engine, precision=precision)
     drawn = predict_patch_to_folder(image, out, predictor, gsd)
@@ -113,8 +118,8 @@ def export_lanelet2(
     loops closed), confidence as an attribute, UTM projector around the origin (Autoware's
     map_projector_info.yaml beside it). With --bounds, one district of the city; with
     --min-confidence, only the edges at least that sure."""
-    from csboundary.pipeline.lanelet2_export import write_lanelet2
-    from csboundary.pipeline.outputs import read_prediction_graph
+    from csboundary.pipeline.outputs.lanelet2_export import write_lanelet2
+    from csboundary.pipeline.outputs.prediction_files import read_prediction_graph
 
     source = prediction / "graph.json" if prediction.is_dir() and bounds is None else prediction
     box = district_bounds(bounds)
@@ -125,7 +130,7 @@ def export_lanelet2(
         if not (-90 <= lat <= 90 and -180 <= lon <= 180):
             raise typer.BadParameter(f"{origin!r} is not a latitude,longitude", param_hint="--origin")
         at = (lat, lon)
-    from csboundary.pipeline.outputs import check_finite_geometry
+    from csboundary.pipeline.outputs.prediction_files import check_finite_geometry
 
     graph = read_prediction_graph(source, box)
     check_finite_geometry(graph, source)
@@ -153,12 +158,13 @@ def review(
     confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
     for apply-review. Open OUT/index.html (no network needed). With --bounds, one district of
     the city (its edits merge into the whole city all the same)."""
-    from csboundary.pipeline.review import write_review
+    from csboundary.pipeline.outputs.review import write_review
 
     box = district_bounds(bounds)
     out_dir(out or prediction / "review")
     done = write_review(prediction, out, ground_truth, progress=not quiet, bounds=box)
-    typer.echo(f"{done['page']}: {done['edges']} edges to review{', ground truth ' + str(done['ground_truth']) if done['ground_truth'] else ''}")
+    typer.echo(f"{done['page']}: {done['edges']} edges to "
+               f"review{', ground truth ' + str(done['ground_truth']) if done['ground_truth'] else ''}")
 
 
 def apply_review(
@@ -168,7 +174,7 @@ def apply_review(
     """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
     GeoJSON and map.osm (when present), and appends what a person changed, and the areas marked
     complete (labels for csboundary finetune), to review.json."""
-    from csboundary.pipeline.review import apply_review as merge
+    from csboundary.pipeline.outputs.review import apply_review as merge
 
     done = merge(prediction, edits)
     if "already_applied" in done:
@@ -195,8 +201,8 @@ def demo(
     """
     from csboundary.metrics.report import format_rows
     from csboundary.pipeline.demo import run_demo
-    from csboundary.pipeline.patch import load_predictor
-    from csboundary.pipeline.run import stage_table
+    from csboundary.pipeline.prediction.patch import load_predictor
+    from csboundary.pipeline.prediction.run import stage_table
 
     out_dir(out)
     done = run_demo(out, load_predictor(None, device, engine=engine, precision=precision), seed)

@@ -13,7 +13,9 @@ from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, fin
 
 def train(
     model: str = typer.Argument(..., help="fpn | afanet | a baseline: orientation-refine | sat2graph | icurb."),
-    config: Path = typer.Option(..., "--config", help="Training config JSON (configs/shipped: the shipped weights; configs/paper: the paper and its baselines)."),
+    config: Path = typer.Option(..., "--config",
+                                help="Training config JSON (configs/shipped: the shipped weights; configs/paper: the paper and its "
+                                "baselines)."),
     out: Path = typer.Option(..., "--out", help="Run folder: checkpoints, train.log."),
     resume: Optional[Path] = typer.Option(None, help="Checkpoint (*-last.pt) to resume from."),
     steps: Optional[int] = typer.Option(None, min=1, help="Override the config's step count."),
@@ -37,21 +39,45 @@ def bundle_weights(
     afanet: Path = typer.Option(..., help="Trained AfANet checkpoint (afanet.pt)."),
     out: Path = typer.Option(..., "--out", help="Bundle to write (e.g. csboundary/weights/csboundary-synthetic.pt)."),
     edge_threshold: float = typer.Option(0.5, callback=finite, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
-    min_edge_support: float = typer.Option(0.0, callback=finite, min=0.0, max=1.0, help="Default mean boundary probability along an AfANet edge (0 = no check)."),
+    min_edge_support: float = typer.Option(0.0, callback=finite, min=0.0, max=1.0,
+                                           help="Default mean boundary probability along an AfANet edge (0 = no check)."),
     max_edge_length: float = typer.Option(0.0, callback=finite, min=0.0, help="Default longest AfANet edge in pixels (0 = no limit)."),
-    max_edge_gap: float = typer.Option(0.0, callback=finite, min=0.0, help="Default longest stretch of an AfANet edge below --gap-level boundary probability, in pixels (0 = no check)."),
-    gap_level: float = typer.Option(0.3, callback=finite, min=0.0, max=1.0, help="Boundary probability below which a point of an edge is a gap."),
-    fill_min_length: float = typer.Option(0.0, "--fill-min-length", callback=finite, min=0.0, help="Default shortest segmentation-skeleton stretch no edge covers that is filled in, in pixels (0 = off)."),
-    join_ends: float = typer.Option(0.0, "--join-ends", callback=finite, min=0.0, help="Default longest join between two dangling ends that head towards each other over boundary, in pixels (0 = off)."),
-    attach_ends: float = typer.Option(0.0, "--attach-ends", callback=finite, min=0.0, help="Default farthest line ahead of a dangling end of the city graph it is joined to, in pixels (0 = off)."),
-    attach_backed: float = typer.Option(0.0, "--attach-backed", callback=finite, min=0.0, help="Default farthest line ahead of a dangling end of a window's graph it is joined to where the boundary map backs the join, in pixels (0 = off)."),
-    surface_check: float = typer.Option(0.0, "--surface-check", callback=finite, min=0.0, max=1.0, help="Default road-surface check: an edge needs this mean surface probability beside it, or a connected edge that has it (0 = off; the FPN needs a surface head)."),
-    surface_weak: float = typer.Option(0.2, "--surface-weak", callback=finite, min=0.0, max=1.0, help="Surface check: edges below this are dropped even when connected to a sure one."),
-    surface_both_sides: float = typer.Option(0.0, "--surface-both-sides", callback=finite, min=0.0, max=1.0, help="Surface check: edges with at least this mean road-surface probability on their poorer side lie inside the roadway and are dropped (0 = off)."),
-    surface_gate: float = typer.Option(0.0, "--surface-gate", callback=finite, min=0.0, max=200.0, help="Default surface gate: keypoint and boundary maps kept only within this many pixels of a change of the road surface (0 = off; the FPN needs a surface head)."),
-    min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0, help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
-    grid_crossings: int = typer.Option(0, min=0, help="Add vertices where the boundary crosses grid lines this far apart (0 = off; 250 = the label grid)."),
-    vertex_threshold: float | None = typer.Option(None, callback=finite, min=0.01, max=1.0, help="Keypoint probability of a vertex (default: the one AfANet was trained with, 0.5 unless its config says)."),
+    max_edge_gap: float = typer.Option(0.0, callback=finite, min=0.0,
+                                       help="Default longest stretch of an AfANet edge below --gap-level boundary probability, in pixels "
+                                       "(0 = no check)."),
+    gap_level: float = typer.Option(0.3, callback=finite, min=0.0, max=1.0,
+                                    help="Boundary probability below which a point of an edge is a gap."),
+    fill_min_length: float = typer.Option(0.0, "--fill-min-length", callback=finite, min=0.0,
+                                          help="Default shortest segmentation-skeleton stretch no edge covers that is filled in, in "
+                                          "pixels (0 = off)."),
+    join_ends: float = typer.Option(0.0, "--join-ends", callback=finite, min=0.0,
+                                    help="Default longest join between two dangling ends that head towards each other over boundary, in "
+                                    "pixels (0 = off)."),
+    attach_ends: float = typer.Option(0.0, "--attach-ends", callback=finite, min=0.0,
+                                      help="Default farthest line ahead of a dangling end of the city graph it is joined to, in pixels (0 "
+                                      "= off)."),
+    attach_backed: float = typer.Option(0.0, "--attach-backed", callback=finite, min=0.0,
+                                        help="Default farthest line ahead of a dangling end of a window's graph it is joined to where the "
+                                        "boundary map backs the join, in pixels (0 = off)."),
+    surface_check: float = typer.Option(0.0, "--surface-check", callback=finite, min=0.0, max=1.0,
+                                        help="Default road-surface check: an edge needs this mean surface probability beside it, or a "
+                                        "connected edge that has it (0 = off; the FPN needs a surface head)."),
+    surface_weak: float = typer.Option(0.2, "--surface-weak", callback=finite, min=0.0, max=1.0,
+                                       help="Surface check: edges below this are dropped even when connected to a sure one."),
+    surface_both_sides: float = typer.Option(0.0, "--surface-both-sides", callback=finite, min=0.0, max=1.0,
+                                             help="Surface check: edges with at least this mean road-surface probability on their poorer "
+                                             "side lie inside the roadway and are dropped (0 = off)."),
+    surface_gate: float = typer.Option(0.0, "--surface-gate", callback=finite, min=0.0, max=200.0,
+                                       help="Default surface gate: keypoint and boundary maps kept only within this many pixels of a "
+                                       "change of the road surface (0 = off; the FPN needs a surface head)."),
+    min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0,
+                                              help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
+    grid_crossings: int = typer.Option(0, min=0,
+                                       help="Add vertices where the boundary crosses grid lines this far apart (0 = off; 250 = the label "
+                                       "grid)."),
+    vertex_threshold: float | None = typer.Option(None, callback=finite, min=0.01, max=1.0,
+                                                  help="Keypoint probability of a vertex (default: the one AfANet was trained with, 0.5 "
+                                                  "unless its config says)."),
 ) -> None:
     """Bundle a trained FPN and AfANet (weights + provenance) into one weights file."""
     from csboundary.models.bundle import make_bundle
@@ -73,7 +99,8 @@ def fit_confidence(
     seed: int = typer.Option(0, min=0, help="Seed of the trees' row sampling."),
     trees: int = typer.Option(200, min=1, max=5000, help="Boosted trees."),
     depth: int = typer.Option(2, min=1, max=8, help="Depth of each tree."),
-    assume_model_gsd: bool = typer.Option(False, "--assume-model-gsd", help="Imagery without a pixel size is at the model's (imported crops)."),
+    assume_model_gsd: bool = typer.Option(False, "--assume-model-gsd",
+                                          help="Imagery without a pixel size is at the model's (imported crops)."),
     engine: str = typer.Option("auto", help="auto | torch | onnx."),
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
@@ -83,9 +110,9 @@ def fit_confidence(
     (docs/confidence.md). Fit on cities the networks never trained on."""
     from csboundary.data import city as layout
     from csboundary.metrics.confidence import confidence_report
-    from csboundary.pipeline.confidence_fit import fit_bundle_confidence
-    from csboundary.pipeline.evaluate_set import set_cities
-    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.training.confidence_fit import fit_bundle_confidence
+    from csboundary.pipeline.evaluation.evaluate_set import set_cities
+    from csboundary.pipeline.prediction.patch import load_predictor
     from csboundary.models.checkpoint import shipped_weights
 
     out_file(out, (".pt",))
@@ -104,7 +131,7 @@ def fit_confidence(
 
 def _budget(**given):
     """The fine-tuning budget: the options given, the defaults of FinetuneBudget for the rest."""
-    from csboundary.pipeline.finetune import FinetuneBudget
+    from csboundary.pipeline.training.finetune import FinetuneBudget
 
     return FinetuneBudget.from_dict({k: v for k, v in given.items() if v is not None})
 
@@ -121,11 +148,13 @@ def finetune(
     user_share: Optional[float] = typer.Option(None, callback=finite, min=0.05, max=1.0,
                                                help="Share of training samples from LABELLED (default 0.5); the rest come from synthetic "
                                                     "cities of the weights' mix."),
-    synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
+    synthetic_cities: Optional[int] = typer.Option(None, min=1,
+                                                   help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
     cache: Optional[Path] = typer.Option(None, help="Folder of the synthetic cities (default: in WORK)."),
     refit_confidence: bool = typer.Option(True, "--refit-confidence/--keep-confidence",
-                                          help="Refit the edge confidence with the tuned networks on LABELLED and the synthetic cities, "
-                                               "when LABELLED gives enough edges (100, with 20 true and 20 false); else keep the weights'."),
+                                          help="Refit the edge confidence with the tuned networks on LABELLED and the synthetic "
+                                               "cities, when LABELLED gives enough edges (100, with 20 true and 20 false); else keep "
+                                               "the weights'."),
     seed: int = typer.Option(0, min=0, help="Seed of the sample draws."),
     device: DeviceOption = "auto",
     quiet: QuietOption = False,
@@ -133,7 +162,7 @@ def finetune(
     """Fine-tune the weights on your own labelled imagery: the FPN, then AfANet on the tuned
     FPN's vertices, with synthetic cities mixed in so nothing learnt is forgotten
     (docs/finetune.md). The default budget takes about 11 minutes on a 2-core CPU."""
-    from csboundary.pipeline.finetune import default_work, finetune as run
+    from csboundary.pipeline.training.finetune import default_work, finetune as run
 
     out_file(out, (".pt",))
     budget = _budget(fpn_steps=fpn_steps, afanet_steps=afanet_steps, user_share=user_share, synthetic_cities=synthetic_cities,
@@ -156,7 +185,8 @@ def adapt(
     fpn_steps: Optional[int] = typer.Option(None, min=1, help="FPN self-training steps (default 800)."),
     afanet_steps: Optional[int] = typer.Option(None, min=0, help="AfANet steps on the adapted FPN's vertices (default 300; 0 keeps "
                                                                  "the bundle's AfANet)."),
-    synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
+    synthetic_cities: Optional[int] = typer.Option(None, min=1,
+                                                   help="Synthetic cities mixed in (default 12; built on first use, 2500 px each)."),
     mix: bool = typer.Option(True, "--mix/--no-mix", help="Paste synthetic roadway, with its labels, into your windows."),
     surface_anchor: bool = typer.Option(True, "--surface-anchor/--no-surface-anchor",
                                         help="Teach a boundary only near the edge of the teacher's roadway."),
@@ -170,7 +200,7 @@ def adapt(
     by an averaged teacher, with synthetic cities mixed in, then AfANet on the adapted FPN's
     vertices (docs/adapt.md). The default budget takes about 13 minutes on a 2-core CPU."""
     from csboundary.models.training.adapt import AdaptConfig
-    from csboundary.pipeline.adapt import AdaptBudget, adapt as run, default_work
+    from csboundary.pipeline.training.adapt import AdaptBudget, adapt as run, default_work
 
     out_file(out, (".pt",))
     given = dict(fpn_steps=fpn_steps, afanet_steps=afanet_steps, synthetic_cities=synthetic_cities)
@@ -190,7 +220,8 @@ def evaluate_finetune(
     weights: WeightsOption = None,
     fpn_steps: Optional[int] = typer.Option(None, min=1, help="FPN steps per fold (default 1000)."),
     afanet_steps: Optional[int] = typer.Option(None, min=1, help="AfANet steps per fold (default 500)."),
-    user_share: Optional[float] = typer.Option(None, callback=finite, min=0.05, max=1.0, help="Share of training samples from the set (default 0.5)."),
+    user_share: Optional[float] = typer.Option(None, callback=finite, min=0.05, max=1.0,
+                                               help="Share of training samples from the set (default 0.5)."),
     synthetic_cities: Optional[int] = typer.Option(None, min=1, help="Synthetic cities mixed in (default 12)."),
     cache: Optional[Path] = typer.Option(None, help="Folder of the synthetic cities (default: in OUT)."),
     seed: int = typer.Option(0, min=0, help="Seed of the sample draws and of the scores' vertex pairs."),
@@ -200,7 +231,7 @@ def evaluate_finetune(
 ) -> None:
     """What fine-tuning on a labelled set is worth: K-fold cross-validation, base against
     fine-tuned scores on every held-out city, with the 95 % interval of the gain."""
-    from csboundary.pipeline.finetune_cv import evaluate_finetune as run, format_finetune
+    from csboundary.pipeline.training.finetune_cv import evaluate_finetune as run, format_finetune
 
     out_dir(out, [set_dir])
     budget = _budget(fpn_steps=fpn_steps, afanet_steps=afanet_steps, user_share=user_share, synthetic_cities=synthetic_cities)

@@ -167,7 +167,8 @@ def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODE
     first = mosaic.tiles[0].path
     if mosaic.crs is None:
         if gsd is None and assume_model_gsd:
-            warnings.warn(f"{first}: no CRS: its pixels are taken to be the model's {model_gsd:g} m (give --gsd otherwise)", InputWarning, stacklevel=2)
+            warnings.warn(f"{first}: no CRS: its pixels are taken to be the model's {model_gsd:g} m (give --gsd otherwise)", InputWarning,
+                          stacklevel=2)
             gsd = model_gsd * abs(mosaic.transform.a)
         if gsd is None:
             raise InputError(first, "has no CRS, so its pixel size is unknown: give --gsd (metres per pixel) to predict it")
@@ -180,7 +181,8 @@ def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODE
     size = geometric_mean(pixel)
     low, high = PIXEL_SIZE_RANGE_M
     if not (low <= size <= high):
-        raise InputError(first, f"pixel size {size:.3g} m is outside {low:g}-{high:g} m: the model ({model_gsd:g} m) would not see curbs in it")
+        raise InputError(first,
+                         f"pixel size {size:.3g} m is outside {low:g}-{high:g} m: the model ({model_gsd:g} m) would not see curbs in it")
     dtype = np.dtype(mosaic.tiles[0].dtype)
     stretch = None if dtype == np.uint8 else fit_stretch(mosaic)
     if stretch is not None:
@@ -190,8 +192,10 @@ def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODE
     if needs_resample:
         factor = size / model_gsd
         if factor > WARN_FACTOR or factor < 1 / WARN_FACTOR:
-            warnings.warn(f"{first}: pixel size {size:.3g} m resampled to the model's {model_gsd:g} m ({'up' if factor > 1 else 'down'}sampled "
-                          f"{max(factor, 1 / factor):.2f}x); accuracy drops the further the input is from {model_gsd:g} m", InputWarning, stacklevel=2)
+            warnings.warn(f"{first}: pixel size {size:.3g} m resampled to the model's {model_gsd:g} m "
+                          f"({'up' if factor > 1 else 'down'}sampled "
+                          f"{max(factor, 1 / factor):.2f}x); accuracy drops the further the input is from {model_gsd:g} m", InputWarning,
+                          stacklevel=2)
         view: Mosaic = ResampledMosaic(mosaic, model_gsd / units.metres_per_unit[0], model_gsd / units.metres_per_unit[1], stretch)
     elif stretch is not None:
         view = StretchedMosaic(mosaic, stretch)

@@ -196,7 +196,8 @@ class Mosaic:
         self._lock = threading.RLock()  # a prefetching thread and the main thread share the open files
         self.max_open = MAX_OPEN_FILES
         self._coverage: dict[Path, tuple | None] = {}  # written blocks per tile, found on first use
-        self._boxes = np.array([[t.window.col_off, t.window.row_off, t.window.col_end, t.window.row_end] for t in tiles], dtype=np.int64).reshape(-1, 4)
+        self._boxes = np.array([[t.window.col_off, t.window.row_off, t.window.col_end, t.window.row_end] for t in tiles],
+                               dtype=np.int64).reshape(-1, 4)
 
     # -- construction ---------------------------------------------------------------------------
     @classmethod
@@ -222,7 +223,9 @@ class Mosaic:
             if (crs is None) != (first[1] is None) or (crs is not None and crs != first[1]):
                 raise InputError(path, f"CRS {crs} differs from {first[1]} of {first[0]}")
             if not (math.isclose(transform.a, first[2].a, rel_tol=1e-9) and math.isclose(abs(transform.e), abs(first[2].e), rel_tol=1e-9)):
-                raise InputError(path, f"pixel size {transform.a:g}x{abs(transform.e):g} differs from {first[2].a:g}x{abs(first[2].e):g} of {first[0]}")
+                raise InputError(path,
+                                 f"pixel size {transform.a:g}x{abs(transform.e):g} differs from {first[2].a:g}x{abs(first[2].e):g} of "
+                                 f"{first[0]}")
             if dtype != first[4]:
                 raise InputError(path, f"data type {dtype} differs from {first[4]} of {first[0]}")
         crs = first[1]
@@ -232,7 +235,8 @@ class Mosaic:
             if first[2] == Affine.identity():
                 warnings.warn(f"{first[0]}: no CRS and no georeference; working in pixel coordinates", InputWarning, stacklevel=2)
             else:
-                warnings.warn(f"{first[0]}: no CRS; coordinates follow the file's geotransform, in unknown units", InputWarning, stacklevel=2)
+                warnings.warn(f"{first[0]}: no CRS; coordinates follow the file's geotransform, in unknown units", InputWarning,
+                              stacklevel=2)
 
         res_x, res_y = first[2].a, first[2].e
         west = min(i[2].c for i in infos)

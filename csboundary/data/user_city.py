@@ -64,8 +64,10 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     if complete is not None:
         complete = complete.to_crs(crs) if complete.crs is not None else complete.set_crs(crs)
     write_ground_truth(ground_truth_path(out), frame, complete=complete)
-    meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "units": units.unit_name, "pixel_m": pixel_m, "width": size[0], "height": size[1], "tiles": names,
+    meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "units": units.unit_name, "pixel_m": pixel_m, "width": size[0],
+            "height": size[1], "tiles": names,
             "tile_sources": [str(p) for p in paths], "ground_truth_source": str(Path(ground_truth).resolve()),
-            "boundaries": len(frame), **({"complete_areas": len(complete)} if complete is not None else {}), "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
+            "boundaries": len(frame), **({"complete_areas": len(complete)} if complete is not None else {}),
+            "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
     write_meta(out, meta)
     return meta

@@ -122,7 +122,8 @@ class BoundaryGraph:
 
     # -- construction -------------------------------------------------------------------------------
     @classmethod
-    def from_polylines(cls, lines: Sequence[np.ndarray], transform: Affine | None = None, crs: str | None = None, snap: float = 1e-6) -> "BoundaryGraph":
+    def from_polylines(cls, lines: Sequence[np.ndarray], transform: Affine | None = None, crs: str | None = None,
+                       snap: float = 1e-6) -> "BoundaryGraph":
         """A graph whose vertices are the polylines' points (shared points merged within ``snap``)."""
         points, edges = [], []
         index: dict[tuple[int, int], int] = {}
@@ -177,7 +178,8 @@ class BoundaryGraph:
                 edge_polylines=[np.array(e["polyline_px"], dtype=float) if "polyline_px" in e else None for e in edges]
                 if any("polyline_px" in e for e in edges)
                 else None,
-                edge_scores=np.array([np.nan if e.get("score") is None else e["score"] for e in edges], dtype=float) if any("score" in e for e in edges) else None,
+                edge_scores=np.array([np.nan if e.get("score") is None else e["score"] for e in edges],
+                                     dtype=float) if any("score" in e for e in edges) else None,
                 edge_patches=np.array([e.get("patch", [-1, -1]) for e in edges], dtype=np.int64).reshape(-1, 2)
                 if any("patch" in e for e in edges)
                 else None,

@@ -51,7 +51,7 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None, groups: n
     ``groups`` (E,) confines the piece and boundary features to the edges of the same group: the
     city graph groups edges by the patch core their midpoint lies in, so that an edge's evidence
     never depends on how far the city extends and a band of the city can be scored on its own
-    (:mod:`csboundary.pipeline.city_blocks`). ``degree`` (V,) gives the vertices' degrees in a
+    (:mod:`csboundary.pipeline.prediction.city_blocks`). ``degree`` (V,) gives the vertices' degrees in a
     larger graph that ``graph`` is part of (default: their degrees in ``graph``)."""
     n = graph.n_edges
     out = np.full((n, len(FEATURES)), np.nan)

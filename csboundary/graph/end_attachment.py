@@ -10,7 +10,7 @@ of the direction its line was going), so a line is not bent back across the road
 
 Three users: seam mending in :mod:`csboundary.graph.stitching` (ends cut by a window border, no
 heading), the city graph's attachment of every other end (``city_graph`` in
-:mod:`csboundary.pipeline.city`, the bundle's ``attach_max_px``, ``--attach-ends``), and the
+:mod:`csboundary.pipeline.prediction.city`, the bundle's ``attach_max_px``, ``--attach-ends``), and the
 window's attachment where the boundary map backs the join (:mod:`csboundary.graph.end_joining`,
 ``join_attach_px``, ``--attach-backed``; the ``accept`` test).
 Pure geometry on pixel (col, row) coordinates.
@@ -76,7 +76,8 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
     if not len(ends) or graph.n_edges == 0:
         return graph
     lines = [graph.edge_polyline(e) for e in range(graph.n_edges)]
-    ends_at, near_edges = STRtree([LineString(line) for line in lines]).query(points(graph.vertices[ends]), predicate="dwithin", distance=radius)
+    ends_at, near_edges = STRtree([LineString(line) for line in lines]).query(points(graph.vertices[ends]), predicate="dwithin",
+                                                                              distance=radius)
     near = [near_edges[ends_at == k] for k in range(len(ends))]
     edge_piece, _ = fragment_lengths(graph)
     vertex_piece = np.full(graph.n_vertices, -1)

@@ -45,9 +45,11 @@ class EndJoinConfig:
         return self.max_px > 0 or self.attach_px > 0
 
     def __post_init__(self) -> None:
-        if not (self.max_px >= 0 and self.attach_px >= 0 and 0 <= self.max_turn_deg <= 180 and 0 <= self.min_support <= 1 and self.max_gap_px >= 0
+        if not (self.max_px >= 0 and self.attach_px >= 0 and 0 <= self.max_turn_deg <= 180 and 0 <= self.min_support <= 1
+                and self.max_gap_px >= 0
                 and 0 <= self.gap_level <= 1 and self.radius_px >= 0):
-            raise ValueError(f"need max_px, attach_px, max_gap_px, radius_px >= 0, 0 <= max_turn_deg <= 180 and levels in [0, 1]; got {self}")
+            raise ValueError(f"need max_px, attach_px, max_gap_px, radius_px >= 0, 0 <= max_turn_deg <= 180 and levels in [0, 1]; got "
+                             f"{self}")
 
 
 def end_headings(graph: BoundaryGraph) -> tuple[np.ndarray, np.ndarray]:

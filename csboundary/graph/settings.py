@@ -111,6 +111,8 @@ class GraphSettings:
     def overridden(self, options: GraphOverrides) -> "GraphSettings":
         """These settings with the command line's ``options`` in place of the bundle's."""
         replace = dataclasses.replace
+        options = replace(options, **{f.name: float(getattr(options, f.name)) for f in dataclasses.fields(options)
+                                       if f.name != "max_degree" and getattr(options, f.name) is not None})
         settings = self
         if options.edge_threshold is not None:
             settings = replace(settings, edge_threshold=options.edge_threshold)

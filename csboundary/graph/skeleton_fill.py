@@ -49,7 +49,8 @@ class FillConfig:
         return self.min_length_px > 0
 
     def __post_init__(self) -> None:
-        if not (self.min_length_px >= 0 and 0 < self.threshold <= 1 and self.cover_px >= 0 and self.snap_px >= 0 and self.simplify_px >= 0 and self.split_px >= 0):
+        if not (self.min_length_px >= 0 and 0 < self.threshold <= 1 and self.cover_px >= 0 and self.snap_px >= 0
+                and self.simplify_px >= 0 and self.split_px >= 0):
             raise ValueError(f"need min_length_px, cover_px, snap_px, simplify_px, split_px >= 0 and 0 < threshold <= 1; got {self}")
 
 
@@ -106,7 +107,8 @@ def _stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
     rows, cols = nonzero_pixels(mask)
     r0, c0 = rows.min(), cols.min()
     box = mask[r0:rows.max() + 1, c0:cols.max() + 1]
-    found = skeleton_graph(np.pad(box, 1).astype(np.float32), SkeletonConfig(threshold=0.5, simplify_px=simplify_px, spur_px=0.0, min_length_px=0.0))
+    found = skeleton_graph(np.pad(box, 1).astype(np.float32), SkeletonConfig(threshold=0.5, simplify_px=simplify_px, spur_px=0.0,
+                                                                             min_length_px=0.0))
     shift = np.array([c0 - 1, r0 - 1], float)
     return BoundaryGraph(found.vertices + shift, found.edges, edge_kinds=found.edge_kinds,
                          edge_polylines=[line + shift for line in found.edge_polylines], edge_scores=found.edge_scores)

@@ -67,7 +67,7 @@ def _prune(lines: list[np.ndarray], ends: list[tuple[int, int]], config: Skeleto
     for line, (a, b) in zip(lines, ends):
         spur = (degree[a] == 1) != (degree[b] == 1) and max(degree[a], degree[b]) >= 3
         keep.append(not (spur and polyline_length(line) < config.spur_px))
-    lines = [l for l, k in zip(lines, keep) if k]
+    lines = [line for line, k in zip(lines, keep) if k]
     ends = [e for e, k in zip(ends, keep) if k]
     # connected pieces by union-find over chain ends
     parent: dict[int, int] = {}
@@ -83,4 +83,4 @@ def _prune(lines: list[np.ndarray], ends: list[tuple[int, int]], config: Skeleto
     for line, (a, _) in zip(lines, ends):
         total[root(a)] = total.get(root(a), 0.0) + polyline_length(line)
     long_enough = [total[root(a)] >= config.min_length_px for a, _ in ends]
-    return [l for l, k in zip(lines, long_enough) if k], [e for e, k in zip(ends, long_enough) if k]
+    return [line for line, k in zip(lines, long_enough) if k], [e for e, k in zip(ends, long_enough) if k]

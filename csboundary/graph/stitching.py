@@ -36,7 +36,7 @@ the rules here:
   is 15 px: 5 px left the suburb test city's APLS at 0.432, 15 px gives 0.513
   (docs/city-inference.md). The join itself is :func:`csboundary.graph.end_attachment.attach_ends`,
   which the city graph also uses for every other dangling end (``city_graph`` in
-  :mod:`csboundary.pipeline.city`, after noding: :mod:`csboundary.graph.noding`).
+  :mod:`csboundary.pipeline.prediction.city`, after noding: :mod:`csboundary.graph.noding`).
 
 Coordinates are mosaic pixels (col, row), the frame of ``grid.transform``.
 """

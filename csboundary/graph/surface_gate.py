@@ -71,7 +71,8 @@ def surface_change(surface: np.ndarray, config: SurfaceGateConfig) -> np.ndarray
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
     if config.mode == "sides":
         f = max(int(round(config.far_px)), 1)
-        near_road = cv2.dilate(surface, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * f + 1, 2 * f + 1)), borderType=cv2.BORDER_REPLICATE)
+        near_road = cv2.dilate(surface, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * f + 1, 2 * f + 1)),
+                               borderType=cv2.BORDER_REPLICATE)
         not_inside = 1.0 - cv2.erode(surface, disc, borderType=cv2.BORDER_REPLICATE)
         return np.clip(near_road / np.float32(config.far_level), 0, 1) * np.clip(not_inside / np.float32(config.inside_level), 0, 1)
     spread = cv2.dilate(surface, disc, borderType=cv2.BORDER_REPLICATE) - cv2.erode(surface, disc, borderType=cv2.BORDER_REPLICATE)

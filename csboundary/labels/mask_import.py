@@ -137,7 +137,8 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
         raise InputError(image_path, f"{len(image)} band(s); expected RGB or R, G, B, NIR")
     picture, _, _ = read_picture(mask_path)
     if picture.shape[1:] != image.shape[1:]:
-        raise InputError(mask_path, f"is {picture.shape[2]}x{picture.shape[1]} px; its image {image_path.name} is {image.shape[2]}x{image.shape[1]}")
+        raise InputError(mask_path,
+                         f"is {picture.shape[2]}x{picture.shape[1]} px; its image {image_path.name} is {image.shape[2]}x{image.shape[1]}")
     if transform is None and (gsd is None or not np.isfinite(gsd) or gsd <= 0):
         raise InputError(image_path, "has no georeference: give its pixel size in metres (--gsd)")
     out_crs = crs or PLACEHOLDER_CRS

@@ -16,7 +16,8 @@ NORMAL_EDGE = "normal"
 CORNER_EDGE = "corner"
 
 
-def window_graph(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window: PixelWindow) -> tuple[BoundaryGraph, list[tuple[int, int]]]:
+def window_graph(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window: PixelWindow) -> tuple[BoundaryGraph, list[tuple[int,
+                                                                                                                                 int]]]:
     """Graph of the keypoints inside ``window`` (closed), in the window's local pixels.
 
     An edge joins consecutive keypoints of a boundary when the boundary between them stays in

@@ -53,7 +53,8 @@ def segmentation_label(boundaries: list[Boundary], bounds: np.ndarray, window: P
     return _widen(out, width)[pad:-pad, pad:-pad]
 
 
-def orientation_label(boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, width: int = 3, bins: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def orientation_label(boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, width: int = 3,
+                      bins: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Boundary direction on boundary pixels (Batra et al. 2019).
 
     Returns (2, h, w) float32 unit vectors (d col, d row), 0 off the boundary, and (h, w) uint8

@@ -68,7 +68,7 @@ def score_segments(pred: Segments, gt: Segments, pred_px: np.ndarray, gt_px: np.
         metrics["apls"], metrics["apls_gt_to_pred"], metrics["apls_pred_to_gt"] = sym.score, sym.gt_to_pred, sym.pred_to_gt
         counts["symmetric_pairs_gt"], counts["symmetric_pairs_pred"] = sym.n_pairs_gt, sym.n_pairs_pred
     t = tlts_from_pairs(pairs, config.phi)
-    metrics["tlts"], metrics["tlts_too_long"], metrics["tlts_too_short"], metrics["tlts_infeasible"] = t.score, t.too_long, t.too_short, t.infeasible
+    metrics.update(tlts=t.score, tlts_too_long=t.too_long, tlts_too_short=t.too_short, tlts_infeasible=t.infeasible)
     return metrics, counts
 
 

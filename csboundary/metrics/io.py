@@ -136,11 +136,14 @@ def resolve_frame(pred: Source, gt: Source, raster: str | Path | None = None, gs
         if not boxes:
             raise InputError(gt.path, "--gsd needs world coordinates, but no input holds lines")
         minx, maxy = min(b[0] for b in boxes), max(b[3] for b in boxes)
-        return Frame(Affine(gsd, 0.0, math.floor(minx), 0.0, -gsd, math.ceil(maxy)), crs.to_string() if crs is not None else None, source=f"--gsd {gsd:g}")
+        return Frame(Affine(gsd, 0.0, math.floor(minx), 0.0, -gsd, math.ceil(maxy)), crs.to_string() if crs is not None else None,
+                     source=f"--gsd {gsd:g}")
     if crs is None:
         return Frame(None, None, source="pixels (no CRS in the inputs)")
     blame = next(s for s in vectors if s.crs is not None)
-    raise InputError(blame.path, f"holds world coordinates ({crs.to_string()}): give --raster or --gsd to convert them to pixels, or --pixels if they are pixels")
+    raise InputError(blame.path,
+                     f"holds world coordinates ({crs.to_string()}): give --raster or --gsd to convert them to pixels, or --pixels if they "
+                     f"are pixels")
 
 
 def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
@@ -174,7 +177,8 @@ def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
     return BoundaryGraph.from_world_lines(lines, frame.transform, crs=frame.crs)
 
 
-def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False) -> tuple[BoundaryGraph, BoundaryGraph, Frame]:
+def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False) -> tuple[BoundaryGraph, BoundaryGraph,
+                                                                                                        Frame]:
     """Read both inputs, put them in one frame and check that they can be compared."""
     pred_src, gt_src = read_source(pred_path), read_source(gt_path)
     if not pixels:
@@ -208,7 +212,8 @@ def check_spaces(pred: Source, gt: Source, frame: Frame) -> None:
 
     crs = CRS.from_user_input(known[1]).to_string()
     problem = f"has no CRS but {known[0]} is in {crs}, so the two cannot be aligned (scores would be meaningless)"
-    predicted = "a prediction of a picture without a CRS is scored by predicting the labelled city itself (evaluate-model CITY, evaluate-set SET)"
+    predicted = ("a prediction of a picture without a CRS is scored by predicting the labelled city itself "
+                 "(evaluate-model CITY, evaluate-set SET)")
     advice = {"graph": predicted, "lines": f"if its coordinates are in {crs}, set that CRS (e.g. ogr2ogr -a_srs {crs}); {predicted}",
               "raster": "give a georeferenced raster, or leave --raster out"}[unknown[1]]
     raise InputError(unknown[0], f"{problem}: {advice}")

@@ -12,7 +12,8 @@ import numpy as np
 from csboundary.metrics.sampled_graph import SampledGraph
 
 
-def boundary_pairs(graph: SampledGraph, rng: np.random.Generator, min_vertices: int = 5, divisor: int = 3, exhaustive: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def boundary_pairs(graph: SampledGraph, rng: np.random.Generator, min_vertices: int = 5, divisor: int = 3,
+                   exhaustive: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The paper's pairs: for every boundary (connected component) with more than ``min_vertices``
     sampled vertices, ``n // divisor`` pairs of two distinct vertices drawn uniformly at random.
 

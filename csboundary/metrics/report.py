@@ -25,7 +25,8 @@ def format_table(result: dict) -> str:
     """A readable summary of :func:`csboundary.metrics.evaluate`'s result."""
     m, c = result["metrics"], result["counts"]
     taus = result["config"]["taus"]
-    head = f"{result['inputs']['pred']} vs {result['inputs']['gt']}: {result['scale']} scale, APLS {result['apls_variant']}, seed {result['seed']}"
+    head = (f"{result['inputs']['pred']} vs {result['inputs']['gt']}: {result['scale']} scale, APLS {result['apls_variant']}, "
+            f"seed {result['seed']}")
     if result["scale"] == "patch":
         head += f"\n{c['patches_scored']} of {c['patches']} patches scored ({c['patches_with_gt']} with ground truth); per-patch means"
     lines = [head, f"{'':12s}" + "".join(f"{'tau=' + format(t, 'g'):>10s}" for t in taus)]
@@ -54,7 +55,8 @@ def format_review(report: dict) -> str:
              + (f"{km:.3f} km of true boundary" if km else f"{report['true_boundary_px']:.0f} px of true boundary") + "):",
              f"  from scratch {_num(report['scratch_minutes'] * scale, 1)} {unit} ({report['scratch_clicks']} clicks)"]
     for name, o in report["orders"].items():
-        lines.append(f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} (look {_num(o['look_minutes'] * scale, 1)}, "
+        lines.append(f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} (look "
+                     f"{_num(o['look_minutes'] * scale, 1)}, "
                      f"draw {_num(o['draw_minutes'] * scale, 1)}); F1@5 {_num(o['start_f1'], 3)} -> {_num(o['end_f1'], 3)}; "
                      f"to F1@5 {target:g}: {_num(o['minutes_to_target_f1'] * scale, 1)} {unit}")
     return "\n".join(lines)

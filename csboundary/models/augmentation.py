@@ -65,7 +65,8 @@ def warp(array: np.ndarray, angle: float, scale: float, crop: int, nearest: bool
     matrix[:, 2] += (crop - side) / 2
     flags = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR
     planes = array.reshape(-1, side, side)
-    out = [cv2.warpAffine(np.ascontiguousarray(p), matrix, (crop, crop), flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0) for p in planes]
+    out = [cv2.warpAffine(np.ascontiguousarray(p), matrix, (crop, crop), flags=flags, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0) for p in planes]
     return np.stack(out).reshape(*array.shape[:-2], crop, crop)
 
 

@@ -28,7 +28,8 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
     graph is attached to over boundary, farthest line a dangling end of the city graph is attached to, road-surface check and its
     both-sides rule, surface gate of the maps (both: an FPN with a surface head; :mod:`csboundary.graph.surface_gate`);
     see :mod:`csboundary.graph.edge_support`, :mod:`csboundary.graph.crossings` and
-    :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`, :mod:`csboundary.graph.end_joining`), and the pixel size the FPN was trained at (imagery is
+    :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`, :mod:`csboundary.graph.end_joining`), and the pixel size the
+    FPN was trained at (imagery is
     resampled to it)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))
     afanet = load_checkpoint(afanet_path, ("afanet", "bundle"))
@@ -39,7 +40,8 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
     init = (fpn.get("train_config") or {}).get("init_fpn")
     if init and Path(init).exists():  # a fine-tuned FPN (e.g. a surface head on a trained one): where it started
         start = load_checkpoint(init, ("fpn", "bundle"))
-        provenance["fpn_init"] = {"file": str(init), **(start["provenance"]["fpn"] if start["kind"] == "bundle" else {k: start.get(k) for k in keys})}
+        provenance["fpn_init"] = {"file": str(init),
+                                  **(start["provenance"]["fpn"] if start["kind"] == "bundle" else {k: start.get(k) for k in keys})}
     if (surface_strong > 0 or surface_gate_px > 0) and not (fpn["fpn_config"] or {}).get("surface"):
         raise InputError(fpn_path, "a surface check or gate needs an FPN with a road-surface head")
     pixel_size = training_pixel_size(fpn.get("train_config") or {}) or MODEL_GSD

@@ -107,7 +107,8 @@ class EdgeConfidence:
             raise bad(f"is not a version-{VERSION} table")
         try:
             features = tuple(str(f) for f in data["features"])
-            arrays = {k: np.asarray(data[k], float) for k in ("tree_starts", "feature", "threshold", "left", "right", "value", "iso_x", "iso_y")}
+            arrays = {k: np.asarray(data[k], float) for k in ("tree_starts", "feature", "threshold", "left", "right", "value", "iso_x",
+                                                              "iso_y")}
             rate = float(data["learning_rate"])
         except (KeyError, TypeError, ValueError) as exc:
             raise bad(f"table is incomplete or not numbers ({type(exc).__name__})") from exc

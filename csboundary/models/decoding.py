@@ -34,7 +34,8 @@ def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: flo
     corner = [tuple(int(x) for x in e) for e in found.edges]
     polylines = {tuple(sorted(e)): _smooth(found.edge_polylines[k]) for k, e in enumerate(corner)} if found.edge_polylines else {}
     corner_scores = {tuple(sorted(e)): float(found.edge_scores[k]) for k, e in enumerate(corner)} if found.edge_scores is not None else {}
-    edges = edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), threshold, max_degree, fixed=corner) if len(probs) >= 2 else [tuple(sorted(e)) for e in corner]
+    edges = edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), threshold, max_degree,
+                                 fixed=corner) if len(probs) >= 2 else [tuple(sorted(e)) for e in corner]
     kinds, lines, scores = [], [], []
     for u, v in edges:
         line = polylines.get((u, v))

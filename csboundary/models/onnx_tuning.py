@@ -113,7 +113,8 @@ def tuned_levels(path: Path, models: dict[str, bytes], threads: int) -> dict[str
     if not missing:
         return {name: levels[name] for name in models}
     seconds = dict(entry.get("seconds", {}))
-    print(f"csboundary: timing ONNX Runtime's optimisation levels for {', '.join(missing)} on this machine (once)", file=sys.stderr, flush=True)
+    print(f"csboundary: timing ONNX Runtime's optimisation levels for {', '.join(missing)} on this machine (once)", file=sys.stderr,
+          flush=True)
     for name in missing:
         times = time_levels(models[name], name, threads)
         levels[name] = fastest_level(times)

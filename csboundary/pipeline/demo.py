@@ -10,8 +10,8 @@ from csboundary.data.inputs import open_imagery
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.metrics.report import write_scores
-from csboundary.pipeline.patch import PatchPredictor
-from csboundary.pipeline.run import evaluate_run, run_prediction
+from csboundary.pipeline.prediction.patch import PatchPredictor
+from csboundary.pipeline.prediction.run import evaluate_run, run_prediction
 
 TILES = (2, 2)  # 2x2 tiles of 1500 px: a 3000 px city, 3x3 patches
 TILE_SIZE = 1500
@@ -25,7 +25,8 @@ def run_demo(out: str | Path, predictor: PatchPredictor, seed: int = 0) -> dict:
     city_dir = out / "city"
     meta = synthesize_city(city_dir, seed, "test", TILES, SynthConfig(tile_size=TILE_SIZE))
     mosaic, lines = open_imagery([city_dir])
-    settings = {"weights": "shipped", "edge_threshold": predictor.settings.edge_threshold, "device": str(predictor.device), "engine": predictor.engine}
+    settings = {"weights": "shipped", "edge_threshold": predictor.settings.edge_threshold, "device": str(predictor.device),
+                "engine": predictor.engine}
     if predictor.precision != "float32":  # recorded only then, as in predict
         settings["precision"] = predictor.precision
     settings["precision_choice"] = predictor.precision_choice or predictor.precision  # --precision auto: what it chose, and why

@@ -40,11 +40,13 @@ def curves_svg(rows: list[dict], keys: list[str], title: str, width: int = 640, 
         lo, hi = min(v for _, v in values), max(v for _, v in values)
         span = hi - lo or 1.0
         pts = " ".join(
-            f"{left + (s - x0) / (x1 - x0) * (width - left - right):.1f},{top + (1 - (v - lo) / span) * (height - top - bottom):.1f}" for s, v in values
+            f"{left + (s - x0) / (x1 - x0) * (width - left - right):.1f},{top + (1 - (v - lo) / span) * (height - top - bottom):.1f}" for s,
+                       v in values
         )
         colour = COLOURS[k % len(COLOURS)]
         parts.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="2"/>')
-        parts.append(f'<text x="{width - right + 10}" y="{top + 18 * k + 10}" fill="{colour}">{key}: {values[0][1]:.3g} -&gt; {values[-1][1]:.3g}</text>')
+        parts.append(f'<text x="{width - right + 10}" y="{top + 18 * k + 10}" fill="{colour}">{key}: {values[0][1]:.3g} -&gt; '
+                     f'{values[-1][1]:.3g}</text>')
     parts.append(f'<text x="{width - right + 10}" y="{top + 18 * len(keys) + 16}" fill="gray">(each curve on its own scale)</text>')
     parts.append("</svg>")
     return "\n".join(parts)

@@ -69,7 +69,8 @@ def render_window(
     if grid is not None:
         for patch in grid:
             for w, c in ((patch.expanded, GRID_EXPANDED), (patch.core, GRID_CORE)):
-                corners = np.array([[w.col_off, w.row_off], [w.col_end, w.row_off], [w.col_end, w.row_end], [w.col_off, w.row_end], [w.col_off, w.row_off]], float)
+                corners = np.array([[w.col_off, w.row_off], [w.col_end, w.row_off], [w.col_end, w.row_end], [w.col_off, w.row_end],
+                                    [w.col_off, w.row_off]], float)
                 draw_lines(rgb, [(corners - [window.col_off, window.row_off]) * scale], c, 1)
     draw_world_lines(rgb, mosaic, window, boundaries, colour, max_size)
     for lines_world, layer_colour in layers:

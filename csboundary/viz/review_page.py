@@ -50,7 +50,8 @@ def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
         for c in range(cols):
             win = PixelWindow(c * TILE, r * TILE, min(TILE, width - c * TILE), min(TILE, height - r * TILE))
             read = mosaic.read(win)
-            cv2.imwrite(str(folder / "0" / f"{r}_{c}.jpg"), to_display(read.data, read.valid)[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+            cv2.imwrite(str(folder / "0" / f"{r}_{c}.jpg"), to_display(read.data, read.valid)[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY,
+                                                                                                            JPEG_QUALITY])
             bar.update(1)
     bar.close()
     for level in range(1, levels):
@@ -59,8 +60,8 @@ def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
         rows, cols = math.ceil(below_rows / 2), math.ceil(below_cols / 2)
         for r in range(rows):
             for c in range(cols):
-                parts = [[cv2.imread(str(folder / str(level - 1) / f"{2 * r + dr}_{2 * c + dc}.jpg")) if 2 * r + dr < below_rows and 2 * c + dc < below_cols
-                          else None for dc in (0, 1)] for dr in (0, 1)]
+                parts = [[cv2.imread(str(folder / str(level - 1) / f"{2 * r + dr}_{2 * c + dc}.jpg"))
+                          if 2 * r + dr < below_rows and 2 * c + dc < below_cols else None for dc in (0, 1)] for dr in (0, 1)]
                 top = np.hstack([p for p in parts[0] if p is not None])
                 bottom = np.hstack([p for p in parts[1] if p is not None]) if any(p is not None for p in parts[1]) else None
                 image = np.vstack([top, bottom]) if bottom is not None else top

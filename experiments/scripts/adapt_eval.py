@@ -23,13 +23,13 @@ import numpy as np
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.metrics.compare import paired_bootstrap
 from csboundary.metrics.confidence import TRUE_SHARE, edge_truth, roc_auc
-from csboundary.pipeline.run import evaluate_run
+from csboundary.pipeline.prediction.run import evaluate_run
 from csboundary.models.checkpoint import shipped_weights
 from csboundary.models.training.adapt import AdaptConfig
-from csboundary.pipeline.adapt import AdaptBudget, adapt
-from csboundary.pipeline.evaluate_set import predicted_city, score_value, set_cities
-from csboundary.pipeline.finetune_cv import folds_of
-from csboundary.pipeline.patch import load_predictor
+from csboundary.pipeline.training.adapt import AdaptBudget, adapt
+from csboundary.pipeline.evaluation.evaluate_set import predicted_city, score_value, set_cities
+from csboundary.pipeline.training.finetune_cv import folds_of
+from csboundary.pipeline.prediction.patch import load_predictor
 
 COMPARED = ("f1@5", "precision@5", "recall@5", "apls", "tlts")
 

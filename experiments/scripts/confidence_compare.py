@@ -2,7 +2,8 @@
 (synthetic test cities by style, the Ottawa crops, the dense-urban NYC patch), beside the raw
 edge score they replace. Reads the files experiments/scripts/confidence_evidence.py wrote.
 
-    .venv/bin/python experiments/scripts/confidence_compare.py runs/confidence/evidence [--features all|graph|nomaps...] [--trees 200 --depth 3]
+    .venv/bin/python experiments/scripts/confidence_compare.py runs/confidence/evidence [--features all|graph|nomaps...] [--trees 200
+    --depth 3]
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ FEATURE_SETS = {
     "all": FEATURES,
     "no_surface": tuple(f for f in FEATURES if not f.startswith("surface")),
     "no_score": tuple(f for f in FEATURES if f != "score"),
-    "maps": ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low", "surface_contrast"),
+    "maps": ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low",
+             "surface_contrast"),
     "maps_shape": ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low",
                    "surface_contrast", "log_length", "sinuosity", "log_piece_length"),
 }
@@ -39,7 +41,8 @@ def row(name: str, p: np.ndarray, data: dict) -> str:
     r = confidence_report(p, data["truth_share"], data["length"])
     rv = r["review"]
     return (f"{name:28s} {r['edges']:6d} {r['share_true']:6.2f} {r['auc']:7.3f} {r['ece']:7.3f} "
-            f"{rv['0.1']['false_length']:6.2f} {rv['0.2']['false_length']:6.2f} {rv['0.2']['false_edges']:6.2f} {rv['0.5']['false_length']:6.2f}")
+            f"{rv['0.1']['false_length']:6.2f} {rv['0.2']['false_length']:6.2f} {rv['0.2']['false_edges']:6.2f} "
+            f"{rv['0.5']['false_length']:6.2f}")
 
 
 def main() -> None:
@@ -52,8 +55,10 @@ def main() -> None:
     parser.add_argument("--tree-share", type=float, default=0.5, help="share on the ground truth the trees learn (calibration: 0.5)")
     parser.add_argument("--bundle", type=Path, default=None, help="score this bundle's confidence instead of fitting one")
     parser.add_argument("--brief", action="store_true", help="pooled sets only")
-    parser.add_argument("--curves", action="store_true", help="also the pooled sets' precision and kept true length against --min-confidence")
-    parser.add_argument("--bootstrap", type=int, default=0, help="95 %% intervals of the real sets' AUC and ECE from this many resamples of cities (edges for one city)")
+    parser.add_argument("--curves", action="store_true",
+                        help="also the pooled sets' precision and kept true length against --min-confidence")
+    parser.add_argument("--bootstrap", type=int, default=0,
+                        help="95 %% intervals of the real sets' AUC and ECE from this many resamples of cities (edges for one city)")
     parser.add_argument("--single", action="store_true", help="also each feature's own AUC on the real sets")
     args = parser.parse_args()
     d = str(args.folder)
@@ -75,7 +80,8 @@ def main() -> None:
     sets["ottawa (14 crops)"] = sorted(glob.glob(f"{d}/ottawa-*.npz"))
     sets["nyc dense-urban"] = sorted(glob.glob(f"{d}/nyc-*.npz"))
     print(f"features {args.features}, {args.trees} trees of depth {args.depth}, rate {args.rate}; fitted on {len(fit['length'])} edges")
-    print(f"{'set / confidence':28s} {'edges':>6s} {'true':>6s} {'AUC':>7s} {'ECE':>7s} {'fl@10':>6s} {'fl@20':>6s} {'fe@20':>6s} {'fl@50':>6s}")
+    print(f"{'set / confidence':28s} {'edges':>6s} {'true':>6s} {'AUC':>7s} {'ECE':>7s} {'fl@10':>6s} {'fl@20':>6s} {'fe@20':>6s} "
+          f"{'fl@50':>6s}")
     for name, files in sets.items():
         if not files or (args.brief and not name.startswith(("ottawa", "nyc", "synthetic"))):
             continue

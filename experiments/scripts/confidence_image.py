@@ -30,9 +30,9 @@ from csboundary.graph.chains import edge_line
 from csboundary.graph.edge_evidence import FEATURES
 from csboundary.graph.polyline import points_along
 from csboundary.metrics.confidence import TRUE_SHARE, confidence_report
-from csboundary.pipeline.confidence_fit import TREE_SHARE, city_edges
-from csboundary.pipeline.evaluate_set import set_cities
-from csboundary.pipeline.patch import load_predictor
+from csboundary.pipeline.training.confidence_fit import TREE_SHARE, city_edges
+from csboundary.pipeline.evaluation.evaluate_set import set_cities
+from csboundary.pipeline.prediction.patch import load_predictor
 
 IMAGE_FEATURES = ("img_grad_on", "img_grad_across", "img_align", "img_step", "img_color_step", "img_step_far",
                   "img_green_high", "img_green_low", "img_texture_high", "img_texture_low")

@@ -26,7 +26,8 @@ def city_dir(style: str, cache: Path, seed: int = 7) -> Path:
     name = f"test-s{seed}-2x2-2000" if style == "classic" else f"test-{style}-s{seed}-2x2-2000"
     path = cache / name
     if not (path / "city.json").exists():
-        cli("synth", str(path), "--style", style, "--split", "test", "--seed", str(seed), "--tiles", "2x2", "--tile-size", "2000", "--quiet")
+        cli("synth", str(path), "--style", style, "--split", "test", "--seed", str(seed), "--tiles", "2x2", "--tile-size", "2000",
+            "--quiet")
     return path
 
 
@@ -53,7 +54,8 @@ def cli(*args: str) -> None:
 def loso_table(results: dict, held_out: list[str], reference: str = "shipped") -> str:
     """APLS on each held-out style: by the model trained without it, by the other leave-one-out
     models (same budget, the style seen: their mean), and by ``reference`` (the shipped model)."""
-    rows = ["| style left out | APLS without it (F1@5) | APLS of the same-budget models that saw it (mean of 3) | APLS, shipped model (longer, saw it) |",
+    rows = ["| style left out | APLS without it (F1@5) | APLS of the same-budget models that saw it (mean of 3) | APLS, shipped model "
+            "(longer, saw it) |",
             "|---|---|---|---|"]
     for style in held_out:
         own = results[f"without-{style}"].get(style)

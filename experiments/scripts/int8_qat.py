@@ -112,7 +112,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
-    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.prediction.patch import load_predictor
 
     teacher = fold_batch_norms(load_predictor(None, "cpu", engine="torch").fpn).eval()
     student = fold_batch_norms(teacher)
@@ -170,7 +170,8 @@ def main() -> None:
             log.write(json.dumps({"event": "step", "step": step, "lr": lr, "loss": loss_mean, "mean_abs_diff": diff, "cross_0.5": cross,
                                   "seconds": round(time.time() - start, 1)}) + "\n")
             log.flush()
-            print(f"step {step}: loss {loss_mean:.5f} |p - p_float| {diff:.5f} crossing {cross:.5f} ({time.time() - start:.0f} s)", flush=True)
+            print(f"step {step}: loss {loss_mean:.5f} |p - p_float| {diff:.5f} crossing {cross:.5f} ({time.time() - start:.0f} s)",
+                  flush=True)
         if step % args.eval_every == 0 or step == args.steps:
             diff, cross = fidelity()
             log.write(json.dumps({"event": "held_out", "step": step, "mean_abs_diff": diff, "cross_0.5": cross}) + "\n")

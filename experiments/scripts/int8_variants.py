@@ -96,10 +96,11 @@ def main() -> None:
     parser.add_argument("--variants", default="current,exclude-head,exclude-head-stem,exclude-decoder,percentile,calib3",
                         help="also qat (with --qat) and float32-noiseA: float32 on windows with +-A grey levels of noise")
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--qat", type=Path, default=None, help="variant qat: the folded FPN of int8_qat.py, quantized as the product quantizes")
+    parser.add_argument("--qat", type=Path, default=None,
+                        help="variant qat: the folded FPN of int8_qat.py, quantized as the product quantizes")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    from csboundary.pipeline.patch import load_predictor
+    from csboundary.pipeline.prediction.patch import load_predictor
 
     model = load_predictor(None, "cpu", engine="onnx").onnx.fpn_model  # the float32 export the engine runs
     convs = conv_names(model)
@@ -151,8 +152,8 @@ def main() -> None:
             probs, seconds = probabilities(sess, windows)
             diff = np.concatenate([np.abs(p - q).reshape(len(p), -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
             cross = np.concatenate([((p[:2] > 0.5) != (q[:2] > 0.5)).reshape(2, -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
-            row[set_name] = {"mean_abs_diff": [round(float(d), 5) for d in diff.mean(axis=1)], "cross_0.5": [round(float(c), 5) for c in cross.mean(axis=1)],
-                             "s_per_window": round(seconds, 3)}
+            row[set_name] = {"mean_abs_diff": [round(float(d), 5) for d in diff.mean(axis=1)],
+                             "cross_0.5": [round(float(c), 5) for c in cross.mean(axis=1)], "s_per_window": round(seconds, 3)}
         report["variants"][name] = row
         print(name, json.dumps(row), flush=True)
     (args.out / "report.json").write_text(json.dumps(report, indent=1) + "\n")

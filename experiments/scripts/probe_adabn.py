@@ -17,9 +17,9 @@ import dataclasses
 import torch
 from sweep_edge_support import score_row
 
-import csboundary.pipeline.patch as patch_module
+import csboundary.pipeline.prediction.patch as patch_module
 from csboundary.models.maps import image_tensor
-from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
 def window_statistics_probabilities(scope: str):
@@ -49,15 +49,18 @@ def main() -> None:
     parser.add_argument("weights")
     parser.add_argument("sets", nargs="+")
     parser.add_argument("--scope", choices=("off", "encoder", "all"), default="all", help="batch norms on the window's statistics")
-    parser.add_argument("--vertex-threshold", type=float, default=None, help="keypoint probability of vertex extraction (default: the bundle's)")
+    parser.add_argument("--vertex-threshold", type=float, default=None,
+                        help="keypoint probability of vertex extraction (default: the bundle's)")
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.onnx = None  # the PyTorch path, whose batch norms can be switched
     if args.vertex_threshold is not None:
-        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices, threshold=args.vertex_threshold))
+        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices,
+                                                                                                  threshold=args.vertex_threshold))
     if args.scope != "off":
         patch_module.predict_probabilities = window_statistics_probabilities(args.scope)
-    print(f"scope {args.scope} vertex threshold {predictor.settings.vertices.threshold:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)))
+    print(f"scope {args.scope} vertex threshold {predictor.settings.vertices.threshold:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets,
+                                                                                                                                 predictor)))
 
 
 if __name__ == "__main__":

@@ -22,10 +22,11 @@ import torch
 from csboundary.metrics.compare import paired_bootstrap
 from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.maps import predict_probabilities
-from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.prediction.patch import PatchPredictor
 
 QUANTILES = (0.9, 0.95, 0.98, 0.99, 0.995, 0.998)
-LAST = {0: ("head.1.weight", "head.1.bias", 0), 1: ("head.1.weight", "head.1.bias", 1), 2: ("surface_head.2.weight", "surface_head.2.bias", 0)}
+LAST = {0: ("head.1.weight", "head.1.bias", 0), 1: ("head.1.weight", "head.1.bias", 1), 2: ("surface_head.2.weight", "surface_head.2.bias",
+                                                                                            0)}
 
 
 def logits(predictor: PatchPredictor, city: Path) -> np.ndarray:

@@ -14,10 +14,10 @@ import numpy as np
 import torch
 from sweep_edge_support import score_row
 
-import csboundary.pipeline.patch as patch_module
+import csboundary.pipeline.prediction.patch as patch_module
 from csboundary.models.checkpoint import load_fpn
 from csboundary.models.fpn import SURFACE
-from csboundary.pipeline.patch import PatchPredictor
+from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
 def averaged_probabilities(others, single):
@@ -66,8 +66,10 @@ def main() -> None:
         single = flipped_probabilities(single, args.views)
     patch_module.predict_probabilities = averaged_probabilities(others, single)
     for vthr in [float(v) for v in args.vertex_threshold.split(",")] if args.vertex_threshold else [predictor.settings.vertices.threshold]:
-        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices, threshold=vthr))
-        print(f"with {len(others)} FPNs, vertex threshold {vthr:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)), flush=True)
+        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices,
+                                                                                                  threshold=vthr))
+        print(f"with {len(others)} FPNs, vertex threshold {vthr:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)),
+              flush=True)
 
 
 if __name__ == "__main__":

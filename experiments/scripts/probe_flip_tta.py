@@ -8,8 +8,8 @@ import sys
 
 import numpy as np
 
-from csboundary.pipeline.patch import load_predictor
-from csboundary.pipeline.evaluate_set import evaluate_set
+from csboundary.pipeline.prediction.patch import load_predictor
+from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
 flips = {"2": [(), (-1,)], "4": [(), (-1,), (-2,), (-2, -1)]}[sys.argv[1]]
 p = load_predictor(device="cpu", engine="torch")
 base = p.patch_maps

@@ -16,8 +16,8 @@ import argparse
 import numpy as np
 
 from csboundary.models.onnx_quantization import calibration_windows, nir_as_green, quantize_fpn
-from csboundary.pipeline.evaluate_set import evaluate_set
-from csboundary.pipeline.patch import load_predictor
+from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
+from csboundary.pipeline.prediction.patch import load_predictor
 
 SHOWN = ("precision@5", "recall@5", "f1@5", "apls", "tlts")
 

@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from sweep_edge_support import score_row  # noqa: E402
 
 from csboundary.graph.surface_check import kept_by_hysteresis, side_surface  # noqa: E402
-from csboundary.pipeline.patch import PatchPredictor  # noqa: E402
+from csboundary.pipeline.prediction.patch import PatchPredictor  # noqa: E402
 
 RULE = {"value": None}
 
@@ -52,7 +52,8 @@ def main() -> None:
 
         metrics.evaluate = functools.partial(metrics.evaluate, apls="symmetric")
     predictor = PatchPredictor.load(args.bundle, torch.device("cpu"))
-    predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=1e-9))  # active: the maps carry the surface channel
+    # active: the maps carry the surface channel
+    predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=1e-9))
 
     def finished(self, patch, maps, graph):  # the bundle's own check replaced by the rule
         graph = self.filled(patch, maps, graph)

@@ -25,9 +25,9 @@ def main() -> None:
     if "--one-thread" in sys.argv:
         torch.set_num_threads(1)  # ONNX Runtime's sessions take their thread count from it: the FPN on one core
     from csboundary.data.raster import Mosaic
-    from csboundary.pipeline import city
-    from csboundary.pipeline.patch import PatchPredictor
-    from csboundary.pipeline.run import run_prediction
+    from csboundary.pipeline.prediction import city, city_job
+    from csboundary.pipeline.prediction.patch import PatchPredictor
+    from csboundary.pipeline.prediction.run import run_prediction
 
     moments: dict[str, float] = {}
     start = [0.0]
@@ -42,7 +42,7 @@ def main() -> None:
             return out
         setattr(cls, name, wrapper)
 
-    timed(city.CityJob, "compute_maps", "FPN")
+    timed(city_job.CityJob, "compute_maps", "FPN")
     timed(city.CityRun, "finish", "city graph")
     town, precision = Path(args[0]), (args[1] if len(args) > 1 else "auto")
     predictor = PatchPredictor.load(None, torch.device("cpu"))

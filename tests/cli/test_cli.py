@@ -78,7 +78,8 @@ def test_bad_tiles_argument_is_rejected(tmp_path):
     assert not (tmp_path / "c" / layout.META_FILE).exists()
 
 
-@pytest.mark.parametrize("args", [["--patch", "1"], ["--patch", "a,b"], ["--patch", "9,9"], ["--window", "0,0,-5,5"], ["--bounds", "x,1,2,3"]])
+@pytest.mark.parametrize("args", [["--patch", "1"], ["--patch", "a,b"], ["--patch", "9,9"], ["--window", "0,0,-5,5"], ["--bounds",
+                                                                                                                       "x,1,2,3"]])
 def test_bad_show_arguments_are_one_line_errors(small_city, tmp_path, args):
     result = run("show", str(small_city), *args, "--out", str(tmp_path / "x.png"))
     assert result.returncode == 2

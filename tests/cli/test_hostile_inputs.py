@@ -205,7 +205,8 @@ def test_a_bundle_trained_on_a_feet_city_records_its_pixel_size_in_metres(tmp_pa
     train_config = {"model": "fpn", "train_city": None, "extra_train_cities": [str(tmp_path / "city")]}
     save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=bundle["fpn"], fpn_config=bundle["fpn_config"], train_config=train_config)
     save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=bundle["afanet"], afanet_config=bundle["afanet_config"])
-    result = run_cli("bundle-weights", "--fpn", str(tmp_path / "fpn.pt"), "--afanet", str(tmp_path / "afanet.pt"), "--out", str(tmp_path / "b.pt"))
+    result = run_cli("bundle-weights", "--fpn", str(tmp_path / "fpn.pt"), "--afanet", str(tmp_path / "afanet.pt"), "--out",
+                     str(tmp_path / "b.pt"))
     assert result.returncode == 0, result.stderr
     assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["pixel_size_m"] == pytest.approx(0.1524, abs=1e-4)
 
@@ -340,7 +341,8 @@ def slow_city(tmp_path_factory):
 @pytest.mark.parametrize("signum, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_leaves_no_final_file_and_no_temporary(world, slow_city, tmp_path, signum, code):
     out = tmp_path / "out"
-    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(slow_city), "--out", str(out), "--weights", str(world["bundle"]),
+    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(slow_city), "--out", str(out), "--weights",
+                            str(world["bundle"]),
                             "--device", "cpu", "--quiet", "--write-maps"], stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
     while not any(p.name.startswith(".run.partial-") for p in (out.iterdir() if out.exists() else [])):
@@ -393,7 +395,8 @@ def test_a_prediction_of_a_picture_without_crs_is_not_scored_against_an_imported
     picture = labelled_picture(tmp_path / "src")
     done = run_cli("import-masks", str(tmp_path / "src"), "--out", str(tmp_path / "set"), "--gsd", str(GSD), "--quiet")
     assert done.returncode == 0, done.stderr
-    done = run_cli("predict-patch", str(picture), "--gsd", str(GSD), "--out", str(tmp_path / "pred"), "--weights", str(world["bundle"]), "--device", "cpu")
+    done = run_cli("predict-patch", str(picture), "--gsd", str(GSD), "--out", str(tmp_path / "pred"), "--weights", str(world["bundle"]),
+                   "--device", "cpu")
     assert done.returncode == 0, done.stderr
     pred = tmp_path / "pred" / "graph.json"
     for gt in (tmp_path / "set" / "a", tmp_path / "set" / "a" / "ground_truth.gpkg"):
@@ -414,7 +417,8 @@ def test_world_coordinates_with_and_without_a_crs_are_not_mixed_but_two_crss_are
     one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "pred.gpkg"), "--raster", str(plain)),
               f"{plain}: has no CRS", "give a georeferenced raster")
     gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_crs("EPSG:4326").to_file(tmp_path / "gt.geojson", driver="GeoJSON")
-    done = run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "gt.geojson"), "--raster", str(world["tif"]), "--json", str(tmp_path / "s.json"))
+    done = run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "gt.geojson"), "--raster", str(world["tif"]), "--json",
+                   str(tmp_path / "s.json"))
     assert done.returncode == 0, done.stderr  # two CRSs: reprojected, the same lines score 1
     assert json.loads((tmp_path / "s.json").read_text())["metrics"]["f1@2"] == pytest.approx(1.0)
 
@@ -491,7 +495,8 @@ def test_predict_names_what_it_wrote_and_counts_in_english(world, tmp_path):
 # -- one run per output folder -----------------------------------------------------------------------
 def _start_predict(world, inputs, out: Path) -> subprocess.Popen:
     """``predict`` started in the background, returned once it is working in ``out`` (its staging folder made)."""
-    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(inputs), "--out", str(out), "--weights", str(world["bundle"]),
+    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(inputs), "--out", str(out), "--weights",
+                            str(world["bundle"]),
                             "--device", "cpu", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
     while not any(p.name.startswith(".run.partial-") for p in (out.iterdir() if out.exists() else [])):
@@ -548,7 +553,8 @@ def error_lines(result: subprocess.CompletedProcess) -> list[str]:
 def test_a_full_disk_before_any_work_leaves_nothing(world, tmp_path):
     out = tmp_path / "out"
     done = predict_on_a_filling_disk(world, world["tif"], out, room=0)
-    assert done.returncode == 1 and error_lines(done) == [f"error: {out}: no space left on device; nothing of the run was kept"], done.stderr
+    assert done.returncode == 1, done.stderr
+    assert error_lines(done) == [f"error: {out}: no space left on device; nothing of the run was kept"], done.stderr
     assert not out.exists()  # the folder the run made, gone with its empty work store
 
 
@@ -583,7 +589,7 @@ def test_a_complete_area_wholly_in_the_margin_is_refused(world, tmp_path):
 def test_finetune_refuses_a_margin_area_before_making_anything(world, tmp_path):
     """A review log from before apply-review checked its areas: refused in one line, no work folder made."""
     from csboundary.graph import BoundaryGraph
-    from csboundary.pipeline.outputs import write_graph_outputs
+    from csboundary.pipeline.outputs.prediction_files import write_graph_outputs
 
     pred = tmp_path / "pred"
     assert predict(world, world["tif"], out=pred).returncode == 0

@@ -40,7 +40,8 @@ def small_city(tmp_path_factory):
 
 
 def test_predict_patch_writes_graph_geojson_and_overlay(bundle, small_city, tmp_path):
-    result = run("predict-patch", str(small_city / "tiles" / "tile_r00_c00.tif"), "--out", str(tmp_path / "p"), "--weights", str(bundle), "--device", "cpu")
+    result = run("predict-patch", str(small_city / "tiles" / "tile_r00_c00.tif"), "--out", str(tmp_path / "p"), "--weights", str(bundle),
+                 "--device", "cpu")
     assert result.returncode == 0, result.stderr
     graph = json.loads((tmp_path / "p" / "graph.json").read_text())
     assert graph["format"] == "csboundary-graph" and graph["crs"] == "EPSG:32618" and graph["transform"][0] == pytest.approx(0.3)
@@ -67,7 +68,8 @@ def test_too_large_image_is_refused(bundle, tmp_path):
 
 
 def test_evaluate_model_scores_every_patch(bundle, small_city, tmp_path):
-    result = run("evaluate-model", str(small_city), "--weights", str(bundle), "--json", str(tmp_path / "e.json"), "--quiet", "--device", "cpu")
+    result = run("evaluate-model", str(small_city), "--weights", str(bundle), "--json", str(tmp_path / "e.json"), "--quiet", "--device",
+                 "cpu")
     assert result.returncode == 0, result.stderr
     scores = json.loads((tmp_path / "e.json").read_text())
     assert scores["patch"]["scale"] == "patch" and scores["patch"]["counts"]["patches"] == 1
@@ -106,7 +108,8 @@ def test_predict_writes_georeferenced_outputs_and_a_summary(bundle, four_patch_c
     import rasterio
 
     out = tmp_path / "pred"
-    result = run("predict", str(four_patch_city / "tiles"), "--out", str(out), "--weights", str(bundle), "--write-maps", "--quiet", "--device", "cpu")
+    result = run("predict", str(four_patch_city / "tiles"), "--out", str(out), "--weights", str(bundle), "--write-maps", "--quiet",
+                 "--device", "cpu")
     assert result.returncode == 0, result.stderr
     names = {p.name for p in out.iterdir()}
     assert names == {"boundaries.gpkg", "boundaries.geojson", "graph.json", "overview.png", "detail.png", "maps.tif", "summary.json"}
@@ -115,7 +118,8 @@ def test_predict_writes_georeferenced_outputs_and_a_summary(bundle, four_patch_c
     assert summary["patches"] == 4 and summary["grid"] == [2, 2] and summary["mosaic_px"] == [1200, 1200]
     assert summary["counts"]["edges"] == len(graph["edges"]) and summary["counts"]["vertex_pairs_within_1px"] == 0
     kinds = [e["kind"] for e in graph["edges"]]
-    assert [summary["counts"][f"{k}_edges"] for k in ("corner", "skeleton", "attach")] == [kinds.count(k) for k in ("corner", "skeleton", "attach")]
+    assert [summary["counts"][f"{k}_edges"] for k in ("corner", "skeleton", "attach")] == [kinds.count(k) for k in ("corner", "skeleton",
+                                                                                                                    "attach")]
     assert set(summary["seconds_per_patch"]) >= {"fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching", "total"}
     assert summary["area_km2"] == pytest.approx(1200 * 1200 * 0.09 / 1e6)
     assert {layer for layer, _ in pyogrio.list_layers(out / "boundaries.gpkg")} == {"road_boundaries", "edges"}
@@ -165,8 +169,8 @@ def test_an_fpn_with_a_surface_head_writes_a_third_map_band_and_its_check_drops_
 
 def test_an_interrupted_predict_leaves_no_final_file(bundle, four_patch_city, tmp_path, monkeypatch):
     from csboundary.data.raster import Mosaic
-    from csboundary.pipeline import map_stitching, run as job
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction import map_stitching, run as job
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     out = tmp_path / "pred"
     out.mkdir()

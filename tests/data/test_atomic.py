@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import errno
 
-import numpy as np
 import pytest
 
 from csboundary.data.atomic import atomic_path, disk_full_error

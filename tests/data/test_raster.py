@@ -601,7 +601,7 @@ def test_open_files_stay_under_the_cap_and_reads_do_not_change(shared_tiles):
 def test_patches_without_imagery_skip_the_model(tmp_path):
     from csboundary.data.grid import GridConfig
     from csboundary.graph import BoundaryGraph
-    from csboundary.pipeline.city import predict_city
+    from csboundary.pipeline.prediction.city import predict_city
 
     data = np.full((4, 100, 100), 90, np.uint8)
     for name, x0 in (("west.tif", 500000.0), ("east.tif", 500000.0 + 400 * 0.5)):  # 300 px of nothing between

@@ -43,7 +43,8 @@ def test_world_lines_round_trip_through_pixels():
 
 
 @settings(max_examples=40, deadline=None)
-@given(points=st.lists(st.tuples(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4)), min_size=2, max_size=12, unique=True), with_extras=st.booleans())
+@given(points=st.lists(st.tuples(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4)), min_size=2, max_size=12, unique=True),
+       with_extras=st.booleans())
 def test_json_round_trip(points, with_extras, tmp_path_factory):
     pts = np.array(points)
     g = BoundaryGraph.from_polylines([pts], transform=T, crs="EPSG:32618")

@@ -25,7 +25,7 @@ def graphs_in_pieces(draw):
 
 
 def _stream(n, edges, order, cuts, delay):
-    stream, found, start = ChainStream(), [], 0
+    stream, found = ChainStream(), []
     pieces = [order[a:b] for a, b in zip([0, *cuts], cuts)]
     last_piece = {}
     for k, piece in enumerate(pieces):

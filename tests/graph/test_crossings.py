@@ -46,18 +46,20 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import shipped_weights
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", 0.3, min_support=0.2, crossing_spacing_px=250,
                 min_fragment_px=160)
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
-    assert predictor.settings.crossings.spacing_px == 250 and predictor.settings.support.min_support == 0.2 and predictor.settings.min_fragment_px == 160
+    settings = predictor.settings
+    assert settings.crossings.spacing_px == 250 and settings.support.min_support == 0.2 and settings.min_fragment_px == 160
     maps = np.zeros((2, 400, 400), np.float32)
     maps[1, 119:122, :] = 1.0  # a boundary and no keypoint at all: the crossings are the vertices
     assert sorted(map(tuple, np.round(predictor.extract(maps).vertices, 1))) == [(50.5, 120.5), (300.5, 120.5)]
     shipped_predictor = PatchPredictor.load(shipped_weights(), torch.device("cpu"))
-    assert shipped_predictor.settings.crossings.spacing_px == 0 and shipped_predictor.settings.min_fragment_px == 240  # the model card's choice
+    # the model card's choice
+    assert shipped_predictor.settings.crossings.spacing_px == 0 and shipped_predictor.settings.min_fragment_px == 240
 
 
 def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_path):
@@ -65,7 +67,7 @@ def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_pat
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import shipped_weights
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     shipped_parts(tmp_path, train_config={"vertex_threshold": 0.35})
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "trained.pt")
@@ -73,7 +75,8 @@ def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_pat
     assert PatchPredictor.load(tmp_path / "trained.pt", torch.device("cpu")).settings.vertices.threshold == 0.35
     assert PatchPredictor.load(tmp_path / "given.pt", torch.device("cpu")).settings.vertices.threshold == 0.6
     shipped = torch.load(shipped_weights(), map_location="cpu", weights_only=True)["inference"]["vertex_threshold"]
-    assert shipped == 0.25 and PatchPredictor.load(shipped_weights(), torch.device("cpu")).settings.vertices.threshold == shipped  # chosen on both real sets
+    # chosen on both real sets
+    assert shipped == 0.25 and PatchPredictor.load(shipped_weights(), torch.device("cpu")).settings.vertices.threshold == shipped
     # a keypoint blob peaking at 0.45 is a vertex at 0.35, not at 0.6
     maps = np.zeros((2, 200, 200), np.float32)
     yy, xx = np.mgrid[:200, :200]

@@ -105,7 +105,7 @@ def test_predictor_applies_the_check(tmp_path):
     import torch
 
     from csboundary.models.checkpoint import shipped_weights
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     predictor = PatchPredictor.load(shipped_weights(), torch.device("cpu"))
     rng = np.random.default_rng(0)
@@ -127,7 +127,7 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
     import torch
 
     from csboundary.models.bundle import make_bundle
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4)

@@ -13,7 +13,7 @@ from csboundary.graph.end_attachment import attach_ends, dangling_ends
 from csboundary.graph.fragments import fragment_lengths
 from csboundary.graph.settings import GraphOverrides
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.city_blocks import CityGraphRecipe, city_graph
+from csboundary.pipeline.prediction.city_blocks import CityGraphRecipe, city_graph
 
 # a road boundary along y = 100 from x = 0 to 300 (a corner edge with a shape), and a side
 # street's boundary coming down x = 150 that stops 30 px short of it
@@ -111,7 +111,7 @@ def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", attach_max_px=40)

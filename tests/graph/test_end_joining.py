@@ -132,7 +132,7 @@ def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_pa
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", **{key: 40})
@@ -145,7 +145,7 @@ def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_pa
 
 
 def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     maps = np.zeros((2, 100, 100), np.float32)
     maps[1] = line_map()

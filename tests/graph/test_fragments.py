@@ -48,4 +48,5 @@ def test_every_kept_edge_lies_in_a_long_enough_piece_and_no_long_piece_loses_an_
     kept = drop_short_fragments(graph, limit)
     expected = int((length[piece] >= limit).sum()) if limit > 0 else graph.n_edges
     assert kept.n_edges == expected
-    assert np.isclose(kept.edge_lengths().sum(), graph.edge_lengths()[length[piece] >= limit].sum() if limit > 0 else graph.edge_lengths().sum())
+    assert np.isclose(kept.edge_lengths().sum(),
+                      graph.edge_lengths()[length[piece] >= limit].sum() if limit > 0 else graph.edge_lengths().sum())

@@ -166,7 +166,7 @@ def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path)
     import torch
 
     from csboundary.models.bundle import make_bundle
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", fill_min_length_px=55)
@@ -180,7 +180,7 @@ def test_the_predictor_fills_a_window_only_inside_its_core_and_one_pixel_beyond(
     from types import SimpleNamespace
 
     from csboundary.data.windows import PixelWindow
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     maps = np.zeros((2, 120, 240), np.float32)
     maps[1] = row_map()

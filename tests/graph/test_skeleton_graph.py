@@ -42,7 +42,8 @@ def test_a_ring_is_a_closed_edge_and_spurs_and_specks_go():
     assert abs(g.edge_lengths()[0] - 400) <= 12
     spur = drawn(ring + [[(100, 150), (100, 156)]])
     assert skeleton_graph(spur).n_edges == 1  # the 6 px spur is removed
-    assert skeleton_graph(drawn(ring + [[(100, 150), (100, 190)]])).n_edges == 2  # a 40 px branch stays: the ring (now a loop through the junction) + the branch
+    # a 40 px branch stays: the ring (now a loop through the junction) + the branch
+    assert skeleton_graph(drawn(ring + [[(100, 150), (100, 190)]])).n_edges == 2
 
 
 def test_an_empty_map_gives_an_empty_graph():

@@ -76,7 +76,7 @@ def test_a_straight_edge_beside_a_half_plane_of_roadway_scores_one_either_way_ro
 
 
 def test_the_predictor_checks_only_maps_that_carry_a_surface_channel():
-    from csboundary.pipeline.patch import PatchPredictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     g = graph([[10, 20], [50, 20], [10, 80], [50, 80]], [[0, 1], [2, 3]])
     host = SimpleNamespace(settings=GraphSettings(join=EndJoinConfig(), surface=SurfaceCheckConfig(strong=0.5)))
@@ -95,13 +95,14 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
     from csboundary.models.fpn import FPNConfig, fpn_for_weights
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import bundle_without, shipped_parts
 
     fpn_path, afanet_path = shipped_parts(tmp_path)  # the shipped FPN has the head
     shipped = load_checkpoint(fpn_path, ("fpn",))
     assert shipped["fpn_config"]["surface"]
-    assert load_predictor(None, "cpu", GraphOverrides(surface_check=0.5), engine="torch").settings.surface.strong == 0.5  # the option works on the shipped weights
+    # the option works on the shipped weights
+    assert load_predictor(None, "cpu", GraphOverrides(surface_check=0.5), engine="torch").settings.surface.strong == 0.5
     assert load_predictor(None, "cpu", engine="torch").settings.surface.strong == 0.5  # on by default since the model card's choice
     assert not load_predictor(None, "cpu", GraphOverrides(surface_check=0.0), engine="torch").settings.surface.active  # and 0 turns it off
     plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}  # an FPN from before the head
@@ -121,7 +122,8 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     assert (predictor.settings.surface.strong, predictor.settings.surface.weak, predictor.settings.surface.offset_px) == (0.6, 0.25, 8.0)
     assert predictor.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
     off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_check=0), engine="torch")
-    assert not off.settings.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)  # nothing reads the surface
+    # nothing reads the surface
+    assert not off.settings.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_strong", "surface_weak", "surface_offset_px"))
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.surface.active
 

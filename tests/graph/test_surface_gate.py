@@ -72,7 +72,7 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
     from csboundary.errors import InputError
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
-    from csboundary.pipeline.patch import PatchPredictor, load_predictor
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import shipped_parts
 
     fpn_path, afanet_path = shipped_parts(tmp_path)

@@ -47,7 +47,7 @@ def test_surface_outline_skips_the_picture_border():
     assert set(np.nonzero(outline)[0]) == {10, 19}
     assert not outline[:, 0].any() and not outline[:, -1].any()
     lines = mask_polylines(surface, MaskRule(kind="surface"))
-    assert sorted(round(float(np.mean(l[:, 1])), 1) for l in lines) == [10.5, 19.5]
+    assert sorted(round(float(np.mean(line[:, 1])), 1) for line in lines) == [10.5, 19.5]
 
 
 def test_import_resamples_image_and_ground_truth_to_the_target_pixel_size(tmp_path):
@@ -71,7 +71,8 @@ def test_georeferenced_input_keeps_its_crs_and_origin(tmp_path, write_tif):
     label = np.zeros((1, 32, 32), np.uint8)
     label[0, :, 8] = 255
     write_tif(src / "t_edge.tif", label, transform, "EPSG:32618")
-    import_masks(src, tmp_path / "out", gsd=None, image_pattern="{id}_image.tif", mask_pattern="{id}_edge.tif", target_gsd=0.3, progress=False)
+    import_masks(src, tmp_path / "out", gsd=None, image_pattern="{id}_image.tif", mask_pattern="{id}_edge.tif", target_gsd=0.3,
+                 progress=False)
     (line,) = read_ground_truth(layout.ground_truth_path(tmp_path / "out" / "t")).geometry
     assert np.allclose(np.asarray(line.coords)[:, 0], 500000.0 + 8.5 * 0.3)
 

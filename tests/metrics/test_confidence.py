@@ -82,7 +82,8 @@ def test_review_effort_counts_length():
     effort = review_effort(confidence, positive, length)
     # the least sure edge: 1 of 2 false edges, 10 of 40 px false length; one edge could hold 1 false
     # edge at best (all of it), and 30 px (the longest false edge)
-    assert effort["0.1"] == {"false_edges": 0.5, "false_length": 0.25, "false_edges_of_attainable": 1.0, "false_length_of_attainable": 1 / 3}
+    assert effort["0.1"] == {"false_edges": 0.5, "false_length": 0.25, "false_edges_of_attainable": 1.0,
+                             "false_length_of_attainable": 1 / 3}
     # five edges could hold both false ones (2 edges, 40 px): this order finds one
     assert effort["0.5"] == {"false_edges": 0.5, "false_length": 0.25, "false_edges_of_attainable": 0.5, "false_length_of_attainable": 0.25}
 

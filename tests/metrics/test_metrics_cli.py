@@ -63,7 +63,8 @@ def test_graph_json_prediction_at_patch_scale_is_seeded(city, broken_prediction,
     outs = []
     for name in ("a.json", "b.json"):
         out = tmp_path / name
-        result = run("evaluate", str(broken_prediction), str(city), "--scale", "patch", "--apls", "symmetric", "--seed", "3", "--json", str(out))
+        result = run("evaluate", str(broken_prediction), str(city), "--scale", "patch", "--apls", "symmetric", "--seed", "3", "--json",
+                     str(out))
         assert result.returncode == 0, result.stderr
         outs.append(json.loads(out.read_text()))
     assert outs[0] == outs[1]
@@ -74,7 +75,8 @@ def test_graph_json_prediction_at_patch_scale_is_seeded(city, broken_prediction,
 
 def test_pixel_geojson_needs_and_honours_pixels_flag(tmp_path):
     def geojson(path: Path, rows: list[float]) -> Path:
-        features = [{"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": [[10.5, r], [110.5, r]]}} for r in rows]
+        features = [{"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": [[10.5, r], [110.5, r]]}}
+                    for r in rows]
         path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
         return path
 

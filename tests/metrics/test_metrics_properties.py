@@ -44,7 +44,8 @@ SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[Healt
 
 
 @SETTINGS
-@given(pair(), st.tuples(st.integers(-100_000, 100_000), st.integers(-100_000, 100_000)), st.sampled_from(["paper", "symmetric"]), st.integers(0, 3))
+@given(pair(), st.tuples(st.integers(-100_000, 100_000), st.integers(-100_000, 100_000)), st.sampled_from(["paper", "symmetric"]),
+       st.integers(0, 3))
 def test_translating_both_graphs_changes_no_metric(graphs, offset, variant, seed):
     pred, gt = graphs
     here = evaluate_city(build(pred), build(gt), apls=variant, seed=seed)["metrics"]

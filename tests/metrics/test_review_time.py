@@ -25,7 +25,8 @@ from hypothesis import strategies as st
 
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics import evaluate, pixel_scores
-from csboundary.metrics.review_time import ReviewCosts, boundary_samples, clicks_to_trace, missing_runs, review_order, review_report, scratch_clicks
+from csboundary.metrics.review_time import (ReviewCosts, boundary_samples, clicks_to_trace, missing_runs, review_order, review_report,
+                                            scratch_clicks)
 
 
 HAND = ReviewCosts(look_s=3.0, delete_s=1.0, vertex_s=1.5, trace_tolerance_px=2.0)

@@ -69,7 +69,8 @@ def test_pseudo_labels_are_confidence_weighted_and_anchored_to_the_roadway():
 
 def test_mixing_pastes_the_widened_roadway_with_its_labels():
     size = 32
-    image, target, weight = np.zeros((4, size, size), np.float32), np.zeros((3, size, size), np.float32), np.full((3, size, size), 0.2, np.float32)
+    image, target, weight = np.zeros((4, size, size), np.float32), np.zeros((3, size, size), np.float32), np.full((3, size, size), 0.2,
+                                                                                                                  np.float32)
     src_image = np.ones((4, size, size), np.float32)
     src_target = np.zeros((3, size, size), np.float32)
     src_target[2, :, 10:14] = 1  # the roadway: columns 10-13

@@ -19,7 +19,7 @@ from csboundary.models.baselines.icurb import Expert, ICurbConfig, Model, border
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import CitySpec, TrainingCity
-from csboundary.pipeline.city import predict_city
+from csboundary.pipeline.prediction.city import predict_city
 
 
 def line(*points, closed=False) -> Boundary:

@@ -13,7 +13,7 @@ from csboundary.errors import InputError  # noqa: E402
 from csboundary.models.afanet import adjacency_from_logits  # noqa: E402
 from csboundary.models.onnx_engine import OnnxNetworks  # noqa: E402
 from csboundary.models.onnx_session import LEVELS  # noqa: E402
-from csboundary.pipeline.patch import PatchPredictor  # noqa: E402
+from csboundary.pipeline.prediction.patch import PatchPredictor  # noqa: E402
 from helpers import run_cli  # noqa: E402
 
 
@@ -155,7 +155,7 @@ def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors,
 
 def test_auto_precision_runs_whichever_fpn_was_timed_faster_here_and_says_why(predictors, monkeypatch):
     from csboundary.models import onnx_quantization
-    from csboundary.pipeline.patch import faster_fpn
+    from csboundary.pipeline.prediction.patch import faster_fpn
 
     monkeypatch.setattr(onnx_quantization, "CALIBRATION_STYLES", ("classic",))  # a faster test
     torch_engine, onnx_engine, weights = predictors

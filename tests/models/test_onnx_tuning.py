@@ -123,7 +123,8 @@ def test_an_instance_moved_to_another_machine_uses_that_machines_levels(tmp_path
     networks.levels = tuned_levels(path, networks.models, 2)
     opened = []
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed although recorded"))
-    monkeypatch.setattr("csboundary.models.onnx_engine.open_session", lambda model, threads, level, name: opened.append((name, threads, level)))
+    monkeypatch.setattr("csboundary.models.onnx_engine.open_session", lambda model, threads, level, name: opened.append((name, threads,
+                                                                                                                         level)))
     moved = pickle.loads(pickle.dumps(networks))
     moved.threads = 1
     moved._session("fpn")

@@ -49,8 +49,8 @@ def test_bfloat16_hardware_reads_the_cpu_flags(tmp_path, flags, expected):
 
 
 def test_the_predictor_refuses_unknown_precisions_and_warns_without_bfloat16_units(monkeypatch):
-    import csboundary.pipeline.patch as patch_module
-    from csboundary.pipeline.patch import PatchPredictor
+    import csboundary.pipeline.prediction.patch as patch_module
+    from csboundary.pipeline.prediction.patch import PatchPredictor
 
     predictor = PatchPredictor.load(None, torch.device("cpu"))
     with pytest.raises(InputError, match="unknown precision 'half'"):

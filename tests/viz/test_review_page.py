@@ -144,7 +144,8 @@ def _square() -> BoundaryGraph:
 
 def test_edits_by_hand():
     features = [
-        {"properties": {"action": "delete", "edge": 0}, "geometry": {"type": "LineString", "coordinates": [[100.0, 200.0], [105.0, 200.0]]}},
+        {"properties": {"action": "delete", "edge": 0}, "geometry": {"type": "LineString", "coordinates": [[100.0, 200.0], [105.0,
+                                                                                                                            200.0]]}},
         {"properties": {"action": "accept", "edge": 1},  # drawn from its other end: the pair is checked either way round
          "geometry": {"type": "LineString", "coordinates": [[105.0, 195.0], [106.0, 197.5], [105.0, 200.0]]}},
         {"properties": {"action": "move", "vertex": 2}, "geometry": {"type": "Point", "coordinates": [105.0, 194.0]}},  # pixel (10, 12)
@@ -161,7 +162,8 @@ def test_edits_by_hand():
 
 def test_a_complete_area_is_recorded_and_changes_nothing():
     square = [[100.0, 200.0], [104.0, 200.0], [104.0, 196.0], [100.0, 196.0]]  # pixels (0, 0)-(8, 8), given unclosed
-    graph, record = apply_edits(_square(), [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [square]}}])
+    graph, record = apply_edits(_square(), [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon",
+                                                                                                "coordinates": [square]}}])
     assert record.complete_areas == [[*square, square[0]]]
     assert graph.n_edges == 2 and np.array_equal(graph.vertices, _square().vertices) and record.kept == {0: 0, 1: 1}
 
@@ -169,7 +171,8 @@ def test_a_complete_area_is_recorded_and_changes_nothing():
 @pytest.mark.parametrize("feature, message", [
     ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[100, 200], [101, 199]]]}}, "3 corners"),
     ({"properties": {"action": "complete"}, "geometry": {"type": "LineString", "coordinates": [[100, 200], [101, 199]]}}, "Polygon"),
-    ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [5000, 0], [5000, 5000]]]}}, "outside the imagery"),
+    ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [5000, 0], [5000, 5000]]]}},
+     "outside the imagery"),
     ({"properties": {"action": "delete", "edge": 5}}, "not an edge"),
     ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}}, "Point"),
     ({"properties": {"action": "paint"}}, "unknown action"),

@@ -67,7 +67,8 @@ def _edge_strips(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block
     return verge
 
 
-def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, roadway, sidewalk_colour: Colour = CONCRETE) -> None:
+def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, roadway,
+                    sidewalk_colour: Colour = CONCRETE) -> None:
     sidewalk = rng.uniform(*cfg.sidewalk_width)
     if rng_share(rng, cfg.bare_block_share):
         sidewalk = 0.0  # the lawn runs to the curb

@@ -35,7 +35,8 @@ def _yard(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, yard: dict[s
             yard["things"].append(Painted(line.buffer(rng.uniform(0.5, 0.9)).intersection(area), _jitter(rng, HEDGE, 0.12), 22))
         else:
             fence = FENCES[int(rng.integers(len(FENCES)))]
-            yard["things"].append(Painted(line.buffer(rng.uniform(0.07, 0.15), cap_style="flat").intersection(area), _jitter(rng, fence, 0.08), 3))
+            yard["things"].append(Painted(line.buffer(rng.uniform(0.07, 0.15), cap_style="flat").intersection(area), _jitter(rng, fence,
+                                                                                                                             0.08), 3))
     if rng_share(rng, cfg.pool_share):
         centre = origin + d * width * rng.uniform(0.3, 0.7) + left * (setback + depth + rng.uniform(3.5, 7.0))
         pool = _centred_rect(centre, d, rng.uniform(5.0, 10.0), rng.uniform(3.0, 5.0))
@@ -90,13 +91,15 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
             if cfg.building_share < 1 and rng.random() >= cfg.building_share:
                 continue
             placed.append(footprint)
-            roof = _roof(rng, cfg.roof_palette) if cfg.roof_palette != "tar" else _jitter(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))], 0.1)
+            roof = _roof(rng, cfg.roof_palette) if cfg.roof_palette != "tar" else _jitter(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))],
+                                                                                          0.1)
             height = rng.uniform(8, 40) if wide else rng.uniform(*cfg.house_height)
             if rng_share(rng, cfg.tower_share):
                 height = rng.uniform(*cfg.tower_height)
             building = Building(footprint, height, roof)
             if not wide and rng_share(rng, cfg.pitched_roof_share):
-                building.facets, building.ridge = roof_facets(a + d * t0 + left * setback, d, left, fw, depth, rng.random() < 0.5, scene.sun)
+                building.facets, building.ridge = roof_facets(a + d * t0 + left * setback, d, left, fw, depth, rng.random() < 0.5,
+                                                              scene.sun)
             elif rng.random() < 0.35:
                 c = np.array(footprint.centroid.coords[0]) + rng.uniform(-0.2, 0.2, 2) * min(w, depth)
                 building.detail = _centred_rect(c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35))

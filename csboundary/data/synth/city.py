@@ -95,7 +95,8 @@ def draw_look(config: SynthConfig, split: str, seed: int) -> CameraLook:
     # drawn after the older fields and only when switched on, so older looks stay the same
     blur = float(rng.uniform(*config.photo_blur)) if config.photo_blur[1] > 0 else 0.0
     jpeg = int(rng.integers(config.jpeg_quality[0], config.jpeg_quality[1] + 1)) if config.jpeg_quality[1] > 0 else 0
-    return CameraLook(source_gsd=source, haze=haze, saturation=saturation, gamma=gamma, gains=gains, blur=blur, jpeg=jpeg)  # type: ignore[arg-type]
+    # type: ignore[arg-type]
+    return CameraLook(source_gsd=source, haze=haze, saturation=saturation, gamma=gamma, gains=gains, blur=blur, jpeg=jpeg)
 
 
 def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]) -> SyntheticCity:
@@ -129,7 +130,8 @@ def synthesize_city(
         render_seconds.append(time.perf_counter() - t0)
         name = layout.tile_name(row, col)
         write_geotiff(layout.tiles_dir(out_dir) / name, image, city.transform(row, col), config.crs,
-                      tags={"generator": f"csboundary {__version__} synth", "split": split, "seed": str(seed), "tile_row": str(row), "tile_col": str(col)})
+                      tags={"generator": f"csboundary {__version__} synth", "split": split, "seed": str(seed), "tile_row": str(row),
+                            "tile_col": str(col)})
         records.append({"path": f"{layout.TILES_DIR}/{name}", "row": row, "col": col})
     gt = city.ground_truth()
     write_ground_truth(layout.ground_truth_path(out_dir), gt, city.road_surface())

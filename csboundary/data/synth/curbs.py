@@ -71,7 +71,8 @@ def _islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], 
                 continue
             side = rng.uniform(3.5, 7.0)
             theta = rng.uniform(0, 2 * math.pi)
-            corners = [(hit.x + side * 0.58 * math.cos(theta + k * 2 * math.pi / 3), hit.y + side * 0.58 * math.sin(theta + k * 2 * math.pi / 3)) for k in range(3)]
+            corners = [(hit.x + side * 0.58 * math.cos(theta + k * 2 * math.pi / 3),
+                        hit.y + side * 0.58 * math.sin(theta + k * 2 * math.pi / 3)) for k in range(3)]
             island = Polygon(corners).buffer(0.8, quad_segs=QUAD_SEGS)
             if inside.contains(island) and not any(island.distance(o) < 3.0 for o in islands):
                 islands.append(island)

@@ -42,7 +42,8 @@ def with_highways(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stre
             for part in as_linestrings(street.centreline.difference(corridor)):
                 touching = [j for j in tree.query(part.buffer(1.0), predicate="intersects") if j != k]
                 if part.length > 30.0 and touching:  # a piece cut off from every other street would float
-                    kept.append(Street(part, street.width, street.kind, street.median, street.bulb_radius if part.coords[-1] == end else 0.0))
+                    kept.append(Street(part, street.width, street.kind, street.median,
+                                       street.bulb_radius if part.coords[-1] == end else 0.0))
         ramps: list[Street] = []
         for street in kept:
             if street.kind not in ("avenue", "boulevard"):

@@ -150,4 +150,6 @@ def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> 
                 seam = _centred_rect(p + n * off, d, rng.uniform(15.0, 60.0), rng.uniform(0.1, 0.25))
                 scene.markings.append(Painted(seam, _scaled_colour(road, rng.uniform(0.45, 0.7)), 2))
             else:  # a manhole cover
-                scene.markings.append(Painted(shapely.Point(p + n * off).buffer(0.35, quad_segs=4), _scaled_colour(road, rng.uniform(0.5, 0.8)), 3))
+                scene.markings.append(Painted(shapely.Point(p + n * off).buffer(0.35, quad_segs=4), _scaled_colour(road, rng.uniform(0.5,
+                                                                                                                                     0.8)),
+                                              3))

@@ -183,7 +183,8 @@ def write_split_cities(tiles: list[AssembledTile], out_dir: Path, index: TopoBou
         continuity = border_continuity(members)
         if continuity["share"] is not None and continuity["share"] < 0.5:
             warnings.warn(f"{city_dir}: only {continuity['matched']} of {continuity['border_ends']} boundary ends at shared tile edges "
-                          "continue in the neighbour: the placement from tile ids is probably wrong (--no-placement)", InputWarning, stacklevel=2)
+                          "continue in the neighbour: the placement from tile ids is probably wrong (--no-placement)", InputWarning,
+                          stacklevel=2)
         write_meta(city_dir, {
             "source": SOURCE, "split": split, "crs": FALLBACK_CRS, "gsd": FALLBACK_GSD, "units": "US survey foot",
             "tiles": names, "tile_ids": [t.tile_id for t in members], "boundaries": len(lines),

@@ -117,7 +117,8 @@ def edge_slots(vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:
     return slots
 
 
-def encode_graph(vertices: np.ndarray, edges: np.ndarray, shape: tuple[int, int], options: Sat2GraphOptions) -> tuple[np.ndarray, np.ndarray]:
+def encode_graph(vertices: np.ndarray, edges: np.ndarray, shape: tuple[int, int], options: Sat2GraphOptions) -> tuple[np.ndarray,
+                                                                                                                      np.ndarray]:
     """The (19, h, w) float32 graph tensor of a graph in the map's pixel frame, and its loss mask.
 
     target[0] = 1 on vertex discs; on the disc of vertex u, for each slot k holding neighbour v:
@@ -301,7 +302,7 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
 
 @dataclass
 class Model:
-    """The city pipeline's :class:`~csboundary.pipeline.city.PatchModel`: maps are (20, S, S), channel
+    """The city pipeline's :class:`~csboundary.pipeline.prediction.city.PatchModel`: maps are (20, S, S), channel
     0 csBoundary's keypoint probability, 1..19 the Sat2Graph tensor (averaged across overlapping
     windows like any map; its vectors are relative, so averaging is consistent)."""
 

@@ -100,11 +100,13 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     vertex_config = VertexConfig(threshold=config.vertex_threshold)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_windows = [cities["valid"].random_window(valid_rng, config.window) for _ in range(config.validation_samples)]
-    valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
+    valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config,
+                                         vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
     rng = np.random.default_rng(config.seed)
     step, history = resume_run(resume, "afanet", model, optimizer, rng)
     init = {"init_afanet_sha256": file_sha256(config.init_afanet)} if config.init_afanet else {}
-    log.write(event="start", model="afanet", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()),
+    log.write(event="start", model="afanet", step=step, code_version=run_code_version(),
+              parameters=sum(p.numel() for p in model.parameters()),
               config=config.to_dict(), **init)
 
     probabilities = city_probabilities(train_cities, len(config.extra_train_cities), config.extra_share, by_area=False)
@@ -117,7 +119,8 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
             city = train_cities[int(rng.choice(len(train_cities), p=probabilities))]
         else:  # as recorded runs drew their cities
             city = train_cities[int(rng.integers(len(train_cities)))]
-        tensor, vertices, label = _afanet_sample(city, city.random_window(rng, config.window), rng, stage, config, vertex_config, augmentation)
+        tensor, vertices, label = _afanet_sample(city, city.random_window(rng, config.window), rng, stage, config, vertex_config,
+                                                 augmentation)
         extras = {"stage": stage, "m": len(vertices)}
         if len(vertices) < 2:  # nothing to connect in this window
             return None, extras

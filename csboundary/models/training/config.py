@@ -30,26 +30,31 @@ class TrainConfig(Config):
     weight_decay: float = 1e-4
     validate_every: int = 250
     validation_samples: int = 8
-    extra_train_cities: list = field(default_factory=list)  # city directories (imported, from masks, a user's own) trained on beside train_city
-    extra_share: float = 0.0  # share of samples drawn from extra_train_cities (fine-tuning on a user's city); 0 = every city by its area (FPN) or alike (AfANet)
+    # city directories (imported, from masks, a user's own) trained on beside train_city
+    extra_train_cities: list = field(default_factory=list)
+    # share of samples drawn from extra_train_cities (fine-tuning on a user's city); 0 = every city by its area (FPN) or alike (AfANet)
+    extra_share: float = 0.0
     augment: dict = field(default_factory=lambda: {"enabled": False})  # AugmentConfig overrides; {} = every augmentation at its defaults
     snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
     encoder_lr_scale: float = 1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
     freeze_encoder_bn: bool = False  # pretrained FPN encoder: keep its batch-norm statistics (ImageNet's, not the synthetic cities')
-    style_mix: float = 0.0  # pretrained FPN encoder: probability per batch of mixing early feature statistics between samples (MixStyle); 0 = off
+    # pretrained FPN encoder: probability per batch of mixing early feature statistics between samples (MixStyle); 0 = off
+    style_mix: float = 0.0
     style_mix_alpha: float = 0.1  # Beta(alpha, alpha) of the mixing weight
     autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides
     init_fpn: str = ""  # start from this trained FPN (fpn checkpoint or bundle; its architecture, not ``fpn``): fine-tuning
     surface: bool = False  # add (or keep) the road-surface head; with init_fpn, a network without one gains a new head
-    surface_only: bool = False  # train the surface head alone: every other weight frozen, so the keypoint and boundary maps stay as they were
+    # train the surface head alone: every other weight frozen, so the keypoint and boundary maps stay as they were
+    surface_only: bool = False
     surface_weight: float = 1.0  # the surface loss's weight beside the keypoint and boundary losses
     crop: int = 256
     batch: int = 4
     pos_weight_keypoint: float = 20.0
     pos_weight_segmentation: float = 10.0
-    hard_negative_weight: float = 0.0  # extra loss weight on keypoint/boundary negatives where the image has an edge (roofs, cars, lots); 0 = off
+    # extra loss weight on keypoint/boundary negatives where the image has an edge (roofs, cars, lots); 0 = off
+    hard_negative_weight: float = 0.0
     hard_negative_margin_px: int = 6  # pixels this close to a true boundary are never hard negatives
     # afanet
     afanet: dict = field(default_factory=dict)  # AfANetConfig overrides

@@ -102,7 +102,8 @@ def covers_imagery(polygons: list, mosaic: Mosaic) -> bool:
     if window is None:
         return False
     transform = mosaic.transform @ Affine.translation(window.col_off, window.row_off)
-    return bool(rasterize(polygons, out_shape=(window.height, window.width), transform=transform, fill=0, default_value=1, dtype="uint8").any())
+    return bool(rasterize(polygons, out_shape=(window.height, window.width), transform=transform, fill=0, default_value=1,
+                          dtype="uint8").any())
 
 
 def city_probabilities(cities: list, extra: int, extra_share: float, by_area: bool) -> np.ndarray:

@@ -103,7 +103,8 @@ def starting_fpn(config: TrainConfig, device: torch.device):
     return model, model_config
 
 
-def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None, surface: bool = False):
+def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None,
+               surface: bool = False):
     """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
     (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
     otherwise (validation)."""
@@ -154,7 +155,8 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     valid_city = TrainingCity(config.valid_city.ensure(config.cache))
     model, model_config = starting_fpn(config, device)
     add_style_mixing(model, config.style_mix, config.style_mix_alpha)
-    groups = [{"params": [p for p in model.parameters() if p.requires_grad], "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
+    groups = [{"params": [p for p in model.parameters() if p.requires_grad],
+               "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
     optimizer = torch.optim.Adam(groups, lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)

@@ -32,4 +32,5 @@ class ICurbConfig(Config):
 def split_options(options: dict) -> tuple[ICurbConfig, dict]:
     """TrainConfig.options -> (agent config, training options); a misspelt key is an error."""
     reject_unknown(options, {*ICurbConfig.__dataclass_fields__, *TRAIN_OPTIONS}, "icurb")
-    return ICurbConfig.from_dict({k: v for k, v in options.items() if k not in TRAIN_OPTIONS}), {k: options.get(k, v) for k, v in TRAIN_OPTIONS.items()}
+    return ICurbConfig.from_dict({k: v for k, v in options.items() if k not in TRAIN_OPTIONS}), {k: options.get(k, v) for k,
+                                                                                                 v in TRAIN_OPTIONS.items()}

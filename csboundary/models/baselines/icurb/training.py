@@ -73,7 +73,8 @@ def validate(agent: Agent, city: TrainingCity, windows, config: ICurbConfig, opt
     for window in windows:
         tensor, expert = _window_data(city, window, config, device)
         if starts := expert.starts():
-            traces, records = rollout(agent, tensor, np.array([s[0] for s in starts]), config, expert.teacher(starts), 0.0, np.random.default_rng(0))
+            traces, records = rollout(agent, tensor, np.array([s[0] for s in starts]), config, expert.teacher(starts), 0.0,
+                                      np.random.default_rng(0))
             for x, offset, stop in records:
                 x, offset, stop = x.to(device), torch.from_numpy(offset).to(device), torch.from_numpy(stop).to(device)
                 losses.append(float(_imitation_loss(agent, x, offset, stop, opts["stop_pos_weight"])))

@@ -1,0 +1,143 @@
+"""Scores of a model on a set of small labelled cities (e.g. real crops imported from masks).
+
+A validation set is a folder of city directories, listed in ``set.json`` by ``import-masks`` (or
+every city directory in the folder). Each city is predicted as ``predict`` does and scored against
+its ground truth at city scale; the set's score is the plain mean over cities of every metric
+(each crop counts once, and a crop with an empty prediction counts as 0, not skipped).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from csboundary.data import city as layout
+from csboundary.data.inputs import open_imagery
+from csboundary.data.model_view import model_view
+from csboundary.errors import InputError, InputWarning
+from csboundary.graph.stitching import StitchConfig
+from csboundary.labels.mask_import import SET_FILE
+from csboundary.pipeline.prediction.city_job import CityResult, PatchModel
+from csboundary.pipeline.prediction.city import predict_city
+from csboundary.pipeline.prediction.run import evaluate_run
+
+HEADLINE = ("precision@5", "recall@5", "f1@2", "f1@5", "f1@10", "apls", "tlts")
+
+
+def set_cities(set_dir: str | Path) -> list[Path]:
+    """The city directories of a set: those ``set.json`` lists, else every city directory inside."""
+    set_dir = Path(set_dir)
+    if not set_dir.is_dir():
+        raise InputError(set_dir, "not a folder")
+    listing = set_dir / SET_FILE
+    if listing.exists():
+        try:
+            names = [c["dir"] for c in json.loads(listing.read_text())["cities"]]
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise InputError(listing, f"not a set listing ({exc})") from exc
+        cities = [set_dir / n for n in names]
+    else:
+        cities = sorted(p for p in set_dir.iterdir() if layout.is_city_dir(p))
+    missing = [c for c in cities if not layout.is_city_dir(c)]
+    if missing:
+        raise InputError(missing[0], "listed in the set but not a city directory")
+    if not cities:
+        raise InputError(set_dir, "holds no city directory (see csboundary import-masks)")
+    return cities
+
+
+def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd: bool = False, batch_size: int = 1,
+                   progress: bool = False, stitch: StitchConfig = StitchConfig()) -> tuple[CityResult, list]:
+    """``model``'s prediction of a labelled city directory, read as ``predict`` reads it, and the
+    city's ground-truth lines. ``assume_model_gsd``: imagery without a pixel size is taken to be
+    at the model's (imported crops), and RGB is read without warnings (NIR := green is the
+    documented rule); ``stitch``: how patch graphs become the city graph (sweeps vary it)."""
+    layout.read_meta(city_dir)
+    with warnings.catch_warnings():
+        if assume_model_gsd:
+            warnings.simplefilter("ignore", InputWarning)
+        mosaic, lines = open_imagery([city_dir])
+        view = model_view(mosaic, model_gsd=model.pixel_size_m, assume_model_gsd=assume_model_gsd)
+    with view.mosaic:
+        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress, stitch=stitch)
+    return result, lines
+
+
+def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[str, Any]:
+    """City-scale scores of ``model`` on one city of a set (see :func:`predicted_city`)."""
+    result, lines = predicted_city(city_dir, model, assume_model_gsd=True)
+    scores = evaluate_run(result, lines, seed, scales=("city",), metres_per_px=model.pixel_size_m)["city"]
+    scores["counts"] = {"pred_edges": int(result.graph.n_edges), "gt_lines": len(lines)}
+    return scores
+
+
+def evaluate_city(city_dir: str | Path, model: PatchModel, seed: int = 0, batch_size: int = 1, progress: bool = True) -> dict[str, dict]:
+    """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
+    ``model`` on a city directory with ground truth, without writing the prediction."""
+    result, lines = predicted_city(city_dir, model, batch_size=batch_size, progress=progress)
+    scores = evaluate_run(result, lines, seed, metres_per_px=model.pixel_size_m)
+    for item in scores.values():
+        item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}
+    return scores
+
+
+def evaluate_set(set_dir: str | Path, model: PatchModel, seed: int = 0, progress: bool = True) -> dict[str, Any]:
+    """Per-city and mean scores of ``model`` on every city of a set."""
+    cities = set_cities(set_dir)
+    per_city = {}
+    for city_dir in tqdm(cities, desc="evaluate set", unit="city", disable=not progress):
+        per_city[city_dir.name] = evaluate_city_dir(city_dir, model, seed)
+    keys = per_city[cities[0].name]["metrics"].keys()
+    mean = {k: _mean([s["metrics"][k] for s in per_city.values()]) for k in keys}
+    out = {"set": str(set_dir), "cities": len(cities), "mean": mean, "per_city": per_city}
+    reviews = [s["review_effort"] for s in per_city.values() if "review_effort" in s]
+    if reviews:
+        out["review_effort"] = set_review_effort(reviews)
+    return out
+
+
+def set_review_effort(reviews: list[dict]) -> dict[str, float]:
+    """The set's simulated review per km of true boundary: every city's minutes summed over all
+    their km (a long city weighs more than a short one). Minutes to the target F1 count only the
+    cities that reach it (``cities_reaching_target``)."""
+    km = sum(r["true_boundary_km"] or 0.0 for r in reviews)
+    out = {"true_boundary_km": km, "cities": len(reviews),
+           "scratch_min_per_km": sum(r["scratch_minutes"] for r in reviews) / km if km else math.nan}
+    for order in reviews[0]["orders"]:
+        out[f"{order}_min_per_km"] = sum(r["orders"][order]["minutes"] for r in reviews) / km if km else math.nan
+        hit = [r for r in reviews if math.isfinite(r["orders"][order]["minutes_to_target_f1"])]
+        hit_km = sum(r["true_boundary_km"] or 0.0 for r in hit)
+        out[f"{order}_to_target_min_per_km"] = sum(r["orders"][order]["minutes_to_target_f1"] for r in hit) / hit_km if hit_km else math.nan
+        out[f"{order}_cities_reaching_target"] = len(hit)
+    return out
+
+
+def score_value(value) -> float:
+    """A city's score as a set counts it: undefined (None, NaN) is 0."""
+    return 0.0 if value is None or (isinstance(value, float) and math.isnan(value)) else float(value)
+
+
+def _mean(values: list[float]) -> float:
+    return sum(map(score_value, values)) / len(values)
+
+
+def format_set(result: dict[str, Any]) -> str:
+    """One row per city and the mean, headline metrics only."""
+    width = max(10, *(len(n) + 2 for n in result["per_city"]))
+    lines = [f"{'':{width}s}" + "".join(f"{h:>13s}" for h in HEADLINE)]
+    rows = [(n, s["metrics"]) for n, s in result["per_city"].items()] + [(f"mean ({result['cities']})", result["mean"])]
+    for name, m in rows:
+        lines.append(f"{name:{width}s}" + "".join(f"{m.get(h, float('nan')):13.3f}" for h in HEADLINE))
+    review = result.get("review_effort")
+    if review:
+        lines.append(f"review effort over {review['true_boundary_km']:.2f} km of true boundary: from scratch "
+                     f"{review['scratch_min_per_km']:.1f} min/km; corrected map " + ", ".join(
+                         f"{o} order {review[o + '_min_per_km']:.1f} min/km (to the target F1@5 {review[o + '_to_target_min_per_km']:.1f} "
+                         f"min/km, {review[o + '_cities_reaching_target']} of {review['cities']} cities reach it)"
+                         for o in ("confidence", "random") if o + "_min_per_km" in review))
+    return "\n".join(lines)

@@ -1,0 +1,156 @@
+"""``predict`` and ``predict-patch`` as library calls: imagery in, a folder of georeferenced
+outputs out. The command line only parses options and prints what these return."""
+
+from __future__ import annotations
+
+import contextlib
+import warnings
+from pathlib import Path
+from typing import Callable, Sequence
+
+import geopandas as gpd
+import numpy as np
+
+from csboundary.data.atomic import check_output_dir, staging_folder
+from csboundary.data.folder_lock import folder_lock
+from csboundary.data.grid import Patch, PatchGrid
+from csboundary.data.inputs import open_imagery
+from csboundary.data.model_view import ModelInput, model_view
+from csboundary.errors import InputError, InputWarning
+from csboundary.graph import BoundaryGraph
+from csboundary.models.checkpoint import file_sha256, shipped_weights
+from csboundary.pipeline.prediction.city import predict_city
+from csboundary.pipeline.prediction.patch import PatchPredictor
+from csboundary.pipeline.prediction.run import run_prediction
+from csboundary.viz.labels import draw_patch_labels
+from csboundary.viz.overlay import to_display, write_png
+
+
+SPARSE_SHARE = 0.5  # imagery under fewer than this share of the patches is worth a word before the run
+SECONDS_PER_PATCH = 1.0  # a patch with imagery on a 2-core CPU with ONNX Runtime (docs/scaling.md), for the estimate
+
+
+def warn_if_sparse(grid: PatchGrid, mosaic, inputs: Sequence[str | Path]) -> None:
+    """A warning when the imagery covers little of its extent (a city inside its bounding box):
+    how much, that the rest is skipped, and the time the covered part will take. Finding the
+    coverage reads every tile's block table, so a truncated tile is an InputError here, before
+    the run store exists."""
+    covered = sum(mosaic.may_have_data(patch.expanded) for patch in grid)
+    if len(grid) >= 4 and covered < SPARSE_SHARE * len(grid):
+        warnings.warn(f"{inputs[0]}: imagery covers {covered} of {len(grid)} patches ({covered / len(grid):.1%}) of its extent; "
+                      f"the empty ones are skipped without reading (about {covered * SECONDS_PER_PATCH / 60:.0f} min on a 2-core CPU)",
+                      InputWarning)
+
+
+def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: PatchPredictor, *, weights: str | Path | None = None,
+                      gsd: float | None = None, batch_size: int = 1, write_maps: bool = False, lanelet2: bool = False,
+                      restart: bool = False, scheduler: str | None = None, workers: int | None = None, threads: int | None = None,
+                      progress: bool = True, on_plan: Callable[[PatchGrid, ModelInput], None] | None = None) -> dict:
+    """Predict the city that ``inputs`` name (tiles, a folder of tiles, a city directory) into
+    ``out`` and return the run's summary. ``weights`` names the file ``predictor`` came from (None:
+    the shipped one), for the run's manifest; ``gsd`` is the pixel size of imagery without a
+    CRS; ``scheduler`` (a Dask address) or ``workers`` (a local Dask cluster) spread the patches;
+    ``threads`` sets torch threads per process. ``on_plan`` is told the patch grid before any
+    work. An unfinished run in ``out`` is continued unless ``restart``."""
+    if scheduler and workers:
+        raise ValueError("give a scheduler or a number of workers, not both")
+    mosaic, _ = open_imagery(inputs)
+    view = model_view(mosaic, gsd, predictor.pixel_size_m)
+    check_output_dir(out, inputs=inputs)
+    with contextlib.ExitStack() as stack:
+        if Path(out).is_dir():  # a folder in use is refused before the plan is told (run_prediction locks it too)
+            stack.enter_context(folder_lock(out))
+        grid = PatchGrid.for_mosaic(view.mosaic)
+        warn_if_sparse(grid, view.mosaic, inputs)
+        if on_plan is not None:
+            on_plan(grid, view)
+        if threads and not (scheduler or workers):
+            import torch
+
+            torch.set_num_threads(threads)
+        settings = run_settings(predictor, view, weights, batch_size)
+        stack.enter_context(view.mosaic)
+        options = {}
+        if scheduler or workers:
+            from csboundary.pipeline.prediction.distributed import dask_client, dask_executor
+
+            client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
+            options = {"executor": dask_executor(client), "threads": threads or worker_threads}
+            settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
+        _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=progress,
+                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, keep_graphs=False, **options)
+    return summary
+
+
+def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Path | None, batch_size: int) -> dict:
+    """The model and how it is run, for the run's manifest (JSON-ready)."""
+    graph = predictor.settings
+    settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
+                "edge_threshold": graph.edge_threshold, "support": [graph.support.min_support, graph.support.max_length_px],
+                "max_gap": [graph.support.max_gap_px, graph.support.gap_level],
+                "min_fragment_px": graph.min_fragment_px, "fill_min_length_px": graph.fill.min_length_px,
+                "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
+                "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
+                "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
+    if graph.join.active:  # only then: a run interrupted before end joining existed still resumes
+        settings["join_max_px"] = graph.join.max_px
+        if graph.join.attach_px > 0:
+            settings["join_attach_px"] = graph.join.attach_px
+    if graph.attach_px > 0:  # likewise
+        settings["attach_max_px"] = graph.attach_px
+    if predictor.precision != "float32":  # likewise
+        settings["precision"] = predictor.precision
+    settings["precision_choice"] = predictor.precision_choice or predictor.precision  # --precision auto: what it chose, and why
+    if graph.surface.active:  # only then: a run interrupted before the check existed still resumes
+        settings["surface_check"] = [graph.surface.strong, graph.surface.weak, graph.surface.offset_px]
+        if graph.surface.both_sides > 0:  # likewise
+            settings["surface_both_sides"] = graph.surface.both_sides
+    if graph.gate.active:  # likewise
+        settings["surface_gate"] = [graph.gate.radius_px, graph.gate.full_change, graph.gate.min_piece_px]
+    return settings
+
+
+def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: PatchPredictor, gsd: float | None = None) -> BoundaryGraph:
+    """One image (at most 1100x1100 px at the model's pixel size) -> ``out``/graph.json,
+    boundaries.geojson and overlay.png (maps and graph over the image); returns the graph.
+
+    The image goes through the city pipeline exactly as ``predict`` takes it (in memory, on the
+    same patch grid: one 1100 px window up to 1000 px, two or four windows above), so both write
+    the same graph. An image without a CRS is taken to be at the model's pixel size unless
+    ``gsd`` says otherwise."""
+    image, out = Path(image), Path(out)
+    check_output_dir(out, inputs=[image])
+    mosaic, _ = open_imagery([image])
+    with model_view(mosaic, gsd, predictor.pixel_size_m, assume_model_gsd=True).mosaic as mosaic:
+        if mosaic.width > 1100 or mosaic.height > 1100:
+            raise InputError(image,
+                             f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a "
+                             f"patch)")
+        maps = CoreMaps(mosaic.width, mosaic.height)
+        graph = predict_city(mosaic, predictor, progress=False, on_window=maps.add).graph
+        read = mosaic.read(mosaic.window)
+    frame = gpd.GeoDataFrame(
+        {"kind": graph.edge_kinds or [], "confidence": list(graph.edge_scores) if graph.edge_scores is not None else []},
+        geometry=graph.to_linestrings(world=True), crs=graph.crs,
+    )
+    with staging_folder(check_output_dir(out, create=True), last="graph.json") as stage:
+        graph.write_json(stage / "graph.json")
+        frame.to_file(stage / "boundaries.geojson", driver="GeoJSON", engine="pyogrio", layer="boundaries")
+        arrays = {"segmentation": maps.array[1] > 0.5, "keypoint_heat": maps.array[0]}
+        write_png(stage / "overlay.png", draw_patch_labels(to_display(read.data, read.valid), arrays, graph))
+    return graph
+
+
+class CoreMaps:
+    """A mosaic's stitched maps, put together from each window's core as the city pipeline hands
+    the windows over (``predict_city``'s ``on_window``; the cores cover the mosaic once)."""
+
+    def __init__(self, width: int, height: int):
+        self.width, self.height = width, height
+        self.array: np.ndarray | None = None  # (C, height, width)
+
+    def add(self, patch: Patch, maps: np.ndarray) -> None:
+        if self.array is None:
+            self.array = np.zeros((maps.shape[0], self.height, self.width), np.float32)
+        rows, cols = patch.core_local.slices()
+        self.array[(slice(None), *patch.core.slices())] = maps[:, rows, cols]

@@ -1,0 +1,159 @@
+"""Adapting a weights bundle to a user's own unlabelled imagery (``csboundary adapt``).
+
+Self-training (:mod:`csboundary.models.training.adapt`) adapts the FPN from the bundle's on
+windows drawn from the user's mosaics, beside synthetic cities of the bundle's own mix; then
+AfANet is tuned, as ``finetune`` does, on the vertices the adapted FPN extracts from those
+synthetic cities (the user's imagery has no edges to learn from). The result is a bundle like
+any other: the bundle's inference settings and edge confidence, the adapted networks, and a
+provenance naming the base weights and every image by its sha256.
+
+Everything lands in a work folder; the same command continues a stopped run.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from csboundary.config import Config
+from csboundary.data import city as layout
+from csboundary.data.model_view import model_view
+from csboundary.data.raster import Mosaic
+from csboundary.data.units import MODEL_GSD
+from csboundary.errors import InputError
+from csboundary.labels.mask_import import SET_FILE
+from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
+from csboundary.models.device import resolve_device
+from csboundary.models.training.adapt import AdaptConfig
+from csboundary.models.training.unlabelled import UnlabelledImagery
+from csboundary.pipeline.evaluation.evaluate_set import set_cities
+from csboundary.pipeline.training.finetune import FinetuneBudget, _train, checked_base, training_configs
+from csboundary.pipeline.outputs.review import prediction_inputs
+
+RASTER_SUFFIXES = (".tif", ".tiff")
+
+
+@dataclass
+class AdaptBudget(Config):
+    """How much adapting: sized so that 14 crops of 700 px take under 15 minutes on a 2-core
+    CPU (docs/adapt.md has the measured times)."""
+    config_name = "adapt budget"
+
+    fpn_steps: int = 800
+    afanet_steps: int = 300
+    synthetic_cities: int = 12  # of the bundle's training mix, 2500 px each
+    fpn_lr: float = 1e-4
+    afanet_lr: float = 3e-4
+    crop: int = 256
+
+
+def default_work(out: Path) -> Path:
+    return out.with_name(out.stem + "-adapt")
+
+
+def imagery_groups(paths: list[Path]) -> list[list[Path]]:
+    """The raster files of each mosaic that ``paths`` name: a GeoTIFF is one mosaic; a folder of
+    GeoTIFFs one; a city directory its tiles; a set (``set.json``, or a folder of cities) each of
+    its cities; a prediction folder the imagery it was predicted from. Labels are never read."""
+    groups: list[list[Path]] = []
+    for path in map(Path, paths):
+        if not path.exists():
+            raise InputError(path, "does not exist")
+        if path.is_file():
+            if path.suffix.lower() not in RASTER_SUFFIXES:
+                raise InputError(path, "not a GeoTIFF (.tif), a folder of them, a city, a set or a prediction folder")
+            groups.append([path])
+        elif layout.is_city_dir(path):
+            groups.append(sorted(layout.tiles_dir(path).glob("*.tif")))
+        elif (path / "summary.json").exists():
+            groups.append(prediction_inputs(path))
+        elif (path / SET_FILE).exists() or any(layout.is_city_dir(p) for p in path.iterdir()):
+            groups += [sorted(layout.tiles_dir(c).glob("*.tif")) for c in set_cities(path)]
+        else:
+            rasters = sorted(p for p in path.iterdir() if p.suffix.lower() in RASTER_SUFFIXES)
+            if not rasters:
+                raise InputError(path, "holds no GeoTIFF, city, set or prediction")
+            groups.append(rasters)
+    seen = [p.resolve() for group in groups for p in group]
+    twice = next((p for p in seen if seen.count(p) > 1), None)
+    if twice is not None:
+        raise InputError(twice, "given twice")
+    return groups
+
+
+def open_imagery_views(groups: list[list[Path]], gsd: float | None, model_gsd: float) -> tuple[list, list]:
+    """Each group's mosaic as the model sees it (``model_view``) and the mosaics to close."""
+    views, mosaics = [], []
+    try:
+        for group in groups:
+            mosaic = Mosaic.open(group)
+            mosaics.append(mosaic)
+            views.append(model_view(mosaic, gsd, model_gsd).mosaic)
+    except Exception:
+        for mosaic in mosaics:
+            mosaic.close()
+        raise
+    return views, mosaics
+
+
+def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None, budget: AdaptBudget = AdaptBudget(),
+          method: AdaptConfig = AdaptConfig(), seed: int = 0, cache: Path | None = None, gsd: float | None = None, device: str = "auto",
+          progress: bool = True) -> dict:
+    """Adapt the bundle ``weights`` (default: the shipped one) to the unlabelled ``imagery`` and
+    write the adapted bundle ``out``. ``work`` keeps the runs (default ``OUT-adapt/``), ``cache``
+    the synthetic cities (default: in ``work``); ``gsd`` is the pixel size of imagery without a
+    CRS. Returns what was done and how long each stage took."""
+    from csboundary.models.training.adapt import train_adapt
+
+    out, base_path = Path(out), Path(weights) if weights else shipped_weights()
+    work = Path(work) if work else default_work(out)
+    base = checked_base(base_path)
+    if not base["fpn_config"].get("surface") and (method.mix or method.surface_anchor):
+        raise InputError(base_path, "its FPN has no road-surface head, which mixing and the surface anchor need "
+                                    "(give --no-mix --no-surface-anchor, or a bundle with one)")
+    groups = imagery_groups(imagery)
+    model_gsd = float(base.get("pixel_size_m", MODEL_GSD))
+    views, mosaics = open_imagery_views(groups, gsd, model_gsd)
+    try:
+        target = UnlabelledImagery(views, [str(g[0]) for g in groups])
+        least = 4 * budget.crop ** 2
+        if target.pixels < least:
+            raise InputError(groups[0][0], f"too little imagery to learn from: {target.pixels} px at the model's pixel size, "
+                                           f"adapt needs at least {least} (four {budget.crop} px windows)")
+        records = [{"path": str(p.resolve()), "sha256": file_sha256(p)} for group in groups for p in group]
+        tune = FinetuneBudget(fpn_steps=budget.fpn_steps, afanet_steps=budget.afanet_steps, user_share=0.5,
+                              synthetic_cities=budget.synthetic_cities, fpn_lr=budget.fpn_lr, afanet_lr=budget.afanet_lr,
+                              crop=budget.crop, batch=method.source_batch)
+        fpn_config, afanet_config = training_configs(base, base_path, [], tune, seed, Path(cache) if cache else work / "synthetic")
+        fpn_config.options = {"method": method.to_dict(), "imagery": records}
+        resolved = resolve_device(device)
+        seconds = {}
+        start = time.perf_counter()
+        fpn = _train("adapt", fpn_config, work / "fpn", resolved, progress, final_name="fpn.pt",
+                     trainer=lambda config, run, dev, resume, progress: train_adapt(config, target, run, dev, resume, progress))
+        seconds["fpn"] = time.perf_counter() - start
+    finally:
+        for mosaic in mosaics:
+            mosaic.close()
+    afanet_config.fpn_weights = str(fpn.resolve())
+    start = time.perf_counter()
+    afanet = _train("afanet", afanet_config, work / "afanet", resolved, progress) if budget.afanet_steps else None
+    seconds["afanet"] = time.perf_counter() - start
+    adapted_fpn = load_checkpoint(fpn, ("fpn",))
+    adapted_afanet = load_checkpoint(afanet, ("afanet",)) if afanet else {"afanet": base["afanet"], "afanet_config": base["afanet_config"]}
+    record = {"base_weights": str(base_path.resolve()), "base_sha256": file_sha256(base_path), "imagery": records,
+              "budget": budget.to_dict(), "method": method.to_dict(), "seed": seed, "code_version": code_version(),
+              "edge_confidence": "the base bundle's, fitted on its own predictions (docs/adapt.md: its AUC with the adapted networks)"}
+    keys = ("code_version", "code_version_at_start", "train_config", "step", "validation")
+    payload = {k: v for k, v in base.items() if k not in ("format", "kind", "code_version")}
+    provenance = {"fpn": {k: adapted_fpn.get(k) for k in keys}, "base": base.get("provenance") or {}, "adapt": record}
+    provenance["afanet"] = {k: adapted_afanet.get(k) for k in keys} if afanet else (base.get("provenance") or {}).get("afanet")
+    payload.update(fpn=adapted_fpn["fpn"], fpn_config=adapted_fpn["fpn_config"], afanet=adapted_afanet["afanet"],
+                   afanet_config=adapted_afanet["afanet_config"], provenance=provenance)
+    save_checkpoint(out, "bundle", **payload)
+    return {"out": out, "images": len(records), "pixels": target.pixels, "work": work, "seconds": seconds,
+            "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps}}
+
+
+__all__ = ["AdaptBudget", "adapt", "imagery_groups"]
