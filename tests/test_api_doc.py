@@ -10,7 +10,6 @@ import re
 import shutil
 from pathlib import Path
 
-import csboundary
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 

@@ -15,8 +15,8 @@ import pytest
 
 import csboundary
 
-LAYERS = {"errors": 0, "config": 1, "data": 2, "graph": 3, "labels": 4, "metrics": 4, "viz": 4, "models": 5, "pipeline": 6, "api": 7, "cli": 7,
-          "__main__": 8}
+LAYERS = {"errors": 0, "config": 1, "data": 2, "graph": 3, "labels": 4, "metrics": 4, "viz": 4, "models": 5, "pipeline": 6, "api": 7,
+          "cli": 7, "__main__": 8}
 PACKAGE = Path(csboundary.__file__).parent
 
 

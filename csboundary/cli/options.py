@@ -66,7 +66,7 @@ GATE_HELP = ("Surface gate: keypoint and boundary maps are kept only within this
 CONFIDENCE_HELP = ("Drop the city graph's edges whose confidence (the calibrated probability that an edge is a true boundary) is "
                    "below this (0 = keep all; docs/confidence.md shows precision and recall against it).")
 DEGREE_HELP = "Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."
-GRAPH_PANEL = "Graph settings (default: the weights')"
+GRAPH_PANEL = "Graph settings (default: the weights'; bundle-weights: off)"
 
 
 def _graph_option(flag: str, metavar: str, help: str, low: float = 0.0, high: float | None = None, kind: type = float):

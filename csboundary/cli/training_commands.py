@@ -8,7 +8,8 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, finite, out_dir, out_file, positive
+from csboundary.cli.options import DeviceOption, QuietOption, WeightsOption, finite, out_dir, out_file, positive, with_graph_options
+from csboundary.graph.settings import GraphOverrides
 
 
 def train(
@@ -34,44 +35,19 @@ def train(
     typer.echo(f"{weights}: trained {model} ({cfg.steps} steps); log in {out / 'train.log'}")
 
 
+@with_graph_options
 def bundle_weights(
     fpn: Path = typer.Option(..., help="Trained FPN checkpoint (fpn.pt)."),
     afanet: Path = typer.Option(..., help="Trained AfANet checkpoint (afanet.pt)."),
     out: Path = typer.Option(..., "--out", help="Bundle to write (e.g. csboundary/weights/csboundary-synthetic.pt)."),
-    edge_threshold: float = typer.Option(0.5, callback=finite, min=0.0, max=1.0, help="Default adjacency probability for an edge."),
-    min_edge_support: float = typer.Option(0.0, callback=finite, min=0.0, max=1.0,
-                                           help="Default mean boundary probability along an AfANet edge (0 = no check)."),
-    max_edge_length: float = typer.Option(0.0, callback=finite, min=0.0, help="Default longest AfANet edge in pixels (0 = no limit)."),
-    max_edge_gap: float = typer.Option(0.0, callback=finite, min=0.0,
-                                       help="Default longest stretch of an AfANet edge below --gap-level boundary probability, in pixels "
-                                       "(0 = no check)."),
+    graph: GraphOverrides = GraphOverrides(),
     gap_level: float = typer.Option(0.3, callback=finite, min=0.0, max=1.0,
                                     help="Boundary probability below which a point of an edge is a gap."),
-    fill_min_length: float = typer.Option(0.0, "--fill-min-length", callback=finite, min=0.0,
-                                          help="Default shortest segmentation-skeleton stretch no edge covers that is filled in, in "
-                                          "pixels (0 = off)."),
-    join_ends: float = typer.Option(0.0, "--join-ends", callback=finite, min=0.0,
-                                    help="Default longest join between two dangling ends that head towards each other over boundary, in "
-                                    "pixels (0 = off)."),
-    attach_ends: float = typer.Option(0.0, "--attach-ends", callback=finite, min=0.0,
-                                      help="Default farthest line ahead of a dangling end of the city graph it is joined to, in pixels (0 "
-                                      "= off)."),
-    attach_backed: float = typer.Option(0.0, "--attach-backed", callback=finite, min=0.0,
-                                        help="Default farthest line ahead of a dangling end of a window's graph it is joined to where the "
-                                        "boundary map backs the join, in pixels (0 = off)."),
-    surface_check: float = typer.Option(0.0, "--surface-check", callback=finite, min=0.0, max=1.0,
-                                        help="Default road-surface check: an edge needs this mean surface probability beside it, or a "
-                                        "connected edge that has it (0 = off; the FPN needs a surface head)."),
     surface_weak: float = typer.Option(0.2, "--surface-weak", callback=finite, min=0.0, max=1.0,
                                        help="Surface check: edges below this are dropped even when connected to a sure one."),
     surface_both_sides: float = typer.Option(0.0, "--surface-both-sides", callback=finite, min=0.0, max=1.0,
                                              help="Surface check: edges with at least this mean road-surface probability on their poorer "
                                              "side lie inside the roadway and are dropped (0 = off)."),
-    surface_gate: float = typer.Option(0.0, "--surface-gate", callback=finite, min=0.0, max=200.0,
-                                       help="Default surface gate: keypoint and boundary maps kept only within this many pixels of a "
-                                       "change of the road surface (0 = off; the FPN needs a surface head)."),
-    min_fragment_length: float = typer.Option(0.0, "--min-fragment-length", callback=finite, min=0.0,
-                                              help="Default shortest connected piece of the city graph kept, in pixels (0 = keep all)."),
     grid_crossings: int = typer.Option(0, min=0,
                                        help="Add vertices where the boundary crosses grid lines this far apart (0 = off; 250 = the label "
                                        "grid)."),
@@ -79,16 +55,24 @@ def bundle_weights(
                                                   help="Keypoint probability of a vertex (default: the one AfANet was trained with, 0.5 "
                                                   "unless its config says)."),
 ) -> None:
-    """Bundle a trained FPN and AfANet (weights + provenance) into one weights file."""
+    """Bundle a trained FPN and AfANet (weights + provenance) into one weights file. Its graph
+    settings are the graph options given (each one not given: off, edge threshold 0.5, at most 2
+    edges per vertex)."""
     from csboundary.models.bundle import make_bundle
 
+    if graph.min_confidence is not None:
+        raise typer.BadParameter("a confidence threshold is chosen when predicting, not stored in a bundle", param_hint="--min-confidence")
     out_file(out, (".pt",))
-    path = make_bundle(fpn, afanet, out, edge_threshold, min_support=min_edge_support, max_length_px=max_edge_length,
-                       crossing_spacing_px=grid_crossings, min_fragment_px=min_fragment_length, vertex_threshold=vertex_threshold,
-                       max_gap_px=max_edge_gap, gap_level=gap_level, fill_min_length_px=fill_min_length,
-                       surface_strong=surface_check, surface_weak=surface_weak, join_max_px=join_ends,
-                       attach_max_px=attach_ends, join_attach_px=attach_backed, surface_both_sides=surface_both_sides,
-                       surface_gate_px=surface_gate)
+    given = {name: value for name, value in (
+        ("edge_threshold", graph.edge_threshold), ("max_degree", graph.max_degree), ("min_support", graph.min_edge_support),
+        ("max_length_px", graph.max_edge_length), ("min_fragment_px", graph.min_fragment_length), ("max_gap_px", graph.max_edge_gap),
+        ("fill_min_length_px", graph.fill_min_length), ("surface_strong", graph.surface_check), ("join_max_px", graph.join_ends),
+        ("attach_max_px", graph.attach_ends), ("join_attach_px", graph.attach_backed), ("surface_gate_px", graph.surface_gate))
+        if value is not None}
+    if given.get("max_degree") == 0:
+        given["max_degree"] = None  # 0 = no cap, as when predicting
+    path = make_bundle(fpn, afanet, out, crossing_spacing_px=grid_crossings, vertex_threshold=vertex_threshold, gap_level=gap_level,
+                       surface_weak=surface_weak, surface_both_sides=surface_both_sides, **given)
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
 
 

@@ -601,6 +601,7 @@ def test_open_files_stay_under_the_cap_and_reads_do_not_change(shared_tiles):
 def test_patches_without_imagery_skip_the_model(tmp_path):
     from csboundary.data.grid import GridConfig
     from csboundary.graph import BoundaryGraph
+    from csboundary.graph.settings import GraphSettings
     from csboundary.pipeline.prediction.city import predict_city
 
     data = np.full((4, 100, 100), 90, np.uint8)
@@ -609,6 +610,7 @@ def test_patches_without_imagery_skip_the_model(tmp_path):
 
     class Counting:
         seen = 0
+        settings, confidence, collect_evidence = GraphSettings(), None, False
 
         def patch_maps(self, patches, images):
             self.seen += len(images)
