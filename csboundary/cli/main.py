@@ -51,6 +51,11 @@ for _name, _command in COMMANDS:
     app.command(_name)(_command)
 
 
+def command_line():
+    """The app as the click command ``main`` runs, its help tidied (:func:`help_as_read`)."""
+    return help_as_read(typer.main.get_command(app))
+
+
 def help_as_read(group):
     """The help screens tidied: each command's text re-flowed to the terminal (its docstring's
     line breaks dropped, paragraphs kept) and summed up in the command list by its first
@@ -126,7 +131,7 @@ def main() -> None:
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
     try:
-        code = help_as_read(typer.main.get_command(app))(standalone_mode=False)
+        code = command_line()(standalone_mode=False)
     except typer.Abort:
         typer.echo("aborted", err=True)
         sys.exit(1)
