@@ -169,7 +169,8 @@ def review(
 
 def apply_review(
     prediction: Path = typer.Argument(..., help="The predict output folder the review page was made from."),
-    edits: Path = typer.Argument(..., help="The edits the page exported (edits.geojson)."),
+    edits: Path = typer.Argument(..., help="The edits the page exported (edits.geojson), or a copy of the prediction's "
+                                 "boundaries.gpkg whose edges layer was edited in QGIS (with an optional 'complete' polygon layer)."),
 ) -> None:
     """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
     GeoJSON and map.osm (when present), and appends what a person changed, and the areas marked

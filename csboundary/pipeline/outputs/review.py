@@ -9,15 +9,18 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 from csboundary.data import city as layout
 from csboundary.data.atomic import atomic_path, check_output_dir
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.layer_edits import layer_edits
 from csboundary.graph.review_edits import EditError, apply_edits
 from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
-from csboundary.pipeline.outputs.prediction_files import imagery_extent, read_district, write_graph_outputs
+from csboundary.pipeline.outputs.prediction_files import EDGES_LAYER, imagery_extent, read_district, write_graph_outputs
 from csboundary.metrics.review_time import ReviewCosts
 from csboundary.viz.review_page import write_review_page
 
@@ -80,21 +83,27 @@ def graph_fingerprint(prediction: Path) -> str:
 
 
 def apply_review(prediction: Path, edits: Path) -> dict:
-    """Merge ``edits`` (the page's GeoJSON export) into the prediction's graph.json, GeoPackage,
-    GeoJSON and map.osm (when present), and append the record to ``review.json``. Edits made on
-    another version of graph.json are refused; a file applied before changes nothing (the
-    result then has ``already_applied``: that earlier record)."""
+    """Merge ``edits`` into the prediction's graph.json, GeoPackage, GeoJSON and map.osm (when
+    present), and append the record to ``review.json``. ``edits`` is the page's GeoJSON export,
+    or a GeoPackage whose ``edges`` layer (a copy of the prediction's) a person edited in a GIS,
+    with an optional ``complete`` polygon layer (:mod:`csboundary.graph.layer_edits`). Edits
+    made on another version of graph.json are refused; a file applied before changes nothing
+    (the result then has ``already_applied``: that earlier record)."""
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     try:
         raw = edits.read_bytes()
-        collection = json.loads(raw)
-        features = collection["features"]
-        if not isinstance(features, list):
-            raise TypeError
     except FileNotFoundError as exc:
         raise InputError(edits, "file not found") from exc
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(edits, "not a GeoJSON FeatureCollection of edits") from exc
+    if edits.suffix.lower() == ".gpkg":
+        collection = {"properties": {}, "features": gpkg_edits(graph, edits)}
+    else:
+        try:
+            collection = json.loads(raw)
+            if not isinstance(collection["features"], list):
+                raise TypeError
+        except (ValueError, KeyError, TypeError) as exc:
+            raise InputError(edits, "not a GeoJSON FeatureCollection of edits") from exc
+    features = collection["features"]
     edits_sha = hashlib.sha256(raw).hexdigest()
     log_path = prediction / REVIEW_LOG
     log = read_log(log_path)
@@ -126,6 +135,50 @@ def apply_review(prediction: Path, edits: Path) -> dict:
     with atomic_path(log_path) as tmp:
         tmp.write_text(json.dumps(log, indent=1) + "\n")
     return {**entry, "log": log_path}
+
+
+COMPLETE_LAYER = "complete"  # polygons a person marked complete, beside the edited edges layer
+
+
+def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
+    """The page's edit features equivalent to ``path``: a GeoPackage with the prediction's
+    ``edges`` layer as a person edited it, and optionally a ``complete`` polygon layer."""
+    import pyogrio
+
+    try:
+        layers = {name for name, _ in pyogrio.list_layers(path)}
+        edges = pyogrio.read_dataframe(path, layer=EDGES_LAYER) if EDGES_LAYER in layers else None
+    except Exception as exc:  # GDAL's errors for a file that is not a GeoPackage
+        raise InputError(path, f"not a readable GeoPackage ({' '.join(str(exc).split())[:200]})") from None
+    if edges is None:
+        raise InputError(path, f"has no {EDGES_LAYER} layer: edit a copy of the prediction's boundaries.gpkg")
+    missing = [c for c in ("edge_id", "u", "v") if c not in edges.columns]
+    if missing:
+        raise InputError(path, f"its {EDGES_LAYER} layer lacks {', '.join(missing)} (not a csboundary prediction's layer)")
+    for name, frame in ((EDGES_LAYER, edges),) + (((COMPLETE_LAYER, pyogrio.read_dataframe(path, layer=COMPLETE_LAYER)),)
+                                                   if COMPLETE_LAYER in layers else ()):
+        crs = frame.crs.to_string() if frame.crs is not None else None
+        if graph.crs is not None and crs is not None and not frame.crs.equals(graph.crs):
+            raise InputError(path, f"its {name} layer is in {crs}, the prediction in {graph.crs}")
+        if name == COMPLETE_LAYER:
+            areas = []
+            for geometry in frame.geometry:
+                for polygon in getattr(geometry, "geoms", [geometry]):
+                    if polygon is None or polygon.geom_type != "Polygon":
+                        raise InputError(path, f"its {COMPLETE_LAYER} layer holds a {getattr(polygon, 'geom_type', 'missing')} "
+                                               "geometry; draw polygons there")
+                    areas.append([[float(x), float(y)] for x, y, *_ in polygon.exterior.coords])
+    rows = []
+    for number, (edge_id, u, v, geometry) in enumerate(zip(edges["edge_id"], edges["u"], edges["v"], edges.geometry)):
+        lines = [] if geometry is None else list(getattr(geometry, "geoms", [geometry]))
+        if len(lines) != 1 or lines[0].geom_type != "LineString":
+            raise InputError(path, f"feature {number} of its {EDGES_LAYER} layer is not one line")
+        known = [None if value is None or value != value else int(value) for value in (edge_id, u, v)]  # NULL: a drawn feature
+        rows.append((*(known if known[0] is not None else (None, None, None)), np.asarray(lines[0].coords, float)[:, :2]))
+    try:
+        return layer_edits(graph, rows, areas if COMPLETE_LAYER in layers else [])
+    except EditError as exc:
+        raise InputError(path, str(exc)) from exc
 
 
 def read_log(path: Path) -> dict:

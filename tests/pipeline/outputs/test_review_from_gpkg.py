@@ -1,0 +1,124 @@
+"""Review done with a GIS's own editing tools: the prediction's edges layer edited in a copy of
+boundaries.gpkg (here through GeoPandas, which writes the GeoPackage QGIS edits) gives the same
+graph as the review page's equivalent edits, through the same checks and record."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+import pytest
+from shapely.geometry import LineString, Polygon
+
+from csboundary.data.windows import pixel_to_world
+from csboundary.graph import BoundaryGraph
+from csboundary.graph.chains import edge_line
+from csboundary.graph.layer_edits import layer_edits
+from csboundary.graph.review_edits import EditError
+from helpers import run_cli
+from test_review_edits_checked import edits_file, world_line
+
+
+@pytest.fixture
+def two_predictions(demo_run, tmp_path) -> tuple[Path, Path]:
+    for name in ("page", "gis"):
+        shutil.copytree(demo_run / "prediction", tmp_path / name)
+    return tmp_path / "page", tmp_path / "gis"
+
+
+def world(graph: BoundaryGraph, points: np.ndarray) -> np.ndarray:
+    xs, ys = pixel_to_world(graph.transform, points[:, 0], points[:, 1])
+    return np.stack([np.atleast_1d(xs), np.atleast_1d(ys)], axis=-1)
+
+
+def test_the_same_edits_from_a_gis_layer_and_from_the_page_give_the_same_graph(two_predictions, tmp_path):
+    page, gis = two_predictions
+    graph = BoundaryGraph.read_json(page / "graph.json")
+    degree = np.bincount(graph.edges.ravel(), minlength=graph.n_vertices)
+    deleted = 3
+    vertex = int(next(i for i in range(graph.n_vertices) if degree[i] == 2 and deleted not in np.flatnonzero((graph.edges == i).any(1))))
+    moved_to = graph.vertices[vertex] + np.array([4.0, -3.0])
+    drawn = np.array([[500.0, 500.0], [540.0, 520.0], [600.0, 520.0]])  # graph pixels, away from every vertex
+    area = np.array([[100.0, 100.0], [900.0, 100.0], [900.0, 900.0], [100.0, 900.0], [100.0, 100.0]])
+
+    # the page's export
+    features = [{"type": "Feature", "properties": {"action": "delete", "edge": deleted},
+                 "geometry": {"type": "LineString", "coordinates": world_line(graph, deleted)}},
+                {"type": "Feature", "properties": {"action": "move", "vertex": vertex},
+                 "geometry": {"type": "Point", "coordinates": world(graph, moved_to[None])[0].tolist()}},
+                {"type": "Feature", "properties": {"action": "add"}, "geometry": {"type": "LineString",
+                                                                                   "coordinates": world(graph, drawn).tolist()}},
+                {"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon",
+                                                                                        "coordinates": [world(graph, area).tolist()]}}]
+    done = run_cli("apply-review", str(page), str(edits_file(tmp_path / "edits.geojson", page, features)))
+    assert done.returncode == 0, done.stderr
+
+    # the same in the GIS: delete a feature, drag a vertex with both its lines, draw a line, draw a polygon
+    edited = tmp_path / "edited.gpkg"
+    shutil.copy(gis / "boundaries.gpkg", edited)
+    edges = gpd.read_file(edited, layer="edges")
+    assert (edges["edge_id"].to_numpy() == np.arange(graph.n_edges)).all()
+    edges = edges[edges["edge_id"] != deleted].copy()
+    new_end = world(graph, moved_to[None])[0]
+    lines = []
+    for (u, v), line in zip(edges[["u", "v"]].to_numpy(), edges.geometry):
+        coords = np.asarray(line.coords)
+        if u == vertex:
+            coords[0] = new_end
+        if v == vertex:
+            coords[-1] = new_end
+        lines.append(LineString(coords))
+    edges = edges.set_geometry(gpd.GeoSeries(lines, index=edges.index, crs=edges.crs))
+    row = {c: None for c in edges.columns if c != "geometry"}
+    edges = gpd.GeoDataFrame(list(edges.to_dict("records")) + [{**row, "geometry": LineString(world(graph, drawn))}],
+                             geometry="geometry", crs=edges.crs)
+    edges.to_file(edited, layer="edges", driver="GPKG", engine="pyogrio")
+    gpd.GeoDataFrame({"note": ["checked"]}, geometry=[Polygon(world(graph, area))], crs=edges.crs).to_file(
+        edited, layer="complete", driver="GPKG", engine="pyogrio")
+    done = run_cli("apply-review", str(gis), str(edited))
+    assert done.returncode == 0, done.stderr
+
+    a, b = BoundaryGraph.read_json(page / "graph.json"), BoundaryGraph.read_json(gis / "graph.json")
+    assert a.n_edges == b.n_edges == graph.n_edges and a.n_vertices == b.n_vertices  # one deleted, one drawn
+    assert np.allclose(a.vertices, b.vertices, atol=1e-6) and (a.edges == b.edges).all() and a.edge_kinds == b.edge_kinds
+    assert all(np.allclose(edge_line(a, k), edge_line(b, k), atol=1e-6) for k in range(a.n_edges))
+    assert np.allclose(b.vertices[vertex], moved_to, atol=1e-6) and b.edge_kinds[-1] == "manual"
+    import json
+    page_record, gis_record = (json.loads((p / "review.json").read_text())["reviews"][-1] for p in (page, gis))
+    for key in ("deleted_edges", "moved_vertices", "added_edges", "edge_index_map"):
+        assert page_record[key] == gis_record[key], key
+    assert len(gis_record["complete_areas"]) == 1
+
+
+def test_a_line_redrawn_between_its_ends_replaces_its_edge_and_a_vertex_moved_twice_is_refused():
+    from affine import Affine
+
+    graph = BoundaryGraph(np.array([[10.0, 10.0], [50.0, 10.0], [90.0, 10.0]]), np.array([[0, 1], [1, 2]]),
+                          transform=Affine(0.5, 0, 1000, 0, -0.5, 2000), crs="EPSG:32618")
+    rows = [(k, int(u), int(v), world(graph, edge_line(graph, k))) for k, (u, v) in enumerate(graph.edges)]
+    assert layer_edits(graph, rows) == []  # nothing changed, nothing to do
+    bent = world(graph, np.array([[10.0, 10.0], [30.0, 20.0], [50.0, 10.0]]))
+    actions = [f["properties"]["action"] for f in layer_edits(graph, [(0, 0, 1, bent), rows[1]])]
+    assert actions == ["delete", "add"]
+    two_places = [(0, 0, 1, world(graph, np.array([[10.0, 10.0], [52.0, 10.0]]))), (1, 1, 2, world(graph, np.array([[48.0, 10.0],
+                                                                                                                    [90.0, 10.0]])))]
+    with pytest.raises(EditError, match="vertex 1 is moved to two places"):
+        layer_edits(graph, two_places)
+    with pytest.raises(EditError, match="written for another prediction"):
+        layer_edits(graph, [(0, 1, 2, rows[0][3])])
+    only_one = layer_edits(graph, [rows[0]])
+    assert [(f["properties"]["action"], f["properties"]["edge"]) for f in only_one] == [("delete", 1)]
+
+
+def test_a_layer_that_is_not_the_prediction_s_is_one_line(demo_run, tmp_path):
+    from test_review_edits_checked import refused
+
+    prediction = tmp_path / "prediction"
+    shutil.copytree(demo_run / "prediction", prediction)
+    (tmp_path / "junk.gpkg").write_text("not a geopackage")
+    refused(prediction, tmp_path / "junk.gpkg", "not a readable GeoPackage")
+    gpd.GeoDataFrame({"name": ["x"]}, geometry=[LineString([(0, 0), (1, 1)])], crs="EPSG:32618").to_file(
+        tmp_path / "other.gpkg", layer="roads", driver="GPKG", engine="pyogrio")
+    refused(prediction, tmp_path / "other.gpkg", "has no edges layer")
