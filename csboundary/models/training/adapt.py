@@ -56,7 +56,7 @@ class AdaptConfig(Config):
     source_batch: int = 2  # synthetic labelled windows per step
     target_batch: int = 2  # windows of the user's imagery per step
     ema_decay: float = 0.99  # teacher = decay x teacher + (1 - decay) x student, every step
-    target_weight: float = 1.0  # the pseudo-label loss's weight beside the source loss
+    target_weight: float = 0.3  # the pseudo-label loss's weight beside the source loss: 0.3 kept APLS on both real sets (docs/adapt.md)
     confidence_weighting: bool = True  # weight each pseudo-label by the teacher's confidence |2q - 1|; else 1
     hard_labels: bool = False  # boundary and surface targets 0/1 (q > 0.5) rather than q: sharpens, and thins weak boundaries
     strong_augment: bool = True  # the student sees the target re-lit and degraded; else as the teacher does
