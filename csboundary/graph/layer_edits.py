@@ -9,7 +9,8 @@ What each change to the layer means:
   of every edge at it; two features moving one vertex to two places is refused;
 * a feature's line changed between its ends (vertices added, moved or removed inside it): the
   edge is replaced by the line as drawn (a deletion and an added edge);
-* a feature drawn (no ``edge_id``, or one already used by another feature): an added edge;
+* a feature drawn (no ``edge_id``, or one already used by another feature): an added edge; a
+  feature whose line was only reversed is unchanged;
 * a polygon in the ``complete`` layer: an area marked complete.
 
 Features keep their ``edge_id`` and the ``u`` and ``v`` of the graph they were written from; a
@@ -57,8 +58,10 @@ def layer_edits(graph: BoundaryGraph, rows: list[tuple[int | None, int | None, i
         kept[edge_id] = line
     moves: dict[int, tuple[np.ndarray, int]] = {}
     replaced: list[int] = []
-    for k, line in kept.items():
+    for k, line in list(kept.items()):
         before = original[k]
+        if np.abs(line[[0, -1]] - before[[-1, 0]]).max() <= SAME_PX < np.abs(line[[0, -1]] - before[[0, -1]]).max():
+            kept[k] = line = line[::-1]  # the line's direction reversed in the GIS (QGIS: Reverse Line): the same edge
         for vertex, old, new in ((graph.edges[k][0], before[0], line[0]), (graph.edges[k][1], before[-1], line[-1])):
             if np.abs(new - old).max() <= SAME_PX:
                 continue

@@ -99,6 +99,7 @@ def test_a_line_redrawn_between_its_ends_replaces_its_edge_and_a_vertex_moved_tw
                           transform=Affine(0.5, 0, 1000, 0, -0.5, 2000), crs="EPSG:32618")
     rows = [(k, int(u), int(v), world(graph, edge_line(graph, k))) for k, (u, v) in enumerate(graph.edges)]
     assert layer_edits(graph, rows) == []  # nothing changed, nothing to do
+    assert layer_edits(graph, [(0, 0, 1, rows[0][3][::-1]), rows[1]]) == []  # a line reversed is the same edge
     bent = world(graph, np.array([[10.0, 10.0], [30.0, 20.0], [50.0, 10.0]]))
     actions = [f["properties"]["action"] for f in layer_edits(graph, [(0, 0, 1, bent), rows[1]])]
     assert actions == ["delete", "add"]
