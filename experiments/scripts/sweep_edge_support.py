@@ -109,19 +109,12 @@ def main() -> None:
     for edge, vthr, support, length, gap, fill, strong, weak, join, fragment, attach, gate, both in grid:
         if (gate > 0 or strong > 0) and not predictor.fpn.config.surface:
             raise SystemExit("the surface check and gate need an FPN with a surface head")
-        predictor.settings = dataclasses.replace(predictor.settings, gate=dataclasses.replace(predictor.settings.gate, radius_px=gate))
-        predictor.settings = dataclasses.replace(predictor.settings, min_fragment_px=fragment)
-        predictor.settings = dataclasses.replace(predictor.settings, join=dataclasses.replace(predictor.settings.join, max_px=join,
-                                                                                              attach_px=attach))
-        predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=strong,
-                                                                                                 weak=weak, both_sides=both))
-        predictor.settings = dataclasses.replace(predictor.settings, fill=dataclasses.replace(predictor.settings.fill, min_length_px=fill))
-        predictor.settings = dataclasses.replace(predictor.settings, edge_threshold=edge)
-        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices,
-                                                                                                  threshold=vthr))
-        predictor.settings = dataclasses.replace(predictor.settings, support=dataclasses.replace(predictor.settings.support,
-                                                                                                 min_support=support, max_length_px=length,
-                                                max_gap_px=gap, gap_level=gap_level))
+        base, replace = predictor.settings, dataclasses.replace
+        predictor.settings = replace(
+            base, edge_threshold=edge, min_fragment_px=fragment, gate=replace(base.gate, radius_px=gate),
+            join=replace(base.join, max_px=join, attach_px=attach), fill=replace(base.fill, min_length_px=fill),
+            surface=replace(base.surface, strong=strong, weak=weak, both_sides=both), vertices=replace(base.vertices, threshold=vthr),
+            support=replace(base.support, min_support=support, max_length_px=length, max_gap_px=gap, gap_level=gap_level))
         row = score_row(args.sets, predictor)
         print(f"{edge:4.2f} {vthr:4.2f} {support:7.2f} {length:6.0f} {gap:3.0f} {fill:4.0f} {strong:7.2f} {weak:4.2f} {join:4.0f}  "
               f"{fragment:5.0f} {attach:6.0f} {gate:4.0f} {both:4.2f} " + " ".join(f"{r:>29s}" for r in row), flush=True)

@@ -148,6 +148,7 @@ def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
     try:
         layers = {name for name, _ in pyogrio.list_layers(path)}
         edges = pyogrio.read_dataframe(path, layer=EDGES_LAYER) if EDGES_LAYER in layers else None
+        complete = pyogrio.read_dataframe(path, layer=COMPLETE_LAYER) if COMPLETE_LAYER in layers else None
     except Exception as exc:  # GDAL's errors for a file that is not a GeoPackage
         raise InputError(path, f"not a readable GeoPackage ({' '.join(str(exc).split())[:200]})") from None
     if edges is None:
@@ -155,19 +156,16 @@ def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
     missing = [c for c in ("edge_id", "u", "v") if c not in edges.columns]
     if missing:
         raise InputError(path, f"its {EDGES_LAYER} layer lacks {', '.join(missing)} (not a csboundary prediction's layer)")
-    for name, frame in ((EDGES_LAYER, edges),) + (((COMPLETE_LAYER, pyogrio.read_dataframe(path, layer=COMPLETE_LAYER)),)
-                                                   if COMPLETE_LAYER in layers else ()):
-        crs = frame.crs.to_string() if frame.crs is not None else None
-        if graph.crs is not None and crs is not None and not frame.crs.equals(graph.crs):
-            raise InputError(path, f"its {name} layer is in {crs}, the prediction in {graph.crs}")
-        if name == COMPLETE_LAYER:
-            areas = []
-            for geometry in frame.geometry:
-                for polygon in getattr(geometry, "geoms", [geometry]):
-                    if polygon is None or polygon.geom_type != "Polygon":
-                        raise InputError(path, f"its {COMPLETE_LAYER} layer holds a {getattr(polygon, 'geom_type', 'missing')} "
-                                               "geometry; draw polygons there")
-                    areas.append([[float(x), float(y)] for x, y, *_ in polygon.exterior.coords])
+    for name, frame in ((EDGES_LAYER, edges), (COMPLETE_LAYER, complete)):
+        if frame is not None and graph.crs is not None and frame.crs is not None and not frame.crs.equals(graph.crs):
+            raise InputError(path, f"its {name} layer is in {frame.crs.to_string()}, the prediction in {graph.crs}")
+    areas = []
+    for geometry in [] if complete is None else complete.geometry:
+        for polygon in getattr(geometry, "geoms", [geometry]):
+            if polygon is None or polygon.geom_type != "Polygon":
+                raise InputError(path, f"its {COMPLETE_LAYER} layer holds a {getattr(polygon, 'geom_type', 'missing')} geometry; "
+                                       "draw polygons there")
+            areas.append([[float(x), float(y)] for x, y, *_ in polygon.exterior.coords])
     rows = []
     for number, (edge_id, u, v, geometry) in enumerate(zip(edges["edge_id"], edges["u"], edges["v"], edges.geometry)):
         lines = [] if geometry is None else list(getattr(geometry, "geoms", [geometry]))
@@ -176,7 +174,7 @@ def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
         known = [None if value is None or value != value else int(value) for value in (edge_id, u, v)]  # NULL: a drawn feature
         rows.append((*(known if known[0] is not None else (None, None, None)), np.asarray(lines[0].coords, float)[:, :2]))
     try:
-        return layer_edits(graph, rows, areas if COMPLETE_LAYER in layers else [])
+        return layer_edits(graph, rows, areas)
     except EditError as exc:
         raise InputError(path, str(exc)) from exc
 
