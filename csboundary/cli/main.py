@@ -51,6 +51,20 @@ for _name, _command in COMMANDS:
     app.command(_name)(_command)
 
 
+def _print_version(asked: bool) -> None:
+    if asked:
+        from csboundary import __version__
+
+        typer.echo(f"csboundary {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
+                                          help="Print the version and exit (the QGIS plugin's check of the environment).")) -> None:
+    pass
+
+
 def command_line():
     """The app as the click command ``main`` runs, its help tidied (:func:`help_as_read`)."""
     return help_as_read(typer.main.get_command(app))

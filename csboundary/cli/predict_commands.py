@@ -152,15 +152,23 @@ def review(
     out: Optional[Path] = typer.Option(None, "--out", help="Folder of the page (default: PREDICTION/review)."),
     ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to show as a toggle (default: the city's own, if any)."),
     bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
+    gpkg: Optional[Path] = typer.Option(None, "--gpkg", help="Write this GeoPackage instead of the page, to review in a GIS: "
+                                        "the edges layer to edit and an empty 'complete' polygon layer (apply-review reads it)."),
     quiet: QuietOption = False,
 ) -> None:
     """A self-contained review page: imagery with pan and zoom, boundaries coloured by
     confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
     for apply-review. Open OUT/index.html (no network needed). With --bounds, one district of
     the city (its edits merge into the whole city all the same)."""
-    from csboundary.pipeline.outputs.review import write_review
+    from csboundary.pipeline.outputs.review import write_review, write_review_layers
 
     box = district_bounds(bounds)
+    if gpkg is not None:
+        from csboundary.data.atomic import check_output_file
+
+        done = write_review_layers(prediction, check_output_file(gpkg, (".gpkg",)), bounds=box)
+        typer.echo(f"{done['gpkg']}: {done['edges']} edges to review (layers edges, complete)")
+        return
     out_dir(out or prediction / "review")
     done = write_review(prediction, out, ground_truth, progress=not quiet, bounds=box)
     typer.echo(f"{done['page']}: {done['edges']} edges to "

@@ -25,6 +25,7 @@ from csboundary.metrics.review_time import ReviewCosts
 from csboundary.viz.review_page import write_review_page
 
 REVIEW_LOG = "review.json"
+COMPLETE_LAYER = "complete"  # polygons a person marked complete, beside the edited edges layer
 
 
 def prediction_inputs(prediction: Path) -> list[Path]:
@@ -74,6 +75,25 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
         page = write_review_page(graph, mosaic, out or prediction / "review", lines, progress=progress,
                                  fingerprint=graph_fingerprint(prediction), ids=ids, review_costs=ReviewCosts().to_dict())
     return {"page": page, "edges": graph.n_edges, "ground_truth": ground_truth if lines else None}
+
+
+def write_review_layers(prediction: Path, path: Path, bounds: tuple[float, float, float, float] | None = None) -> dict:
+    """A GeoPackage to review ``prediction`` in a GIS: a copy of its ``edges`` layer (of the
+    district ``bounds``, or all) to edit, and an empty ``complete`` polygon layer in the same CRS
+    for the areas checked. ``apply-review PREDICTION path`` reads the two back (:func:`gpkg_edits`)."""
+    import geopandas as gpd
+    import pyogrio
+
+    prediction_inputs(prediction)  # a finished prediction, or one line saying it is not
+    source = prediction / "boundaries.gpkg"
+    if path.resolve() == source.resolve():
+        raise InputError(path, "is the prediction's own GeoPackage, which apply-review rewrites: give another file")
+    edges = pyogrio.read_dataframe(source, layer=EDGES_LAYER, bbox=bounds)
+    complete = gpd.GeoDataFrame({"note": np.array([], dtype=object)}, geometry=gpd.GeoSeries([], crs=edges.crs), crs=edges.crs)
+    with atomic_path(path) as tmp:
+        pyogrio.write_dataframe(edges, tmp, layer=EDGES_LAYER, driver="GPKG", geometry_type="LineString")
+        pyogrio.write_dataframe(complete, tmp, layer=COMPLETE_LAYER, driver="GPKG", geometry_type="Polygon", append=True)
+    return {"gpkg": path, "edges": len(edges)}
 
 
 def graph_fingerprint(prediction: Path) -> str:
@@ -136,8 +156,6 @@ def apply_review(prediction: Path, edits: Path) -> dict:
         tmp.write_text(json.dumps(log, indent=1) + "\n")
     return {**entry, "log": log_path}
 
-
-COMPLETE_LAYER = "complete"  # polygons a person marked complete, beside the edited edges layer
 
 
 def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:

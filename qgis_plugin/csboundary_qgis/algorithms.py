@@ -1,0 +1,300 @@
+"""The Processing algorithms: each one a csboundary command, its options as parameters, its
+output files loaded as layers. The work is done by the command (runner.py), so an algorithm
+here only builds the command line and says what to load."""
+
+import json
+import os
+import tempfile
+
+from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingContext, QgsProcessingException,
+                       QgsProcessingOutputFile, QgsProcessingOutputFolder, QgsProcessingOutputNumber,
+                       QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean, QgsProcessingParameterEnum,
+                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterFolderDestination, QgsProcessingParameterMultipleLayers,
+                       QgsProcessingParameterNumber, QgsProcessingParameterVectorLayer, QgsProcessingUtils,
+                       QgsVectorFileWriter)
+
+from . import runner
+from .command import configured_command
+from .styles import Styler
+
+ENGINES = ("auto", "torch", "onnx")
+DEVICES = ("auto", "cpu", "cuda")
+BOUNDARIES_LAYER = "road_boundaries"  # in the prediction's boundaries.gpkg
+EDGES_LAYER = "edges"  # in the prediction's boundaries.gpkg and in the review GeoPackage
+COMPLETE_LAYER = "complete"  # polygons a reviewer marks checked, in the review GeoPackage
+REVIEW_GPKG = "review.gpkg"  # the copy of the edges that a reviewer edits, beside the prediction
+
+
+class CsboundaryAlgorithm(QgsProcessingAlgorithm):
+    """What every algorithm shares: the command's run with QGIS's progress bar and cancel."""
+    NAME = ""
+    TITLE = ""
+    HELP = ""
+
+    def createInstance(self):  # noqa: N802 (QGIS's names throughout)
+        return type(self)()
+
+    def name(self):
+        return self.NAME
+
+    def displayName(self):  # noqa: N802
+        return self.TITLE
+
+    def shortHelpString(self):  # noqa: N802
+        return self.HELP + ("<p>Runs the csboundary command of the environment named under Settings > Options > "
+                            "Processing > Providers > csboundary (or $CSBOUNDARY_COMMAND, or the one on PATH).</p>")
+
+    def csboundary(self, args, feedback):
+        """Run ``csboundary args``: its bars in QGIS's progress bar, its lines in the log, cancel
+        stops it; a failure is one QgsProcessingException line."""
+        try:
+            command = runner.find_command(configured_command())
+            feedback.pushInfo(f"{runner.check_command(command)} ({command})")
+            feedback.pushCommandInfo(" ".join([command, *args]))
+            progress = runner.Progress(stage=feedback.setProgressText, percent=feedback.setProgress,
+                                       line=feedback.pushConsoleInfo, canceled=feedback.isCanceled)
+            return runner.run(command, list(args), progress)
+        except runner.Canceled:
+            raise QgsProcessingException("canceled: csboundary was stopped (a prediction keeps its finished patches: "
+                                         "run it again into the same folder to continue)") from None
+        except runner.CommandError as exc:
+            raise QgsProcessingException(f"csboundary: {exc}") from None
+
+    def engine_parameters(self):
+        self.addParameter(QgsProcessingParameterFile("WEIGHTS", "Weights bundle (empty: the shipped weights)",
+                                                     extension="pt", optional=True))
+        self.addParameter(QgsProcessingParameterEnum("DEVICE", "Device", options=list(DEVICES), defaultValue=0))
+
+    def engine_args(self, parameters, context):
+        args = ["--device", DEVICES[self.parameterAsEnum(parameters, "DEVICE", context)]]
+        weights = self.parameterAsFile(parameters, "WEIGHTS", context)
+        return args + (["--weights", weights] if weights else [])
+
+    def folder(self, parameters, name, context):
+        path = self.parameterAsFile(parameters, name, context)
+        if not path or not os.path.isdir(path):
+            raise QgsProcessingException(f"{path or name}: not a folder")
+        return path
+
+    def prediction(self, parameters, context):
+        """A predict output folder (its graph.json must be there)."""
+        path = self.folder(parameters, "PREDICTION", context)
+        if not os.path.isfile(os.path.join(path, "graph.json")):
+            raise QgsProcessingException(f"{path}: not a csboundary prediction (no graph.json): choose a Detect output folder")
+        return path
+
+
+def load(context, source, name, output, kind):
+    """Have Processing load ``source`` into the project when the algorithm ends, styled as ``kind``."""
+    if context.project() is None:
+        return
+    details = QgsProcessingContext.LayerDetails(name, context.project(), output, QgsProcessingUtils.LayerHint.Vector)
+    details.setPostProcessor(Styler.make(kind))
+    context.addLayerToLoadOnCompletion(source, details)
+
+
+def imagery_files(algorithm, parameters, name, context):
+    """The files behind raster layers; a layer that is not a local raster file is refused, with the way out."""
+    layers = algorithm.parameterAsLayerList(parameters, name, context)
+    if not layers:
+        raise QgsProcessingException("no imagery given")
+    files = []
+    for layer in layers:
+        path = layer.source().split("|")[0]
+        if layer.providerType() != "gdal" or not os.path.isfile(path):
+            raise QgsProcessingException(f"{layer.name()}: not a local raster file; save it as a GeoTIFF first "
+                                         "(Raster > Conversion > Translate)")
+        files.append(path)
+    return files
+
+
+class Detect(CsboundaryAlgorithm):
+    NAME = "detect"
+    TITLE = "Detect road boundaries"
+    HELP = ("<p>Predicts the road-boundary graph of aerial imagery (one or more GeoTIFF tiles of one mosaic) with "
+            "<code>csboundary predict</code>, and loads the boundaries and the review layers, coloured by the "
+            "calibrated confidence of each edge: the least sure in red.</p>"
+            "<p>To review: edit the <i>edges</i> layer of review.gpkg (delete false edges, move vertices, draw missing "
+            "boundaries) and draw the areas you checked in its <i>complete</i> layer, then run Apply review.</p>"
+            "<p>An interrupted or canceled run continues where it stopped when run again into the same output folder.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF tiles of one mosaic)",
+                                                               QgsProcessing.TypeRaster))
+        self.addParameter(QgsProcessingParameterEnum("ENGINE", "Engine", options=list(ENGINES), defaultValue=0))
+        self.addParameter(QgsProcessingParameterNumber("MIN_CONFIDENCE", "Leave out edges less sure than",
+                                                       QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+        self.engine_parameters()
+        self.addParameter(QgsProcessingParameterFolderDestination("OUTPUT", "Prediction folder"))
+        self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
+        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_EDGES", "Edges to review", QgsProcessing.TypeVectorLine))
+        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_COMPLETE", "Areas checked", QgsProcessing.TypeVectorPolygon))
+        self.addOutput(QgsProcessingOutputFile("GRAPH", "graph.json"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        inputs = imagery_files(self, parameters, "INPUT", context)
+        out = self.parameterAsString(parameters, "OUTPUT", context)
+        args = ["predict", *inputs, "--out", out, "--engine", ENGINES[self.parameterAsEnum(parameters, "ENGINE", context)]]
+        min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
+        if min_confidence > 0:
+            args += ["--min-confidence", repr(min_confidence)]
+        self.csboundary(args + self.engine_args(parameters, context), feedback)
+        review = os.path.join(out, REVIEW_GPKG)
+        self.csboundary(["review", out, "--gpkg", review, "--quiet"], feedback)
+        results = {"OUTPUT": out, "GRAPH": os.path.join(out, "graph.json"),
+                   "BOUNDARIES": f"{os.path.join(out, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}",
+                   "REVIEW_EDGES": f"{review}|layername={EDGES_LAYER}", "REVIEW_COMPLETE": f"{review}|layername={COMPLETE_LAYER}"}
+        load(context, results["BOUNDARIES"], "road boundaries", "BOUNDARIES", "boundaries")
+        load(context, results["REVIEW_EDGES"], "edges to review", "REVIEW_EDGES", "edges")
+        load(context, results["REVIEW_COMPLETE"], "areas checked", "REVIEW_COMPLETE", "complete")
+        return results
+
+
+class Evaluate(CsboundaryAlgorithm):
+    NAME = "evaluate"
+    TITLE = "Evaluate against ground truth"
+    HELP = ("<p>Relaxed precision, recall and F1 at 2, 5 and 10 px, APLS and TLTS of a prediction against a "
+            "ground-truth line layer (<code>csboundary evaluate</code>; definitions in docs/metrics.md).</p>")
+    SCORES = (("F1_5", "f1@5"), ("PRECISION_5", "precision@5"), ("RECALL_5", "recall@5"), ("F1_2", "f1@2"),
+              ("F1_10", "f1@10"), ("APLS", "apls"), ("TLTS", "tlts"))
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(QgsProcessingParameterVectorLayer("GROUND_TRUTH", "Ground-truth road boundaries",
+                                                            [QgsProcessing.TypeVectorLine]))
+        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Scores (JSON)", "JSON files (*.json)"))
+        for key, label in self.SCORES:
+            self.addOutput(QgsProcessingOutputNumber(key, label))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        prediction = self.prediction(parameters, context)
+        layer = self.parameterAsVectorLayer(parameters, "GROUND_TRUTH", context)
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        with tempfile.TemporaryDirectory() as work:  # any layer (PostGIS, memory, a shapefile) as one GeoPackage
+            ground_truth = os.path.join(work, "ground_truth.gpkg")
+            options = QgsVectorFileWriter.SaveVectorOptions()
+            options.driverName = "GPKG"
+            error = QgsVectorFileWriter.writeAsVectorFormatV3(layer, ground_truth, context.transformContext(), options)
+            if error[0] != QgsVectorFileWriter.NoError:
+                raise QgsProcessingException(f"{layer.name()}: could not be written for csboundary ({error[1]})")
+            self.csboundary(["evaluate", os.path.join(prediction, "graph.json"), ground_truth, "--json", out], feedback)
+        with open(out) as file:
+            scores = json.load(file)
+        metrics = scores.get("metrics", scores)
+        results = {"OUTPUT": out}
+        for key, name in self.SCORES:
+            value = metrics.get(name)
+            results[key] = float(value) if isinstance(value, (int, float)) else None
+        return results
+
+
+class ExportLanelet2(CsboundaryAlgorithm):
+    NAME = "exportlanelet2"
+    TITLE = "Export Lanelet2"
+    HELP = ("<p>The predicted boundaries as a Lanelet2 map (<code>csboundary export-lanelet2</code>): one road_border "
+            "linestring per boundary, confidence as an attribute, Autoware's map_projector_info.yaml beside it.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(QgsProcessingParameterNumber("MIN_CONFIDENCE", "Leave out edges less sure than",
+                                                       QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Lanelet2 map", "OSM files (*.osm)"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        prediction = self.prediction(parameters, context)
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        args = ["export-lanelet2", prediction, "--out", out]
+        min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
+        if min_confidence > 0:
+            args += ["--min-confidence", repr(min_confidence)]
+        self.csboundary(args, feedback)
+        return {"OUTPUT": out}
+
+
+class ApplyReview(CsboundaryAlgorithm):
+    NAME = "applyreview"
+    TITLE = "Apply review"
+    HELP = ("<p>Merges the review done in QGIS into the prediction (<code>csboundary apply-review</code>): the "
+            "deleted, moved, reshaped and drawn lines of the review GeoPackage's <i>edges</i> layer and the polygons "
+            "of its <i>complete</i> layer become the same edits as the review page's, checked the same way and "
+            "recorded in review.json (the complete areas are labels for Fine-tune). Save your edits first. "
+            "A fresh review GeoPackage of the corrected graph is written for the next round.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(QgsProcessingParameterFile("EDITED", "Edited review GeoPackage", extension="gpkg"))
+        self.addParameter(QgsProcessingParameterFileDestination("NEXT_REVIEW", "Review GeoPackage of the corrected graph",
+                                                                "GeoPackage (*.gpkg)"))
+        self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
+        self.addOutput(QgsProcessingOutputFolder("PREDICTION", "Prediction folder"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        prediction = self.prediction(parameters, context)
+        edited = self.parameterAsFile(parameters, "EDITED", context)
+        next_review = self.parameterAsFileOutput(parameters, "NEXT_REVIEW", context)
+        self.csboundary(["apply-review", prediction, edited], feedback)
+        self.csboundary(["review", prediction, "--gpkg", next_review, "--quiet"], feedback)
+        results = {"PREDICTION": prediction, "NEXT_REVIEW": next_review,
+                   "BOUNDARIES": f"{os.path.join(prediction, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}"}
+        load(context, results["BOUNDARIES"], "road boundaries (reviewed)", "BOUNDARIES", "boundaries")
+        load(context, f"{next_review}|layername={EDGES_LAYER}", "edges to review", "NEXT_REVIEW", "edges")
+        load(context, f"{next_review}|layername={COMPLETE_LAYER}", "areas checked", "NEXT_REVIEW", "complete")
+        return results
+
+
+class Finetune(CsboundaryAlgorithm):
+    NAME = "finetune"
+    TITLE = "Fine-tune on reviewed areas"
+    HELP = ("<p>Fine-tunes the weights on the areas marked complete in reviewed predictions (<code>csboundary "
+            "finetune</code>), with synthetic cities mixed in. Takes hours on a CPU; run again with the same work "
+            "folder to continue a stopped run.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Reviewed prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(QgsProcessingParameterNumber("FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, 1000, minValue=1))
+        self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", "AfANet steps", QgsProcessingParameterNumber.Integer, 500,
+                                                       minValue=1))
+        self.engine_parameters()
+        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs, to continue)"))
+        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Fine-tuned weights", "Weights bundle (*.pt)"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        self.csboundary(["finetune", self.prediction(parameters, context), "--out", out,
+                         "--work", self.parameterAsString(parameters, "WORK", context),
+                         "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
+                         "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
+                         *self.engine_args(parameters, context)], feedback)
+        return {"OUTPUT": out}
+
+
+class Adapt(CsboundaryAlgorithm):
+    NAME = "adapt"
+    TITLE = "Adapt to your imagery (no labels)"
+    HELP = ("<p>Adapts the weights to your city from its own unlabelled imagery (<code>csboundary adapt</code>): "
+            "self-training of the FPN by an averaged teacher with synthetic cities mixed in, then AfANet. Measured "
+            "gains and losses: docs/adapt.md. Run again with the same work folder to continue a stopped run.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF)", QgsProcessing.TypeRaster))
+        self.addParameter(QgsProcessingParameterNumber("FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, 800, minValue=1))
+        self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", "AfANet steps (0: keep the bundle's)",
+                                                       QgsProcessingParameterNumber.Integer, 300, minValue=0))
+        self.addParameter(QgsProcessingParameterBoolean("MIX", "Paste synthetic roadway into your windows", True))
+        self.engine_parameters()
+        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs, to continue)"))
+        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Adapted weights", "Weights bundle (*.pt)"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        mix = self.parameterAsBoolean(parameters, "MIX", context)
+        self.csboundary(["adapt", *imagery_files(self, parameters, "INPUT", context), "--out", out,
+                         "--work", self.parameterAsString(parameters, "WORK", context),
+                         "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
+                         "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
+                         "--mix" if mix else "--no-mix", *self.engine_args(parameters, context)], feedback)
+        return {"OUTPUT": out}
+
+
+ALGORITHMS = (Detect, Evaluate, ExportLanelet2, ApplyReview, Finetune, Adapt)

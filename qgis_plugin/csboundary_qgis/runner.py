@@ -1,0 +1,180 @@
+"""The csboundary command of the user's environment, run for QGIS: its progress bars turned into
+numbers, cancel turned into SIGTERM (the command removes its temporaries and keeps a predict
+run's finished patches), its failure into one line.
+
+QGIS's own Python seldom has PyTorch, so the plugin never imports csboundary: it runs the
+command of an environment the user installed. Nothing here imports QGIS, so it is tested
+without QGIS.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import shutil
+import signal
+import subprocess
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+COMMAND_ENV = "CSBOUNDARY_COMMAND"  # the command's path, when the plugin's setting is empty
+SETTING_PLACE = "Settings > Options > Processing > Providers > csboundary"
+
+# a tqdm bar as csboundary prints it: "predict patches:  45%|####5     | 9/20 [00:04<00:05, 2.1patch/s]"
+_BAR = re.compile(r"^\s*(?P<stage>[^:|]{1,80}):\s*(?P<percent>\d{1,3})%\|")
+
+
+class CommandError(Exception):
+    """The command is missing, broken, or failed: one line for the user."""
+
+
+class Canceled(Exception):
+    """The user canceled; the command was stopped."""
+
+
+def find_command(configured: str | None) -> str:
+    """The csboundary executable: the plugin's setting, else $CSBOUNDARY_COMMAND, else the one on PATH."""
+    command = (configured or "").strip() or os.environ.get(COMMAND_ENV, "").strip() or shutil.which("csboundary")
+    if not command:
+        raise CommandError("no csboundary command found: install csboundary in a Python environment "
+                           f"(pip install csboundary) and give its csboundary executable under {SETTING_PLACE}")
+    if not os.path.isfile(command) or not os.access(command, os.X_OK):
+        raise CommandError(f"{command}: not an executable file; give the csboundary executable of the environment "
+                           f"where csboundary is installed under {SETTING_PLACE}")
+    return command
+
+
+def check_command(command: str, timeout: float = 120.0) -> str:
+    """The version the command reports (``csboundary 0.1.0``); a command that does not run as
+    csboundary is a :class:`CommandError` naming what it printed."""
+    try:
+        done = subprocess.run([command, "--version"], capture_output=True, text=True, timeout=timeout)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise CommandError(f"{command}: does not run ({exc})") from None
+    said = (done.stdout + done.stderr).strip()
+    if done.returncode != 0 or not said.startswith("csboundary "):
+        raise CommandError(f"{command}: the csboundary environment is broken ({last_line(said) or f'exit {done.returncode}'}); "
+                           "reinstall csboundary there")
+    return said.splitlines()[0]
+
+
+def last_line(text: str) -> str:
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    return lines[-1] if lines else ""
+
+
+def failure(lines: list[str], returncode: int) -> str:
+    """One line for a failed run: the command's own ``error:`` line, else (a traceback: the
+    environment, not the input) its last line."""
+    errors = [line for line in lines if line.startswith("error:")]
+    if errors:
+        return errors[-1][len("error:"):].strip()
+    if any(line.startswith("Traceback") for line in lines):
+        return f"the csboundary environment is broken ({last_line(chr(10).join(lines))}); reinstall csboundary there"
+    return last_line("\n".join(lines)) or f"csboundary stopped with exit status {returncode}"
+
+
+@dataclass
+class Progress:
+    """Where the output of a run goes: a stage's name and percentage, and every other line."""
+    stage: Callable[[str], None] = lambda text: None
+    percent: Callable[[float], None] = lambda value: None
+    line: Callable[[str], None] = lambda text: None
+    canceled: Callable[[], bool] = lambda: False
+    lines: list[str] = field(default_factory=list)  # every line that is not a bar, for the failure's message
+    current: str = ""  # the stage whose bar was last seen
+
+    def take(self, piece: str) -> None:
+        """One piece of output (between carriage returns or newlines)."""
+        piece = piece.rstrip()
+        if not piece:
+            return
+        bar = _BAR.match(piece)
+        if bar:
+            stage = bar.group("stage").strip()
+            if stage != self.current:
+                self.current = stage
+                self.stage(stage)
+            self.percent(min(100.0, float(bar.group("percent"))))
+            return
+        self.lines.append(piece)
+        self.line(piece)
+
+
+def run(command: str, args: list[str], progress: Progress, poll: float = 0.1, grace: float = 4.0) -> list[str]:
+    """Run ``command args``, feeding ``progress`` as the output comes; return the output lines.
+
+    On cancel the command's process group gets SIGTERM (csboundary then removes its temporaries
+    and exits; a predict run keeps its finished patches for the same command to continue) and,
+    after ``grace`` seconds, SIGKILL. Raises :class:`Canceled` or, on a non-zero exit,
+    :class:`CommandError`."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONIOENCODING="utf-8")
+    try:
+        process = subprocess.Popen([command, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env,
+                                   start_new_session=os.name != "nt")
+    except OSError as exc:
+        raise CommandError(f"{command}: does not run ({exc})") from None
+    pieces: queue.Queue = queue.Queue()
+    reader = threading.Thread(target=_read, args=(process.stdout, pieces), daemon=True)
+    reader.start()
+    while True:
+        _drain(pieces, progress)
+        if process.poll() is not None:
+            break
+        if progress.canceled():
+            stop(process, grace)
+            reader.join(timeout=1.0)
+            _drain(pieces, progress)
+            raise Canceled()
+        time.sleep(poll)
+    reader.join(timeout=5.0)
+    _drain(pieces, progress)
+    if process.returncode != 0:
+        raise CommandError(failure(progress.lines, process.returncode))
+    return progress.lines
+
+
+def stop(process: subprocess.Popen, grace: float) -> None:
+    """SIGTERM to the command and what it started, then SIGKILL if it is still there after ``grace`` s."""
+    def send(sig) -> None:
+        try:
+            if os.name == "nt":
+                process.terminate() if sig == signal.SIGTERM else process.kill()
+            else:
+                os.killpg(process.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+    send(signal.SIGTERM)
+    try:
+        process.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        send(signal.SIGKILL)
+        process.wait()
+
+
+def _read(stream, pieces: queue.Queue) -> None:
+    """Split the byte stream on carriage returns (a bar redrawn) and newlines, as it comes."""
+    rest = b""
+    while True:
+        chunk = os.read(stream.fileno(), 65536)
+        if not chunk:
+            break
+        parts = re.split(rb"[\r\n]", rest + chunk)
+        rest = parts.pop()
+        for part in parts:
+            pieces.put(part.decode("utf-8", "replace"))
+    if rest:
+        pieces.put(rest.decode("utf-8", "replace"))
+    stream.close()
+
+
+def _drain(pieces: queue.Queue, progress: Progress) -> None:
+    while True:
+        try:
+            progress.take(pieces.get_nowait())
+        except queue.Empty:
+            return
