@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint wheel-check clean
+.PHONY: demo test lint wheel-check qgis-plugin qgis-test clean
 
 $(STAMP): pyproject.toml constraints.txt
 	@echo "installing csboundary and its dependencies (PyTorch CPU, ONNX Runtime, GDAL's rasterio, ...) into $(VENV): once, about 1.5 min"
@@ -22,7 +22,17 @@ test: $(STAMP) lint
 	$(BIN)/pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check csboundary tests benchmarks experiments scripts
+	$(BIN)/ruff check csboundary tests benchmarks experiments scripts qgis_plugin
+
+# the QGIS plugin's installable zip (Plugins > Manage and Install Plugins > Install from ZIP)
+qgis-plugin:
+	$(PYTHON) qgis_plugin/build_zip.py build/csboundary_qgis.zip
+
+# the plugin inside QGIS: installs Debian's QGIS 3.22 (as root) if it is missing, runs the tests marked qgis
+# and renders docs/qgis-layers.jpg from the Detect run
+qgis-test: $(STAMP) qgis-plugin
+	command -v qgis_process >/dev/null || (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q qgis python3-qgis)
+	CSBOUNDARY_QGIS_PICTURE=$(CURDIR)/docs/qgis-layers.jpg $(BIN)/pytest -m qgis tests/qgis_plugin -n 0 -s
 
 wheel-check: $(STAMP)
 	rm -rf build/wheel-check && mkdir -p build/wheel-check

@@ -24,7 +24,8 @@ COMMAND_ENV = "CSBOUNDARY_COMMAND"  # the command's path, when the plugin's sett
 SETTING_PLACE = "Settings > Options > Processing > Providers > csboundary"
 
 # a tqdm bar as csboundary prints it: "predict patches:  45%|####5     | 9/20 [00:04<00:05, 2.1patch/s]"
-_BAR = re.compile(r"^\s*(?P<stage>[^:|]{1,80}):\s*(?P<percent>\d{1,3})%\|")
+# A bar left open (an interrupted run) has the next message glued to its end: kept as "rest".
+_BAR = re.compile(r"^\s*(?P<stage>[^:|]{1,80}):\s*(?P<percent>\d{1,3})%\|[^|]*\|[^\]]*\](?P<rest>.*)$")
 
 
 class CommandError(Exception):
@@ -99,7 +100,9 @@ class Progress:
                 self.current = stage
                 self.stage(stage)
             self.percent(min(100.0, float(bar.group("percent"))))
-            return
+            piece = bar.group("rest").strip()
+            if not piece:
+                return
         self.lines.append(piece)
         self.line(piece)
 

@@ -3,7 +3,6 @@ warm colour (the order in which a reviewer looks at them), checked areas as gree
 
 from qgis.core import (QgsFillSymbol, QgsGraduatedSymbolRenderer, QgsLineSymbol, QgsProcessingLayerPostProcessorInterface,
                        QgsRendererRange, QgsSingleSymbolRenderer)
-from qgis.PyQt.QtGui import QColor
 
 # (lower, upper, colour, label): the classes of the calibrated probability that an edge is a true boundary
 CONFIDENCE_CLASSES = (

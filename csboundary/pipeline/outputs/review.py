@@ -91,7 +91,9 @@ def write_review_layers(prediction: Path, path: Path, bounds: tuple[float, float
     edges = pyogrio.read_dataframe(source, layer=EDGES_LAYER, bbox=bounds)
     complete = gpd.GeoDataFrame({"note": np.array([], dtype=object)}, geometry=gpd.GeoSeries([], crs=edges.crs), crs=edges.crs)
     with atomic_path(path) as tmp:
-        pyogrio.write_dataframe(edges, tmp, layer=EDGES_LAYER, driver="GPKG", geometry_type="LineString")
+        # GeoPackage 1.2: what the GDAL of older GIS releases (QGIS 3.22's 3.6) edits without a warning
+        pyogrio.write_dataframe(edges, tmp, layer=EDGES_LAYER, driver="GPKG", geometry_type="LineString",
+                                dataset_options={"VERSION": "1.2"})
         pyogrio.write_dataframe(complete, tmp, layer=COMPLETE_LAYER, driver="GPKG", geometry_type="Polygon", append=True)
     return {"gpkg": path, "edges": len(edges)}
 

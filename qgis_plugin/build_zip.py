@@ -1,5 +1,5 @@
 """Build the QGIS plugin's installable zip (Plugins > Manage and Install Plugins > Install from
-ZIP): ``python qgis_plugin/build.py [OUT.zip]`` (``make qgis-plugin``)."""
+ZIP): ``python qgis_plugin/build_zip.py [OUT.zip]`` (``make qgis-plugin``)."""
 
 import re
 import sys

@@ -1,0 +1,178 @@
+"""Drives the plugin inside QGIS (headless), for tests/qgis_plugin/test_in_qgis.py: run by QGIS's
+own Python (Debian's python3-qgis), never by the test suite's. Usage:
+
+    python3 qgis_session.py PLUGIN_DIR REQUEST.json REPORT.json
+
+The request's "mode" says what to do: "detect" (run Detect as the Processing dialog does, report
+the layers loaded into the project, render a picture of them), "review" (edit the review
+GeoPackage with QGIS's editing API, run Apply review), "cancel" (cancel Detect once a patch is
+done, then run it again into the same folder). The report is JSON, for the test to check.
+"""
+
+import json
+import os
+import sys
+import time
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+from qgis.core import (QgsApplication, QgsFeature, QgsGeometry, QgsMapRendererSequentialJob,  # noqa: E402
+                       QgsMapSettings, QgsPointXY, QgsProcessingException, QgsProcessingFeedback, QgsProject, QgsRasterLayer,
+                       QgsRectangle, QgsVectorLayer)
+from qgis.PyQt.QtCore import QSize  # noqa: E402
+from qgis.PyQt.QtGui import QColor  # noqa: E402
+
+PLUGIN_DIR, REQUEST, REPORT = sys.argv[1:4]
+sys.path.insert(0, "/usr/share/qgis/python/plugins")
+sys.path.insert(0, PLUGIN_DIR)
+
+app = QgsApplication([], False)
+app.initQgis()
+from processing.core.Processing import Processing  # noqa: E402
+
+Processing.initialize()
+import processing  # noqa: E402
+from csboundary_qgis.provider import CsboundaryProvider  # noqa: E402
+
+provider = CsboundaryProvider()
+QgsApplication.processingRegistry().addProvider(provider)
+with open(REQUEST) as _file:
+    request = json.load(_file)
+
+
+class Feedback(QgsProcessingFeedback):
+    """Keeps what the algorithm says; cancels once the named stage has passed ``cancel_after`` percent."""
+
+    def __init__(self, cancel_stage=None, cancel_after=None):
+        super().__init__()
+        self.stages, self.percents, self.lines = [], [], []
+        self.cancel_stage, self.cancel_after, self.canceled_at = cancel_stage, cancel_after, None
+
+    def setProgressText(self, text):  # noqa: N802
+        self.stages.append(text)
+        super().setProgressText(text)
+
+    def setProgress(self, value):  # noqa: N802
+        self.percents.append(value)
+        super().setProgress(value)
+        if (self.cancel_after is not None and self.canceled_at is None and self.stages[-1:] == [self.cancel_stage]
+                and value > self.cancel_after):
+            self.canceled_at = time.monotonic()
+            self.cancel()
+
+    def pushConsoleInfo(self, text):  # noqa: N802
+        self.lines.append(text)
+        super().pushConsoleInfo(text)
+
+
+def layer_report(layer):
+    renderer = layer.renderer()
+    report = {"name": layer.name(), "source": layer.source(), "type": layer.type(), "features": None, "renderer": None}
+    if isinstance(layer, QgsVectorLayer):
+        report.update(features=layer.featureCount(), geometry_type=layer.geometryType(), crs=layer.crs().authid(),
+                      fields=[f.name() for f in layer.fields()], renderer=renderer.type())
+        if renderer.type() == "graduatedSymbol":
+            report["class_attribute"] = renderer.classAttribute()
+            report["classes"] = [{"lower": r.lowerValue(), "upper": r.upperValue(), "colour": r.symbol().color().name(),
+                                  "label": r.label()} for r in renderer.ranges()]
+    return report
+
+
+def render(path, layers, extent, crs, size=1200):
+    settings = QgsMapSettings()
+    settings.setLayers(layers)
+    settings.setDestinationCrs(crs)
+    settings.setExtent(extent)
+    settings.setOutputSize(QSize(size, size))
+    settings.setBackgroundColor(QColor("white"))
+    job = QgsMapRendererSequentialJob(settings)
+    job.start()
+    job.waitForFinished()
+    job.renderedImage().save(path, "JPG", 85)
+
+
+def detect():
+    feedback = Feedback()
+    results = processing.runAndLoadResults("csboundary:detect", request["parameters"], feedback=feedback)
+    layers = list(QgsProject.instance().mapLayers().values())
+    report = {"results": {k: str(v) for k, v in results.items()}, "layers": [layer_report(layer) for layer in layers],
+              "stages": feedback.stages, "percents": feedback.percents[-3:], "lines": feedback.lines}
+    if request.get("picture"):
+        tiles = [QgsRasterLayer(path, os.path.basename(path)) for path in request["parameters"]["INPUT"]]
+        by_name = {layer.name(): layer for layer in layers}
+        shown = [by_name["areas checked"], by_name["edges to review"]] + tiles
+        extent = QgsRectangle()
+        for tile in tiles:
+            extent.combineExtentWith(tile.extent())
+        x, y, half = extent.center().x(), extent.center().y(), extent.width() * request.get("zoom", 0.5) / 2
+        render(request["picture"], shown, QgsRectangle(x - half, y - half, x + half, y + half), tiles[0].crs())
+        report["picture"] = request["picture"]
+    return report
+
+
+def review():
+    """Edit as a person does in QGIS: delete a feature, drag a line end (every line at that vertex
+    follows, as topological editing does), draw a line, draw a polygon; save; Apply review."""
+    edited = request["edited"]
+    edges = QgsVectorLayer(f"{edited}|layername=edges", "edges", "ogr")
+    complete = QgsVectorLayer(f"{edited}|layername=complete", "complete", "ogr")
+    assert edges.isValid() and complete.isValid()
+    edges.startEditing()
+    by_edge = {f["edge_id"]: f for f in edges.getFeatures()}
+    edges.deleteFeature(by_edge[request["delete_edge"]].id())
+    x, y = request["move_to"]
+    moved = 0
+    for feature in edges.getFeatures():
+        line = feature.geometry().asPolyline()
+        for end, index in (("u", 0), ("v", len(line) - 1)):
+            if feature[end] == request["move_vertex"]:
+                edges.moveVertex(x, y, feature.id(), index)
+                moved += 1
+    drawn = QgsFeature(edges.fields())
+    drawn.setGeometry(QgsGeometry.fromPolylineXY([QgsPointXY(px, py) for px, py in request["draw"]]))
+    edges.addFeature(drawn)
+    assert edges.commitChanges(), edges.commitErrors()
+    complete.startEditing()
+    area = QgsFeature(complete.fields())
+    area.setGeometry(QgsGeometry.fromPolygonXY([[QgsPointXY(px, py) for px, py in request["area"]]]))
+    complete.addFeature(area)
+    assert complete.commitChanges(), complete.commitErrors()
+    del edges, complete  # close the GeoPackage before csboundary reads it
+    feedback = Feedback()
+    results = processing.run("csboundary:applyreview", {"PREDICTION": request["prediction"], "EDITED": edited,
+                                                        "NEXT_REVIEW": request["next_review"]}, feedback=feedback)
+    return {"results": {k: str(v) for k, v in results.items()}, "line_ends_moved": moved, "lines": feedback.lines}
+
+
+def cancel():
+    feedback = Feedback(cancel_stage="predict patches", cancel_after=0)
+    started = time.monotonic()
+    try:
+        processing.run("csboundary:detect", request["parameters"], feedback=feedback)
+        outcome = "finished"
+    except QgsProcessingException as exc:
+        outcome = str(exc)
+    stopped = time.monotonic()
+    report = {"outcome": outcome, "seconds_to_cancel": feedback.canceled_at and stopped - feedback.canceled_at,
+              "seconds_before_cancel": feedback.canceled_at and feedback.canceled_at - started, "lines": feedback.lines}
+    again = Feedback()
+    processing.run("csboundary:detect", request["parameters"], feedback=again)
+    report["again_lines"] = again.lines
+    return report
+
+
+def missing_command():
+    os.environ["CSBOUNDARY_COMMAND"] = request["command"]
+    try:
+        processing.run("csboundary:detect", request["parameters"], feedback=Feedback())
+        return {"outcome": "finished"}
+    except QgsProcessingException as exc:
+        return {"outcome": str(exc)}
+
+
+MODES = {"detect": detect, "review": review, "cancel": cancel, "missing_command": missing_command}
+report = MODES[request["mode"]]()
+QgsProject.instance().clear()
+with open(REPORT, "w") as file:
+    json.dump(report, file, indent=1)
+app.exitQgis()
