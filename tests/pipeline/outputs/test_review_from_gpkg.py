@@ -123,3 +123,28 @@ def test_a_layer_that_is_not_the_prediction_s_is_one_line(demo_run, tmp_path):
     gpd.GeoDataFrame({"name": ["x"]}, geometry=[LineString([(0, 0), (1, 1)])], crs="EPSG:32618").to_file(
         tmp_path / "other.gpkg", layer="roads", driver="GPKG", engine="pyogrio")
     refused(prediction, tmp_path / "other.gpkg", "has no edges layer")
+
+
+def test_the_review_layers_come_back_unchanged_as_no_edit_and_never_overwrite_the_prediction(demo_run, tmp_path):
+    import pyogrio
+
+    prediction = tmp_path / "prediction"
+    shutil.copytree(demo_run / "prediction", prediction)
+    graph = BoundaryGraph.read_json(prediction / "graph.json")
+    review = tmp_path / "review.gpkg"
+    done = run_cli("review", str(prediction), "--gpkg", str(review))
+    assert done.returncode == 0 and f"{graph.n_edges} edges to review" in done.stdout, done.stderr
+    assert sorted(name for name, _ in pyogrio.list_layers(review)) == ["complete", "edges"]
+    complete = pyogrio.read_info(review, layer="complete")
+    assert complete["features"] == 0 and complete["geometry_type"] == "Polygon" and complete["crs"] == "EPSG:32618"
+    done = run_cli("apply-review", str(prediction), str(review))
+    assert done.returncode == 0 and "0 deleted, 0 accepted, 0 vertices moved, 0 added, 0 areas marked complete" in done.stdout
+    after = BoundaryGraph.read_json(prediction / "graph.json")
+    assert np.array_equal(after.vertices, graph.vertices) and np.array_equal(after.edges, graph.edges)
+    own = run_cli("review", str(prediction), "--gpkg", str(prediction / "boundaries.gpkg"))
+    assert own.returncode == 2 and own.stderr.strip() == (f"error: {prediction / 'boundaries.gpkg'}: is the prediction's own "
+                                                          "GeoPackage, which apply-review rewrites: give another file")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    done = run_cli("review", str(empty), "--gpkg", str(tmp_path / "x.gpkg"))
+    assert done.returncode == 2 and "not a finished prediction" in done.stderr and not (tmp_path / "x.gpkg").exists()
