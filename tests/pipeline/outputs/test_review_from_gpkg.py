@@ -135,6 +135,8 @@ def test_the_review_layers_come_back_unchanged_as_no_edit_and_never_overwrite_th
     done = run_cli("review", str(prediction), "--gpkg", str(review))
     assert done.returncode == 0 and f"{graph.n_edges} edges to review" in done.stdout, done.stderr
     assert sorted(name for name, _ in pyogrio.list_layers(review)) == ["complete", "edges"]
+    confidence = pyogrio.read_dataframe(review, layer="edges", read_geometry=False)["confidence"].to_numpy()
+    assert len(confidence) == graph.n_edges and (np.diff(confidence) >= 0).all()  # the least sure first
     complete = pyogrio.read_info(review, layer="complete")
     assert complete["features"] == 0 and complete["geometry_type"] == "Polygon" and complete["crs"] == "EPSG:32618"
     done = run_cli("apply-review", str(prediction), str(review))
