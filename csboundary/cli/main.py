@@ -144,6 +144,8 @@ def main() -> None:
     warnings.simplefilter("always", InputWarning)
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
+    if hasattr(signal, "SIGBREAK"):  # Windows: Ctrl-Break, which the QGIS plugin's cancel sends there
+        signal.signal(signal.SIGBREAK, _on_signal)
     try:
         code = command_line()(standalone_mode=False)
     except typer.Abort:

@@ -166,7 +166,11 @@ def review(
     if gpkg is not None:
         from csboundary.data.atomic import check_output_file
 
-        done = write_review_layers(prediction, check_output_file(gpkg, (".gpkg",)), bounds=box)
+        if box is not None:  # apply-review takes an edge missing from the layer as deleted: a district's layer would delete the rest
+            raise typer.BadParameter("--gpkg writes the whole city's edges; review a district with the page (--bounds without --gpkg)",
+                                     param_hint="--gpkg")
+
+        done = write_review_layers(prediction, check_output_file(gpkg, (".gpkg",)))
         typer.echo(f"{done['gpkg']}: {done['edges']} edges to review (layers edges, complete)")
         return
     out_dir(out or prediction / "review")

@@ -6,13 +6,13 @@ import json
 import os
 import tempfile
 
-from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingContext, QgsProcessingException,
+from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingContext, QgsProcessingException, QgsProject,
                        QgsProcessingOutputFile, QgsProcessingOutputFolder, QgsProcessingOutputNumber,
                        QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterMultipleLayers,
                        QgsProcessingParameterNumber, QgsProcessingParameterVectorLayer, QgsProcessingUtils,
-                       QgsVectorFileWriter)
+                       QgsVectorFileWriter, QgsVectorLayer)
 
 from . import runner
 from .command import configured_command
@@ -77,6 +77,19 @@ class CsboundaryAlgorithm(QgsProcessingAlgorithm):
             raise QgsProcessingException(f"{path or name}: not a folder")
         return path
 
+    def work_args(self, parameters, context):
+        work = self.parameterAsString(parameters, "WORK", context) if parameters.get("WORK") else ""
+        return ["--work", work] if work else []
+
+    def kept(self, path, what, feedback):
+        """Warn when ``path`` is in QGIS's temporary folder: deleted when QGIS closes, and a new
+        one each run, so a canceled run could not be continued there."""
+        temporary = os.path.normcase(os.path.realpath(QgsProcessingUtils.tempFolder()))
+        if os.path.normcase(os.path.realpath(path)).startswith(temporary + os.sep):
+            feedback.reportError(f"{what} is in QGIS's temporary folder ({path}): it is deleted when QGIS closes, and a canceled "
+                                 "run can only be continued in the same folder; give a folder of your own to keep it", False)
+        return path
+
     def prediction(self, parameters, context):
         """A predict output folder (its graph.json must be there)."""
         path = self.folder(parameters, "PREDICTION", context)
@@ -90,6 +103,7 @@ def load(context, source, name, output, kind):
     if context.project() is None:
         return
     details = QgsProcessingContext.LayerDetails(name, context.project(), output, QgsProcessingUtils.LayerHint.Vector)
+    details.forceName = True  # our name, not the GeoPackage layer's ("Prefer output filename for layer names" is on by default)
     details.setPostProcessor(Styler.make(kind))
     context.addLayerToLoadOnCompletion(source, details)
 
@@ -134,14 +148,17 @@ class Detect(CsboundaryAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         inputs = imagery_files(self, parameters, "INPUT", context)
-        out = self.parameterAsString(parameters, "OUTPUT", context)
+        out = self.kept(self.parameterAsString(parameters, "OUTPUT", context), "The prediction", feedback)
         args = ["predict", *inputs, "--out", out, "--engine", ENGINES[self.parameterAsEnum(parameters, "ENGINE", context)]]
         min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
         if min_confidence > 0:
             args += ["--min-confidence", repr(min_confidence)]
         self.csboundary(args + self.engine_args(parameters, context), feedback)
         review = os.path.join(out, REVIEW_GPKG)
-        self.csboundary(["review", out, "--gpkg", review, "--quiet"], feedback)
+        if os.path.exists(review):  # edits may be in it: never overwritten (Apply review refuses it if the graph changed since)
+            feedback.pushWarning(f"{review} exists and is kept (it may hold your edits); delete it for a fresh one")
+        else:
+            self.csboundary(["review", out, "--gpkg", review, "--quiet"], feedback)
         results = {"OUTPUT": out, "GRAPH": os.path.join(out, "graph.json"),
                    "BOUNDARIES": f"{os.path.join(out, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}",
                    "REVIEW_EDGES": f"{review}|layername={EDGES_LAYER}", "REVIEW_COMPLETE": f"{review}|layername={COMPLETE_LAYER}"}
@@ -229,10 +246,23 @@ class ApplyReview(CsboundaryAlgorithm):
         self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
         self.addOutput(QgsProcessingOutputFolder("PREDICTION", "Prediction folder"))
 
+    def prepareAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        """On the main thread, where the project's layers may be read: which of them hold unsaved
+        edits of the edited file (processAlgorithm refuses then, with the message in the log)."""
+        edited = os.path.realpath(self.parameterAsFile(parameters, "EDITED", context))
+        self.unsaved = [layer.name() for layer in QgsProject.instance().mapLayers().values()
+                        if isinstance(layer, QgsVectorLayer) and os.path.realpath(layer.source().split("|")[0]) == edited
+                        and layer.isEditable() and layer.isModified()]
+        return True
+
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        if getattr(self, "unsaved", None):
+            raise QgsProcessingException(f"{', '.join(self.unsaved)} has unsaved edits: save them (Save Layer Edits) before Apply review")
         prediction = self.prediction(parameters, context)
         edited = self.parameterAsFile(parameters, "EDITED", context)
         next_review = self.parameterAsFileOutput(parameters, "NEXT_REVIEW", context)
+        if os.path.realpath(next_review) == os.path.realpath(edited):
+            raise QgsProcessingException(f"{next_review}: the next review GeoPackage must be a new file, not the edited one")
         self.csboundary(["apply-review", prediction, edited], feedback)
         self.csboundary(["review", prediction, "--gpkg", next_review, "--quiet"], feedback)
         results = {"PREDICTION": prediction, "NEXT_REVIEW": next_review,
@@ -256,13 +286,13 @@ class Finetune(CsboundaryAlgorithm):
         self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", "AfANet steps", QgsProcessingParameterNumber.Integer, 500,
                                                        minValue=1))
         self.engine_parameters()
-        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs, to continue)"))
+        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs; empty: beside the weights)",
+                                                                  optional=True, createByDefault=False))
         self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Fine-tuned weights", "Weights bundle (*.pt)"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        self.csboundary(["finetune", self.prediction(parameters, context), "--out", out,
-                         "--work", self.parameterAsString(parameters, "WORK", context),
+        out = self.kept(self.parameterAsFileOutput(parameters, "OUTPUT", context), "The fine-tuned weights", feedback)
+        self.csboundary(["finetune", self.prediction(parameters, context), "--out", out, *self.work_args(parameters, context),
                          "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
                          "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
                          *self.engine_args(parameters, context)], feedback)
@@ -283,14 +313,14 @@ class Adapt(CsboundaryAlgorithm):
                                                        QgsProcessingParameterNumber.Integer, 300, minValue=0))
         self.addParameter(QgsProcessingParameterBoolean("MIX", "Paste synthetic roadway into your windows", True))
         self.engine_parameters()
-        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs, to continue)"))
+        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs; empty: beside the weights)",
+                                                                  optional=True, createByDefault=False))
         self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Adapted weights", "Weights bundle (*.pt)"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        out = self.kept(self.parameterAsFileOutput(parameters, "OUTPUT", context), "The adapted weights", feedback)
         mix = self.parameterAsBoolean(parameters, "MIX", context)
-        self.csboundary(["adapt", *imagery_files(self, parameters, "INPUT", context), "--out", out,
-                         "--work", self.parameterAsString(parameters, "WORK", context),
+        self.csboundary(["adapt", *imagery_files(self, parameters, "INPUT", context), "--out", out, *self.work_args(parameters, context),
                          "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
                          "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
                          "--mix" if mix else "--no-mix", *self.engine_args(parameters, context)], feedback)

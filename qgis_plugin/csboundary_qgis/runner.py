@@ -25,7 +25,25 @@ SETTING_PLACE = "Settings > Options > Processing > Providers > csboundary"
 
 # a tqdm bar as csboundary prints it: "predict patches:  45%|####5     | 9/20 [00:04<00:05, 2.1patch/s]"
 # A bar left open (an interrupted run) has the next message glued to its end: kept as "rest".
-_BAR = re.compile(r"^\s*(?P<stage>[^:|]{1,80}):\s*(?P<percent>\d{1,3})%\|[^|]*\|[^\]]*\](?P<rest>.*)$")
+# A stage may hold colons ("confidence: labelled cities: 45%|...").
+_BAR = re.compile(r"^\s*(?P<stage>[^|]{1,80}?):\s*(?P<percent>\d{1,3})%\|[^|]*\|[^\]]*\](?P<rest>.*)$")
+
+# What QGIS sets for its own Python and libraries (OSGeo4W on Windows, the macOS bundle), which
+# must not reach the csboundary environment's Python, GDAL and PROJ.
+QGIS_ONLY = ("PYTHONHOME", "PYTHONPATH", "PYTHONSTARTUP", "PROJ_LIB", "PROJ_DATA", "GDAL_DATA", "GDAL_DRIVER_PATH", "QGIS_PREFIX_PATH")
+
+
+def command_environment() -> dict:
+    """This process's environment without QGIS's own Python and library paths, unbuffered."""
+    env = {k: v for k, v in os.environ.items() if k not in QGIS_ONLY}
+    return dict(env, PYTHONUNBUFFERED="1", PYTHONIOENCODING="utf-8")
+
+
+def _detached() -> dict:
+    """Popen options: its own process group (cancel reaches what it starts), no console window on Windows."""
+    if os.name == "nt":
+        return {"creationflags": subprocess.CREATE_NEW_PROCESS_GROUP | getattr(subprocess, "CREATE_NO_WINDOW", 0)}
+    return {"start_new_session": True}
 
 
 class CommandError(Exception):
@@ -39,6 +57,7 @@ class Canceled(Exception):
 def find_command(configured: str | None) -> str:
     """The csboundary executable: the plugin's setting, else $CSBOUNDARY_COMMAND, else the one on PATH."""
     command = (configured or "").strip() or os.environ.get(COMMAND_ENV, "").strip() or shutil.which("csboundary")
+    command = os.path.expanduser(command) if command else command
     if not command:
         raise CommandError("no csboundary command found: install csboundary in a Python environment "
                            f"(pip install csboundary) and give its csboundary executable under {SETTING_PLACE}")
@@ -52,7 +71,8 @@ def check_command(command: str, timeout: float = 120.0) -> str:
     """The version the command reports (``csboundary 0.1.0``); a command that does not run as
     csboundary is a :class:`CommandError` naming what it printed."""
     try:
-        done = subprocess.run([command, "--version"], capture_output=True, text=True, timeout=timeout)
+        done = subprocess.run([command, "--version"], capture_output=True, text=True, timeout=timeout, env=command_environment(),
+                              **({"creationflags": getattr(subprocess, "CREATE_NO_WINDOW", 0)} if os.name == "nt" else {}))
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise CommandError(f"{command}: does not run ({exc})") from None
     said = (done.stdout + done.stderr).strip()
@@ -110,29 +130,32 @@ class Progress:
 def run(command: str, args: list[str], progress: Progress, poll: float = 0.1, grace: float = 4.0) -> list[str]:
     """Run ``command args``, feeding ``progress`` as the output comes; return the output lines.
 
-    On cancel the command's process group gets SIGTERM (csboundary then removes its temporaries
-    and exits; a predict run keeps its finished patches for the same command to continue) and,
-    after ``grace`` seconds, SIGKILL. Raises :class:`Canceled` or, on a non-zero exit,
-    :class:`CommandError`."""
-    env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONIOENCODING="utf-8")
+    On cancel the command's process group gets SIGTERM (Ctrl-Break on Windows; csboundary then
+    removes its temporaries and exits, and a predict run keeps its finished patches for the same
+    command to continue) and, after ``grace`` seconds, SIGKILL. Raises :class:`Canceled` or, on a
+    non-zero exit, :class:`CommandError`. The command never outlives this call."""
     try:
-        process = subprocess.Popen([command, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env,
-                                   start_new_session=os.name != "nt")
+        process = subprocess.Popen([command, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=command_environment(),
+                                   **_detached())
     except OSError as exc:
         raise CommandError(f"{command}: does not run ({exc})") from None
     pieces: queue.Queue = queue.Queue()
     reader = threading.Thread(target=_read, args=(process.stdout, pieces), daemon=True)
     reader.start()
-    while True:
-        _drain(pieces, progress)
-        if process.poll() is not None:
-            break
-        if progress.canceled():
-            stop(process, grace)
-            reader.join(timeout=1.0)
+    try:
+        while True:
             _drain(pieces, progress)
-            raise Canceled()
-        time.sleep(poll)
+            if process.poll() is not None:
+                break
+            if progress.canceled():
+                stop(process, grace)
+                reader.join(timeout=1.0)
+                _drain(pieces, progress)
+                raise Canceled()
+            time.sleep(poll)
+    finally:
+        if process.poll() is None:  # a callback failed, or the caller's thread was interrupted
+            stop(process, grace)
     reader.join(timeout=5.0)
     _drain(pieces, progress)
     if process.returncode != 0:
@@ -141,22 +164,33 @@ def run(command: str, args: list[str], progress: Progress, poll: float = 0.1, gr
 
 
 def stop(process: subprocess.Popen, grace: float) -> None:
-    """SIGTERM to the command and what it started, then SIGKILL if it is still there after ``grace`` s."""
-    def send(sig) -> None:
+    """Ask the command and what it started to stop (SIGTERM; Ctrl-Break on Windows), then kill
+    whatever is left after ``grace`` seconds."""
+    def ask() -> None:
         try:
             if os.name == "nt":
-                process.terminate() if sig == signal.SIGTERM else process.kill()
+                process.send_signal(signal.CTRL_BREAK_EVENT)
             else:
-                os.killpg(process.pid, sig)
-        except (ProcessLookupError, PermissionError):
+                os.killpg(process.pid, signal.SIGTERM)
+        except (ProcessLookupError, PermissionError, OSError):
             pass
 
-    send(signal.SIGTERM)
+    def kill() -> None:
+        try:
+            if os.name == "nt":
+                process.kill()
+            else:
+                os.killpg(process.pid, signal.SIGKILL)  # the group too: a worker the command started must not linger
+        except (ProcessLookupError, PermissionError, OSError):
+            pass
+
+    ask()
     try:
         process.wait(timeout=grace)
     except subprocess.TimeoutExpired:
-        send(signal.SIGKILL)
-        process.wait()
+        pass
+    kill()
+    process.wait()
 
 
 def _read(stream, pieces: queue.Queue) -> None:

@@ -4,8 +4,10 @@ warm colour (the order in which a reviewer looks at them), checked areas as gree
 from qgis.core import (QgsFillSymbol, QgsGraduatedSymbolRenderer, QgsLineSymbol, QgsProcessingLayerPostProcessorInterface,
                        QgsRendererRange, QgsSingleSymbolRenderer)
 
-# (lower, upper, colour, label): the classes of the calibrated probability that an edge is a true boundary
+# (lower, upper, colour, label): the classes of the calibrated probability that an edge is a true
+# boundary; a line a reviewer drew has no confidence (NULL, classed as -1) and is drawn grey
 CONFIDENCE_CLASSES = (
+    (-1.5, -0.5, "#707070", "drawn (no confidence)"),
     (0.0, 0.25, "#d7301f", "least sure (< 0.25)"),
     (0.25, 0.5, "#fc8d59", "0.25 - 0.5"),
     (0.5, 0.75, "#91bfdb", "0.5 - 0.75"),
@@ -18,7 +20,7 @@ def confidence_renderer(field: str, width: float = 0.8) -> QgsGraduatedSymbolRen
     for lower, upper, colour, label in CONFIDENCE_CLASSES:
         symbol = QgsLineSymbol.createSimple({"line_color": colour, "line_width": str(width), "capstyle": "round"})
         ranges.append(QgsRendererRange(lower, upper, symbol, label))
-    return QgsGraduatedSymbolRenderer(field, ranges)
+    return QgsGraduatedSymbolRenderer(f'coalesce("{field}", -1)', ranges)
 
 
 def complete_renderer() -> QgsSingleSymbolRenderer:
@@ -42,7 +44,7 @@ class Styler(QgsProcessingLayerPostProcessorInterface):
         cls.kept.append(styler)
         return styler
 
-    def postProcessLayer(self, layer, context, feedback):  # noqa: N802 (QGIS's name)
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802 (QGIS's name; runs on the main thread)
         if self.kind == "edges":
             layer.setRenderer(confidence_renderer("confidence"))
         elif self.kind == "boundaries":

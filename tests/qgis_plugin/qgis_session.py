@@ -18,7 +18,7 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 from qgis.core import (QgsApplication, QgsFeature, QgsGeometry, QgsMapRendererSequentialJob,  # noqa: E402
                        QgsMapSettings, QgsPointXY, QgsProcessingException, QgsProcessingFeedback, QgsProject, QgsRasterLayer,
-                       QgsRectangle, QgsVectorLayer)
+                       QgsRectangle, QgsRenderContext, QgsVectorLayer, QgsExpressionContextUtils)
 from qgis.PyQt.QtCore import QSize  # noqa: E402
 from qgis.PyQt.QtGui import QColor  # noqa: E402
 
@@ -45,7 +45,7 @@ class Feedback(QgsProcessingFeedback):
 
     def __init__(self, cancel_stage=None, cancel_after=None):
         super().__init__()
-        self.stages, self.percents, self.lines = [], [], []
+        self.stages, self.percents, self.lines, self.errors = [], [], [], []
         self.cancel_stage, self.cancel_after, self.canceled_at = cancel_stage, cancel_after, None
 
     def setProgressText(self, text):  # noqa: N802
@@ -60,6 +60,10 @@ class Feedback(QgsProcessingFeedback):
             self.canceled_at = time.monotonic()
             self.cancel()
 
+    def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
+        self.errors.append(error)
+        super().reportError(error, fatalError)
+
     def pushConsoleInfo(self, text):  # noqa: N802
         self.lines.append(text)
         super().pushConsoleInfo(text)
@@ -73,6 +77,15 @@ def layer_report(layer):
                       fields=[f.name() for f in layer.fields()], renderer=renderer.type())
         if renderer.type() == "graduatedSymbol":
             report["class_attribute"] = renderer.classAttribute()
+            drawn = QgsFeature(layer.fields())  # a line a reviewer drew: every attribute NULL
+            drawn.setGeometry(QgsGeometry.fromPolylineXY([QgsPointXY(0, 0), QgsPointXY(1, 1)]))
+            context = QgsRenderContext()  # as the map canvas prepares it: the layer's scopes, then the feature
+            context.expressionContext().appendScopes(QgsExpressionContextUtils.globalProjectLayerScopes(layer))
+            renderer.startRender(context, layer.fields())
+            context.expressionContext().setFeature(drawn)
+            symbol = renderer.symbolForFeature(drawn, context)
+            report["null_colour"] = symbol.color().name() if symbol is not None else None
+            renderer.stopRender(context)
             report["classes"] = [{"lower": r.lowerValue(), "upper": r.upperValue(), "colour": r.symbol().color().name(),
                                   "label": r.label()} for r in renderer.ranges()]
     return report
@@ -114,6 +127,23 @@ def review():
     """Edit as a person does in QGIS: delete a feature, drag a line end (every line at that vertex
     follows, as topological editing does), draw a line, draw a polygon; save; Apply review."""
     edited = request["edited"]
+    refusals = {}
+    for name, parameters in (("same_file", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": edited}),
+                             ("unsaved", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": request["next_review"]})):
+        open_layer = QgsVectorLayer(f"{edited}|layername=edges", "edges to review", "ogr")
+        QgsProject.instance().addMapLayer(open_layer)
+        if name == "unsaved":  # a deletion not saved yet
+            open_layer.startEditing()
+            open_layer.deleteFeature(next(open_layer.getFeatures()).id())
+        said = Feedback()
+        try:
+            processing.run("csboundary:applyreview", parameters, feedback=said)
+            refusals[name] = "accepted"
+        except QgsProcessingException as exc:  # what the Processing dialog's log shows: the feedback's errors, else the exception
+            refusals[name] = said.errors[-1] if said.errors else str(exc)
+        if open_layer.isEditable():
+            open_layer.rollBack()
+        QgsProject.instance().removeMapLayer(open_layer.id())
     edges = QgsVectorLayer(f"{edited}|layername=edges", "edges", "ogr")
     complete = QgsVectorLayer(f"{edited}|layername=complete", "complete", "ogr")
     assert edges.isValid() and complete.isValid()
@@ -141,7 +171,8 @@ def review():
     feedback = Feedback()
     results = processing.run("csboundary:applyreview", {"PREDICTION": request["prediction"], "EDITED": edited,
                                                         "NEXT_REVIEW": request["next_review"]}, feedback=feedback)
-    return {"results": {k: str(v) for k, v in results.items()}, "line_ends_moved": moved, "lines": feedback.lines}
+    return {"results": {k: str(v) for k, v in results.items()}, "line_ends_moved": moved, "lines": feedback.lines,
+            "refusals": refusals}
 
 
 def cancel():

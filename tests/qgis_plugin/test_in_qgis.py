@@ -10,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -96,18 +97,24 @@ def test_qgis_process_lists_the_algorithms_and_runs_detect_on_the_demo_city(qgis
 
 def test_detect_loads_the_boundaries_and_review_layers_styled_by_confidence(qgis, demo_run, tmp_path):
     picture = os.environ.get("CSBOUNDARY_QGIS_PICTURE") or str(tmp_path / "qgis-layers.jpg")
-    report = session(qgis, {"mode": "detect", "parameters": {"INPUT": tiles(demo_run), "OUTPUT": str(tmp_path / "detect")},
-                            "picture": picture}, tmp_path)
+    # outside /tmp, which QGIS counts as temporary (there it would name layers by their file either way)
+    out = Path(tempfile.mkdtemp(dir="/var/tmp" if Path("/var/tmp").is_dir() else None)) / "detect"
+    try:
+        report = session(qgis, {"mode": "detect", "parameters": {"INPUT": tiles(demo_run), "OUTPUT": str(out)}, "picture": picture},
+                         tmp_path)
+        graph = json.loads((out / "graph.json").read_text())
+    finally:
+        shutil.rmtree(out.parent, ignore_errors=True)
     layers = {layer["name"]: layer for layer in report["layers"]}
     assert set(layers) == {"road boundaries", "edges to review", "areas checked"}
-    graph = json.loads((tmp_path / "detect" / "graph.json").read_text())
     edges, boundaries, areas = layers["edges to review"], layers["road boundaries"], layers["areas checked"]
     assert edges["features"] == len(graph["edges"]) and edges["geometry_type"] == 1 and edges["crs"] == "EPSG:32618"
     assert boundaries["features"] > 0 and areas["features"] == 0 and areas["geometry_type"] == 2
     for layer, field in ((edges, "confidence"), (boundaries, "confidence_min")):
-        assert layer["renderer"] == "graduatedSymbol" and layer["class_attribute"] == field
-        lowest, highest = layer["classes"][0], layer["classes"][-1]
-        assert lowest["lower"] == 0 and highest["upper"] >= 1
+        assert layer["renderer"] == "graduatedSymbol" and layer["class_attribute"] == f'coalesce("{field}", -1)'
+        drawn, lowest, highest = layer["classes"][0], layer["classes"][1], layer["classes"][-1]
+        assert drawn["lower"] < -1 < drawn["upper"] < 0 and lowest["lower"] == 0 and highest["upper"] >= 1
+        assert layer["null_colour"] == drawn["colour"], "a line drawn by the reviewer (confidence NULL) would not show grey"
         red, blue = (int(lowest["colour"][1:3], 16), int(lowest["colour"][5:7], 16))
         assert red > 2 * blue, f"the least sure class is not warm: {lowest['colour']}"
     assert report["stages"][0] == "predict patches" and report["percents"][-1] == 100
@@ -145,6 +152,8 @@ def test_apply_review_of_a_layer_edited_with_qgis_gives_the_page_s_graph(qgis, d
                             "next_review": str(gis / "review-2.gpkg"), "delete_edge": deleted, "move_vertex": vertex,
                             "move_to": moved_to, "draw": drawn, "area": area}, tmp_path)
     assert report["line_ends_moved"] == 2
+    assert report["refusals"]["same_file"].endswith("the next review GeoPackage must be a new file, not the edited one")
+    assert report["refusals"]["unsaved"] == "edges to review has unsaved edits: save them (Save Layer Edits) before Apply review"
     features = [{"type": "Feature", "properties": {"action": "delete", "edge": deleted},
                  "geometry": {"type": "LineString", "coordinates": world_line(graph, deleted)}},
                 {"type": "Feature", "properties": {"action": "move", "vertex": vertex},

@@ -130,3 +130,39 @@ def test_a_canceled_prediction_stops_within_5_s_and_the_same_command_continues_i
     work = json.loads((tmp_path / "pred" / "summary.json").read_text())["work"]
     assert work["patches_reused"] >= 1 and work["patches_reused"] + work["patches_predicted"] == 9, work
     assert os.path.exists(tmp_path / "pred" / "graph.json")
+
+
+def test_a_stage_with_colons_is_one_stage_and_qgis_s_own_paths_stay_out_of_the_command(tmp_path, monkeypatch):
+    fake = script(tmp_path / "csboundary", """
+import os
+from tqdm import tqdm
+for _ in tqdm(range(2), desc="confidence: labelled cities", mininterval=0):
+    pass
+print("PYTHONPATH=" + os.environ.get("PYTHONPATH", "-"), "GDAL_DATA=" + os.environ.get("GDAL_DATA", "-"), "HOME" in os.environ)
+""")
+    monkeypatch.setenv("PYTHONPATH", "/qgis/python")
+    monkeypatch.setenv("GDAL_DATA", "/qgis/share/gdal")
+    seen = Seen()
+    runner.run(fake, [], seen.progress())
+    assert seen.stages == ["confidence: labelled cities"] and seen.percents[-1] == 100
+    assert seen.lines == ["PYTHONPATH=- GDAL_DATA=- True"]
+
+
+def test_a_failing_callback_never_leaves_the_command_running(tmp_path):
+    pid_file = tmp_path / "pid"
+    fake = script(tmp_path / "csboundary", f"""
+import os, time
+open({str(pid_file)!r}, "w").write(str(os.getpid()))
+print("started", flush=True)
+while True:
+    time.sleep(0.05)
+""")
+
+    def fail(line):
+        raise RuntimeError("the log window is gone")
+
+    with pytest.raises(RuntimeError):
+        runner.run(fake, [], runner.Progress(line=fail), grace=1.0)
+    pid = int(pid_file.read_text())
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)  # gone (and reaped)

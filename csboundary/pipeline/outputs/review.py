@@ -77,11 +77,11 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
     return {"page": page, "edges": graph.n_edges, "ground_truth": ground_truth if lines else None}
 
 
-def write_review_layers(prediction: Path, path: Path, bounds: tuple[float, float, float, float] | None = None) -> dict:
-    """A GeoPackage to review ``prediction`` in a GIS: a copy of its ``edges`` layer (of the
-    district ``bounds``, or all; the least sure edges first) to edit, and an empty ``complete``
-    polygon layer in the same CRS for the areas checked. ``apply-review PREDICTION path`` reads
-    the two back (:func:`gpkg_edits`)."""
+def write_review_layers(prediction: Path, path: Path) -> dict:
+    """A GeoPackage to review ``prediction`` in a GIS: a copy of its whole ``edges`` layer (the
+    least sure edges first) to edit, and an empty ``complete`` polygon layer in the same CRS for
+    the areas checked. ``apply-review PREDICTION path`` reads the two back (:func:`gpkg_edits`);
+    an edge missing from the layer is a deleted edge, so the layer is never one district's."""
     import geopandas as gpd
     import pyogrio
 
@@ -89,7 +89,7 @@ def write_review_layers(prediction: Path, path: Path, bounds: tuple[float, float
     source = prediction / "boundaries.gpkg"
     if path.resolve() == source.resolve():
         raise InputError(path, "is the prediction's own GeoPackage, which apply-review rewrites: give another file")
-    edges = pyogrio.read_dataframe(source, layer=EDGES_LAYER, bbox=bounds)
+    edges = pyogrio.read_dataframe(source, layer=EDGES_LAYER)
     edges = edges.sort_values("confidence", kind="stable", na_position="last")  # the least sure first, as a reviewer takes them
     complete = gpd.GeoDataFrame({"note": np.array([], dtype=object)}, geometry=gpd.GeoSeries([], crs=edges.crs), crs=edges.crs)
     with atomic_path(path) as tmp:

@@ -150,3 +150,5 @@ def test_the_review_layers_come_back_unchanged_as_no_edit_and_never_overwrite_th
     empty.mkdir()
     done = run_cli("review", str(empty), "--gpkg", str(tmp_path / "x.gpkg"))
     assert done.returncode == 2 and "not a finished prediction" in done.stderr and not (tmp_path / "x.gpkg").exists()
+    district = run_cli("review", str(prediction), "--gpkg", str(tmp_path / "d.gpkg"), "--bounds", "0,0,1,1")
+    assert district.returncode == 2 and "--gpkg writes the whole city's edges" in district.stderr and not (tmp_path / "d.gpkg").exists()
