@@ -22,11 +22,11 @@ test: $(STAMP) lint
 	$(BIN)/pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check csboundary tests benchmarks experiments scripts qgis_plugin
+	$(BIN)/ruff check csboundary tests benchmarks experiments scripts
 
 # the QGIS plugin's installable zip (Plugins > Manage and Install Plugins > Install from ZIP)
-qgis-plugin:
-	$(PYTHON) qgis_plugin/build_zip.py build/csboundary_qgis.zip
+qgis-plugin: $(STAMP)
+	$(BIN)/csboundary qgis-plugin --out build/csboundary_qgis.zip
 
 # the plugin inside QGIS: installs Debian's QGIS 3.22 (as root) if it is missing, runs the tests marked qgis
 # and renders docs/qgis-layers.jpg from the Detect run
@@ -40,6 +40,10 @@ wheel-check: $(STAMP)
 	$(PYTHON) -m venv build/wheel-check/venv
 	build/wheel-check/venv/bin/pip install --quiet -c constraints.txt build/wheel-check/dist/csboundary-*.whl
 	cd /tmp && $(CURDIR)/build/wheel-check/venv/bin/csboundary demo --out $(CURDIR)/build/wheel-check/demo --device cpu
+	cd /tmp && $(CURDIR)/build/wheel-check/venv/bin/csboundary qgis-plugin --out $(CURDIR)/build/wheel-check/csboundary_qgis.zip
+	$(PYTHON) -c "import sys, zipfile; names = zipfile.ZipFile(sys.argv[1]).namelist(); \
+	    assert {'csboundary_qgis/metadata.txt', 'csboundary_qgis/icon.svg', 'csboundary_qgis/algorithms.py'} <= set(names), names" \
+	    build/wheel-check/csboundary_qgis.zip
 
 clean:
 	rm -rf $(VENV) out build

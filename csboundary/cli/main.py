@@ -30,6 +30,7 @@ COMMANDS = (  # (name, function)
     ("export-lanelet2", predict_commands.export_lanelet2),
     ("review", predict_commands.review),
     ("apply-review", predict_commands.apply_review),
+    ("qgis-plugin", predict_commands.qgis_plugin),
     ("evaluate", evaluate_commands.evaluate),
     ("evaluate-model", evaluate_commands.evaluate_model),
     ("evaluate-set", evaluate_commands.evaluate_set_cmd),

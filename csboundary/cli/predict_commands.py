@@ -3,6 +3,7 @@ page, a reviewer's edits merged back, and the demo that shows it all on a synthe
 
 from __future__ import annotations
 
+import sys
 import warnings
 from pathlib import Path
 from typing import Optional
@@ -197,6 +198,21 @@ def apply_review(
                f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added, "
                f"{len(done['complete_areas'])} areas marked complete: "
                f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}")
+
+
+def qgis_plugin(
+    out: Path = typer.Option(Path("csboundary_qgis.zip"), "--out", help="The plugin's zip to write."),
+) -> None:
+    """Write the QGIS plugin's zip (QGIS 3.22 or later: Plugins > Manage and Install Plugins >
+    Install from ZIP): csboundary's commands in the Processing Toolbox, predictions loaded as
+    styled layers, review with QGIS's editing tools (docs/qgis.md)."""
+    from csboundary.data.atomic import check_output_file
+    from csboundary.qgis_plugin import plugin_version, write_plugin_zip
+
+    written = write_plugin_zip(check_output_file(out, (".zip",)))
+    here = [p for p in (Path(sys.argv[0]), Path(sys.executable).with_name("csboundary")) if p.name.startswith("csboundary") and p.is_file()]
+    typer.echo(f"{written}: the csboundary QGIS plugin {plugin_version()}; give it this environment's command under Settings > "
+               f"Options > Processing > Providers > csboundary: {here[0].resolve() if here else 'csboundary'}")
 
 
 def demo(

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "qgis_plugin"))
-from csboundary_qgis import runner  # noqa: E402
+from csboundary.qgis_plugin.csboundary_qgis import runner  # noqa: E402
 
 CSBOUNDARY = Path(sys.executable).parent / "csboundary"
 
@@ -166,3 +165,20 @@ while True:
     pid = int(pid_file.read_text())
     with pytest.raises(ProcessLookupError):
         os.kill(pid, 0)  # gone (and reaped)
+
+
+def test_the_plugin_zip_holds_the_plugin_in_one_folder_as_qgis_installs_it(tmp_path):
+    import zipfile
+
+    from csboundary.qgis_plugin import PLUGIN, plugin_version
+    from helpers import run_cli
+
+    done = run_cli("qgis-plugin", "--out", str(tmp_path / "plugin.zip"))
+    assert done.returncode == 0 and f"the csboundary QGIS plugin {plugin_version()}" in done.stdout, done.stderr
+    with zipfile.ZipFile(tmp_path / "plugin.zip") as archive:
+        names = set(archive.namelist())
+        assert names == {f"csboundary_qgis/{p.name}" for p in PLUGIN.iterdir() if p.is_file()}
+        assert {"csboundary_qgis/metadata.txt", "csboundary_qgis/__init__.py", "csboundary_qgis/icon.svg"} <= names
+        assert archive.read("csboundary_qgis/runner.py") == (PLUGIN / "runner.py").read_bytes()
+        metadata = archive.read("csboundary_qgis/metadata.txt").decode()
+    assert "qgisMinimumVersion=3.22" in metadata and "hasProcessingProvider=yes" in metadata
