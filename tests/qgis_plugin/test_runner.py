@@ -115,8 +115,8 @@ while True:
 def test_a_canceled_prediction_stops_within_5_s_and_the_same_command_continues_it(demo_run, tmp_path):
     """What the plugin's cancel does to a real run: SIGTERM once the first patch is done; the run
     store keeps it and the same command predicts only the rest."""
-    tiles = sorted(str(p) for p in (demo_run / "city" / "tiles").glob("*.tif"))
-    args = ["predict", *tiles, "--out", str(tmp_path / "pred"), "--device", "cpu"]
+    tile = sorted(str(p) for p in (demo_run / "city" / "tiles").glob("*.tif"))[0]  # one tile of the demo city: 2x2 patches
+    args = ["predict", tile, "--out", str(tmp_path / "pred"), "--device", "cpu"]
     seen = Seen(cancel_when=lambda s: s.stages[-1:] == ["predict patches"] and s.percents[-1] > 0)
     with pytest.raises(runner.Canceled):
         runner.run(str(CSBOUNDARY), args, seen.progress())
@@ -127,7 +127,7 @@ def test_a_canceled_prediction_stops_within_5_s_and_the_same_command_continues_i
     again = Seen()
     runner.run(str(CSBOUNDARY), args, again.progress())
     work = json.loads((tmp_path / "pred" / "summary.json").read_text())["work"]
-    assert work["patches_reused"] >= 1 and work["patches_reused"] + work["patches_predicted"] == 9, work
+    assert work["patches_reused"] >= 1 and work["patches_reused"] + work["patches_predicted"] == 4, work
     assert os.path.exists(tmp_path / "pred" / "graph.json")
 
 
