@@ -112,7 +112,8 @@ def test_fit_confidence_writes_a_bundle_predict_uses(tmp_path):
     assert [c["ground_truth_sha256"] for c in recorded] == [file_sha256(c / "ground_truth.gpkg") for c in cities]
     assert table["provenance"]["n_trees"] == 5 and len(table["tree_starts"]) == 6
     image = next((cities[0] / "tiles").glob("*.tif"))
-    done = run_cli("predict-patch", str(image), "--out", str(tmp_path / "patch"), "--weights", str(out), "--device", "cpu", "--engine", "torch")
+    done = run_cli("predict-patch", str(image), "--out", str(tmp_path / "patch"), "--weights", str(out), "--device", "cpu",
+                   "--engine", "torch")
     assert done.returncode == 0, done.stderr
     scores = np.asarray(BoundaryGraph.read_json(tmp_path / "patch" / "graph.json").edge_scores, float)
     assert len(scores) and ((scores >= 0) & (scores <= 1)).all()
