@@ -93,6 +93,16 @@ def test_qgis_process_lists_the_algorithms_and_runs_detect_on_the_demo_city(qgis
     city = json.loads((demo_run / "scores.json").read_text())["city"]["metrics"]  # the demo's own city-scale scores
     assert abs(results["F1_5"] - city["f1@5"]) < 0.02 and abs(results["APLS"] - city["apls"]) < 0.05, (results, city)
     print(json.dumps({"evaluate through qgis_process": results, "demo": {k: city[k] for k in ("f1@5", "apls", "tlts")}}))
+    # a ground-truth layer in another CRS is reprojected to the prediction's first
+    import geopandas as gpd
+
+    degrees = tmp_path / "gt-4326.gpkg"
+    gpd.read_file(demo_run / "city" / "ground_truth.gpkg", layer="road_boundaries").to_crs("EPSG:4326").to_file(degrees, driver="GPKG")
+    done = subprocess.run([QGIS_PROCESS, "--json", "run", "csboundary:evaluate", "--", f"PREDICTION={out}", f"GROUND_TRUTH={degrees}",
+                           f"OUTPUT={tmp_path / 'scores-4326.json'}"], env=qgis["env"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    again = json.loads(done.stdout[done.stdout.index("{"):])["results"]
+    assert abs(again["F1_5"] - results["F1_5"]) < 0.005 and abs(again["APLS"] - results["APLS"]) < 0.01, (again, results)
 
 
 def test_detect_loads_the_boundaries_and_review_layers_styled_by_confidence(qgis, demo_run, tmp_path):

@@ -6,8 +6,9 @@ import json
 import os
 import tempfile
 
-from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingContext, QgsProcessingException, QgsProject,
-                       QgsProcessingOutputFile, QgsProcessingOutputFolder, QgsProcessingOutputNumber,
+from qgis.core import (QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProcessing, QgsProcessingAlgorithm,
+                       QgsProcessingContext, QgsProcessingException, QgsProject, QgsProcessingOutputFile,
+                       QgsProcessingOutputFolder, QgsProcessingOutputNumber,
                        QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterMultipleLayers,
@@ -108,6 +109,15 @@ def load(context, source, name, output, kind):
     context.addLayerToLoadOnCompletion(source, details)
 
 
+def prediction_crs(prediction):
+    """The CRS a prediction was made in (its summary.json, small, rather than its graph.json)."""
+    try:
+        with open(os.path.join(prediction, "summary.json")) as file:
+            return QgsCoordinateReferenceSystem(str(json.load(file).get("crs") or ""))
+    except (OSError, ValueError):
+        return QgsCoordinateReferenceSystem()
+
+
 def imagery_files(algorithm, parameters, name, context):
     """The files behind raster layers; a layer that is not a local raster file is refused, with the way out."""
     layers = algorithm.parameterAsLayerList(parameters, name, context)
@@ -192,10 +202,17 @@ class Evaluate(CsboundaryAlgorithm):
             ground_truth = os.path.join(work, "ground_truth.gpkg")
             options = QgsVectorFileWriter.SaveVectorOptions()
             options.driverName = "GPKG"
+            crs = prediction_crs(prediction)
+            if crs.isValid() and layer.crs().isValid() and layer.crs() != crs:  # in the prediction's CRS, as evaluate needs it
+                options.ct = QgsCoordinateTransform(layer.crs(), crs, context.transformContext())
+                feedback.pushInfo(f"{layer.name()}: reprojected from {layer.crs().authid()} to the prediction's {crs.authid()}")
             error = QgsVectorFileWriter.writeAsVectorFormatV3(layer, ground_truth, context.transformContext(), options)
             if error[0] != QgsVectorFileWriter.NoError:
                 raise QgsProcessingException(f"{layer.name()}: could not be written for csboundary ({error[1]})")
-            self.csboundary(["evaluate", os.path.join(prediction, "graph.json"), ground_truth, "--json", out], feedback)
+            try:
+                self.csboundary(["evaluate", os.path.join(prediction, "graph.json"), ground_truth, "--json", out], feedback)
+            except QgsProcessingException as exc:  # the layer's name, not the temporary copy's path
+                raise QgsProcessingException(str(exc).replace(ground_truth, layer.name())) from None
         with open(out) as file:
             scores = json.load(file)
         metrics = scores.get("metrics", scores)
