@@ -14,7 +14,6 @@ fitted with and without those columns and scored on every other set.
 from __future__ import annotations
 
 import argparse
-import glob
 import sys
 from pathlib import Path
 
@@ -23,17 +22,15 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).parent))
-from confidence_image import model_image  # noqa: E402
+from confidence_image import fit_trees, load, model_image, named_cities  # noqa: E402
 
-from csboundary.data import city as layout  # noqa: E402
 from csboundary.graph.chains import edge_line  # noqa: E402
 from csboundary.graph.edge_evidence import FEATURES  # noqa: E402
 from csboundary.graph.polyline import points_along  # noqa: E402
-from csboundary.metrics.confidence import TRUE_SHARE, confidence_report  # noqa: E402
+from csboundary.metrics.confidence import confidence_report  # noqa: E402
 from csboundary.models.fpn import top_down  # noqa: E402
-from csboundary.pipeline.evaluation.evaluate_set import set_cities  # noqa: E402
 from csboundary.pipeline.prediction.patch import load_predictor  # noqa: E402
-from csboundary.pipeline.training.confidence_fit import TREE_SHARE, city_edges  # noqa: E402
+from csboundary.pipeline.training.confidence_fit import city_edges  # noqa: E402
 
 SIDE_PX = 6.0
 
@@ -82,30 +79,6 @@ def city_record(city: Path, predictor, cache: Path, prefix: str) -> Path:
     return target
 
 
-def load(files: list[Path]) -> dict[str, np.ndarray]:
-    parts = [dict(np.load(f)) for f in files]
-    parts = [p for p in parts if len(p["truth_share"])]
-    out = {k: np.concatenate([p[k] for p in parts]) for k in ("evidence", "fpn", "truth_share", "length")}
-    out["group"] = np.concatenate([np.full(len(p["truth_share"]), k) for k, p in enumerate(parts)])
-    return out
-
-
-def fit_model(x: np.ndarray, fit: dict):
-    """Trees and isotonic map as fit-confidence fits them (confidence_image.fit_model), on every column of ``x``."""
-    from sklearn.ensemble import GradientBoostingClassifier
-    from sklearn.isotonic import IsotonicRegression
-    from sklearn.model_selection import GroupKFold
-
-    positive, tree_positive, groups = fit["truth_share"] >= TRUE_SHARE, fit["truth_share"] >= TREE_SHARE, fit["group"]
-    make = lambda: GradientBoostingClassifier(n_estimators=200, max_depth=2, learning_rate=0.05, random_state=0)  # noqa: E731
-    raw = np.zeros(len(x))
-    for train, test in GroupKFold(n_splits=min(5, len(np.unique(groups)))).split(x, positive, groups):
-        raw[test] = make().fit(x[train], tree_positive[train]).decision_function(x[test])
-    iso = IsotonicRegression(out_of_bounds="clip", y_min=0, y_max=1).fit(raw, positive)
-    trees = make().fit(x, tree_positive)
-    return lambda z: iso.predict(trees.decision_function(z))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("sets", nargs="+", help="NAME=PATH[,PATH...]: set folders or city directories; the first is fitted on")
@@ -116,15 +89,9 @@ def main() -> None:
     args.cache.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(2)
     predictor = load_predictor(args.weights, "cpu")
-    sets = {}
-    for item in args.sets:
-        name, paths = item.split("=", 1)
-        cities = []
-        for path in map(Path, sum((glob.glob(p) for p in paths.split(",")), [])):
-            cities += [path] if layout.is_city_dir(path) else set_cities(path)
-        sets[name] = [city_record(c, predictor, args.cache, name) for c in cities]
+    sets = {name: [city_record(c, predictor, args.cache, name) for c in cities] for name, cities in named_cities(args.sets).items()}
     names = list(sets)
-    fit = load(sets[names[0]])
+    fit = load(sets[names[0]], ("evidence", "fpn"))
     from sklearn.decomposition import PCA
 
     finite = np.isfinite(fit["evidence"]).all(axis=0)
@@ -134,11 +101,11 @@ def main() -> None:
         scale = (fit["fpn"].mean(0), fit["fpn"].std(0) + 1e-6)
         columns[f"+ fpn pca{k}"] = (lambda pca, scale: lambda d: np.concatenate(
             [d["evidence"][:, finite], pca.transform((d["fpn"] - scale[0]) / scale[1])], axis=1))(pca, scale)
-    models = {label: (make, fit_model(make(fit), fit)) for label, make in columns.items()}
+    models = {label: (make, fit_trees(make(fit), fit)) for label, make in columns.items()}
     print(f"fitted on {len(fit['length'])} edges of {len(sets[names[0]])} cities")
     print(f"{'set':24s} {'edges':>6s} " + "".join(f"{label + ' AUC':>24s}{'ECE':>7s}" for label in models))
     for name in names[1:]:
-        d = load(sets[name])
+        d = load(sets[name], ("evidence", "fpn"))
         row = f"{name:24s} {len(d['length']):6d} "
         for label, (make, model) in models.items():
             r = confidence_report(model(make(d)), d["truth_share"], d["length"])

@@ -105,10 +105,23 @@ def city_record(city: Path, predictor, cache: Path, prefix: str) -> Path:
     return target
 
 
-def load(files: list[Path]) -> dict[str, np.ndarray]:
+def named_cities(items: list[str]) -> dict[str, list[Path]]:
+    """NAME=PATH[,PATH...] (globs; set folders or city directories) -> the cities of each name, in order."""
+    sets = {}
+    for item in items:
+        name, paths = item.split("=", 1)
+        cities = []
+        for path in map(Path, sum((glob.glob(p) for p in paths.split(",")), [])):
+            cities += [path] if layout.is_city_dir(path) else set_cities(path)
+        sets[name] = cities
+    return sets
+
+
+def load(files: list[Path], columns: tuple[str, ...] = ("evidence", "image")) -> dict[str, np.ndarray]:
+    """The cached records of ``files`` concatenated (edges without truth dropped), with each edge's city as its group."""
     parts = [dict(np.load(f)) for f in files]
     parts = [p for p in parts if len(p["truth_share"])]
-    out = {k: np.concatenate([p[k] for p in parts]) for k in ("evidence", "image", "truth_share", "length")}
+    out = {k: np.concatenate([p[k] for p in parts]) for k in (*columns, "truth_share", "length")}
     out["group"] = np.concatenate([np.full(len(p["truth_share"]), k) for k, p in enumerate(parts)])
     return out
 
@@ -121,13 +134,7 @@ def main() -> None:
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     predictor = load_predictor(args.weights, "cpu")
-    sets = {}
-    for item in args.sets:
-        name, paths = item.split("=", 1)
-        cities = []
-        for path in map(Path, sum((glob.glob(p) for p in paths.split(",")), [])):
-            cities += [path] if layout.is_city_dir(path) else set_cities(path)
-        sets[name] = [city_record(c, predictor, args.cache, name) for c in cities]
+    sets = {name: [city_record(c, predictor, args.cache, name) for c in cities] for name, cities in named_cities(args.sets).items()}
     names = list(sets)
     fit = load(sets[names[0]])
     with_image = lambda d: np.concatenate([d["evidence"], d["image"]], axis=1)  # noqa: E731
@@ -150,19 +157,25 @@ def main() -> None:
 
 def fit_model(x: np.ndarray, fit: dict, feats: tuple[str, ...]):
     """Trees and isotonic map as fit-confidence fits them, on the columns ``feats`` of ``x``."""
+    keep = [i for i, f in enumerate(FEATURES + IMAGE_FEATURES) if f in feats and np.isfinite(x[:, i]).all()]
+    model = fit_trees(x[:, keep], fit)
+    return lambda z: model(z[:, keep])
+
+
+def fit_trees(x: np.ndarray, fit: dict):
+    """Trees and isotonic map as fit-confidence fits them, on every column of ``x`` (the rows of ``fit``)."""
     from sklearn.ensemble import GradientBoostingClassifier
     from sklearn.isotonic import IsotonicRegression
     from sklearn.model_selection import GroupKFold
 
-    keep = [i for i, f in enumerate(FEATURES + IMAGE_FEATURES) if f in feats and np.isfinite(x[:, i]).all()]
     positive, tree_positive, groups = fit["truth_share"] >= TRUE_SHARE, fit["truth_share"] >= TREE_SHARE, fit["group"]
     make = lambda: GradientBoostingClassifier(n_estimators=200, max_depth=2, learning_rate=0.05, random_state=0)  # noqa: E731
     raw = np.zeros(len(x))
     for train, test in GroupKFold(n_splits=min(5, len(np.unique(groups)))).split(x, positive, groups):
-        raw[test] = make().fit(x[train][:, keep], tree_positive[train]).decision_function(x[test][:, keep])
+        raw[test] = make().fit(x[train], tree_positive[train]).decision_function(x[test])
     iso = IsotonicRegression(out_of_bounds="clip", y_min=0, y_max=1).fit(raw, positive)
-    trees = make().fit(x[:, keep], tree_positive)
-    return lambda z: iso.predict(trees.decision_function(z[:, keep]))
+    trees = make().fit(x, tree_positive)
+    return lambda z: iso.predict(trees.decision_function(z))
 
 
 if __name__ == "__main__":

@@ -78,9 +78,29 @@ class CsboundaryAlgorithm(QgsProcessingAlgorithm):
             raise QgsProcessingException(f"{path or name}: not a folder")
         return path
 
-    def work_args(self, parameters, context):
+    def min_confidence_parameter(self):
+        self.addParameter(QgsProcessingParameterNumber("MIN_CONFIDENCE", "Leave out edges less sure than",
+                                                       QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+
+    def min_confidence_args(self, parameters, context):
+        min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
+        return ["--min-confidence", repr(min_confidence)] if min_confidence > 0 else []
+
+    def training_parameters(self, fpn_steps, afanet_steps, afanet_label, afanet_min, output_label):
+        """Fine-tune's and Adapt's budget, engine, optional work folder and weights to write."""
+        self.addParameter(QgsProcessingParameterNumber("FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, fpn_steps,
+                                                       minValue=1))
+        self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", afanet_label, QgsProcessingParameterNumber.Integer, afanet_steps,
+                                                       minValue=afanet_min))
+        self.engine_parameters()
+        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs; empty: beside the weights)",
+                                                                  optional=True, createByDefault=False))
+        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", output_label, "Weights bundle (*.pt)"))
+
+    def training_args(self, parameters, context):
         work = self.parameterAsString(parameters, "WORK", context) if parameters.get("WORK") else ""
-        return ["--work", work] if work else []
+        return [*(["--work", work] if work else []), "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
+                "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)), *self.engine_args(parameters, context)]
 
     def kept(self, path, what, feedback):
         """Warn when ``path`` is in QGIS's temporary folder: deleted when QGIS closes, and a new
@@ -147,8 +167,7 @@ class Detect(CsboundaryAlgorithm):
         self.addParameter(QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF tiles of one mosaic)",
                                                                QgsProcessing.TypeRaster))
         self.addParameter(QgsProcessingParameterEnum("ENGINE", "Engine", options=list(ENGINES), defaultValue=0))
-        self.addParameter(QgsProcessingParameterNumber("MIN_CONFIDENCE", "Leave out edges less sure than",
-                                                       QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+        self.min_confidence_parameter()
         self.engine_parameters()
         self.addParameter(QgsProcessingParameterFolderDestination("OUTPUT", "Prediction folder"))
         self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
@@ -160,9 +179,7 @@ class Detect(CsboundaryAlgorithm):
         inputs = imagery_files(self, parameters, "INPUT", context)
         out = self.kept(self.parameterAsString(parameters, "OUTPUT", context), "The prediction", feedback)
         args = ["predict", *inputs, "--out", out, "--engine", ENGINES[self.parameterAsEnum(parameters, "ENGINE", context)]]
-        min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
-        if min_confidence > 0:
-            args += ["--min-confidence", repr(min_confidence)]
+        args += self.min_confidence_args(parameters, context)
         self.csboundary(args + self.engine_args(parameters, context), feedback)
         review = os.path.join(out, REVIEW_GPKG)
         if os.path.exists(review):  # edits may be in it: never overwritten (Apply review refuses it if the graph changed since)
@@ -231,17 +248,14 @@ class ExportLanelet2(CsboundaryAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
-        self.addParameter(QgsProcessingParameterNumber("MIN_CONFIDENCE", "Leave out edges less sure than",
-                                                       QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+        self.min_confidence_parameter()
         self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Lanelet2 map", "OSM files (*.osm)"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         prediction = self.prediction(parameters, context)
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         args = ["export-lanelet2", prediction, "--out", out]
-        min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
-        if min_confidence > 0:
-            args += ["--min-confidence", repr(min_confidence)]
+        args += self.min_confidence_args(parameters, context)
         self.csboundary(args, feedback)
         return {"OUTPUT": out}
 
@@ -299,20 +313,12 @@ class Finetune(CsboundaryAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile("PREDICTION", "Reviewed prediction folder", QgsProcessingParameterFile.Folder))
-        self.addParameter(QgsProcessingParameterNumber("FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, 1000, minValue=1))
-        self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", "AfANet steps", QgsProcessingParameterNumber.Integer, 500,
-                                                       minValue=1))
-        self.engine_parameters()
-        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs; empty: beside the weights)",
-                                                                  optional=True, createByDefault=False))
-        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Fine-tuned weights", "Weights bundle (*.pt)"))
+        self.training_parameters(1000, 500, "AfANet steps", 1, "Fine-tuned weights")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.kept(self.parameterAsFileOutput(parameters, "OUTPUT", context), "The fine-tuned weights", feedback)
-        self.csboundary(["finetune", self.prediction(parameters, context), "--out", out, *self.work_args(parameters, context),
-                         "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
-                         "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
-                         *self.engine_args(parameters, context)], feedback)
+        self.csboundary(["finetune", self.prediction(parameters, context), "--out", out, *self.training_args(parameters, context)],
+                        feedback)
         return {"OUTPUT": out}
 
 
@@ -325,22 +331,14 @@ class Adapt(CsboundaryAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF)", QgsProcessing.TypeRaster))
-        self.addParameter(QgsProcessingParameterNumber("FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, 800, minValue=1))
-        self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", "AfANet steps (0: keep the bundle's)",
-                                                       QgsProcessingParameterNumber.Integer, 300, minValue=0))
         self.addParameter(QgsProcessingParameterBoolean("MIX", "Paste synthetic roadway into your windows", True))
-        self.engine_parameters()
-        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs; empty: beside the weights)",
-                                                                  optional=True, createByDefault=False))
-        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Adapted weights", "Weights bundle (*.pt)"))
+        self.training_parameters(800, 300, "AfANet steps (0: keep the bundle's)", 0, "Adapted weights")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.kept(self.parameterAsFileOutput(parameters, "OUTPUT", context), "The adapted weights", feedback)
         mix = self.parameterAsBoolean(parameters, "MIX", context)
-        self.csboundary(["adapt", *imagery_files(self, parameters, "INPUT", context), "--out", out, *self.work_args(parameters, context),
-                         "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
-                         "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
-                         "--mix" if mix else "--no-mix", *self.engine_args(parameters, context)], feedback)
+        self.csboundary(["adapt", *imagery_files(self, parameters, "INPUT", context), "--out", out, "--mix" if mix else "--no-mix",
+                         *self.training_args(parameters, context)], feedback)
         return {"OUTPUT": out}
 
 
