@@ -123,11 +123,13 @@ class BoundaryGraph:
     # -- construction -------------------------------------------------------------------------------
     @classmethod
     def from_polylines(cls, lines: Sequence[np.ndarray], transform: Affine | None = None, crs: str | None = None,
-                       snap: float = 1e-6) -> "BoundaryGraph":
-        """A graph whose vertices are the polylines' points (shared points merged within ``snap``)."""
-        points, edges = [], []
+                       snap: float = 1e-6, scores: Sequence[float] | None = None) -> "BoundaryGraph":
+        """A graph whose vertices are the polylines' points (shared points merged within ``snap``).
+        ``scores`` (one per line) become the scores of the line's edges; a segment two lines share
+        keeps the first line's."""
+        points, edges = [], {}
         index: dict[tuple[int, int], int] = {}
-        for line in lines:
+        for n, line in enumerate(lines):
             line = np.asarray(line, dtype=float)
             ids = []
             for p in line:
@@ -136,19 +138,27 @@ class BoundaryGraph:
                     index[key] = len(points)
                     points.append(p)
                 ids.append(index[key])
-            edges.extend((min(a, b), max(a, b)) for a, b in zip(ids, ids[1:]) if a != b)
-        edges = sorted(set(edges))
-        return cls(np.array(points).reshape(-1, 2), np.array(edges, dtype=np.int64).reshape(-1, 2), transform=transform, crs=crs)
+            for a, b in zip(ids, ids[1:]):
+                if a != b:
+                    edges.setdefault((min(a, b), max(a, b)), np.nan if scores is None else float(scores[n]))
+        keys = sorted(edges)
+        graph = cls(np.array(points).reshape(-1, 2), np.array(keys, dtype=np.int64).reshape(-1, 2), transform=transform, crs=crs)
+        if scores is not None:
+            graph.edge_scores = np.array([edges[k] for k in keys], dtype=float)
+        return graph
 
     @classmethod
-    def from_world_lines(cls, lines: Sequence[LineString], transform: Affine, crs: str | None = None) -> "BoundaryGraph":
-        """Graph of world LineStrings expressed in the pixel frame of ``transform``."""
+    def from_world_lines(cls, lines: Sequence[LineString], transform: Affine, crs: str | None = None,
+                         scores: Sequence[float] | None = None) -> "BoundaryGraph":
+        """Graph of world LineStrings expressed in the pixel frame of ``transform`` (rounded to
+        1e-6 px, so a line written from a graph's pixels reads back onto the same pixels and
+        rasters), with ``scores`` per line as :meth:`from_polylines` takes them."""
         pixel_lines = []
         for line in lines:
             xy = np.asarray(line.coords)[:, :2]
             cols, rows = world_to_pixel(transform, xy[:, 0], xy[:, 1])
-            pixel_lines.append(np.stack([cols, rows], axis=1))
-        return cls.from_polylines(pixel_lines, transform=transform, crs=crs)
+            pixel_lines.append(np.round(np.stack([cols, rows], axis=1), 6))
+        return cls.from_polylines(pixel_lines, transform=transform, crs=crs, scores=scores)
 
     # -- JSON -----------------------------------------------------------------------------------------
     def to_dict(self) -> dict:

@@ -81,3 +81,15 @@ def points_along(line: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]
     pts = line[which] + t[:, None] * seg[which]
     direction = seg[which] / np.maximum(seg_len[which], 1e-12)[:, None]
     return pts, np.stack([direction[:, 1], -direction[:, 0]], axis=1)
+
+
+def polyline_between(points: np.ndarray, start: float, stop: float) -> np.ndarray:
+    """The piece of a polyline from arc length ``start`` to ``stop`` (clipped to the line): its two
+    ends interpolated, the vertices between them kept."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    cum = arc_lengths(points)
+    total = float(cum[-1]) if len(cum) else 0.0
+    start, stop = min(max(start, 0.0), total), min(max(stop, 0.0), total)
+    ends = np.stack([np.interp([start, stop], cum, points[:, 0]), np.interp([start, stop], cum, points[:, 1])], axis=1)
+    inside = points[(cum > start) & (cum < stop)]
+    return np.concatenate([ends[:1], inside, ends[1:]])

@@ -164,17 +164,43 @@ def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
         if graph.edge_polylines is not None:
             polylines = [move(np.asarray(p, dtype=float)) if p is not None else None for p in graph.edge_polylines]
         return dataclasses.replace(graph, vertices=move(graph.vertices), edge_polylines=polylines, transform=frame.transform, crs=frame.crs)
-    from csboundary.data.ground_truth import as_linestrings
-
-    lines = [part for geom in src.lines.geometry for part in as_linestrings(geom)]
-    if frame.transform is None:
-        return BoundaryGraph.from_polylines([np.asarray(line.coords)[:, :2] for line in lines])
-    if frame.crs is not None and src.crs is not None and not _same_crs(src.crs, frame.crs):
+    table = src.lines
+    if frame.transform is not None and frame.crs is not None and src.crs is not None and not _same_crs(src.crs, frame.crs):
         try:
-            lines = [part for geom in src.lines.to_crs(frame.crs).geometry for part in as_linestrings(geom)]
+            table = table.to_crs(frame.crs)
         except Exception as exc:  # pyproj raises several types
             raise InputError(src.path, f"cannot reproject from {src.crs} to {frame.crs} ({exc})".splitlines()[0]) from exc
-    return BoundaryGraph.from_world_lines(lines, frame.transform, crs=frame.crs)
+    lines, scores = line_parts(table)
+    if frame.transform is None:
+        return BoundaryGraph.from_polylines([np.asarray(line.coords)[:, :2] for line in lines], scores=scores)
+    return BoundaryGraph.from_world_lines(lines, frame.transform, crs=frame.crs, scores=scores)
+
+
+SCORE_COLUMNS = ("confidence_mean", "confidence")  # a boundary's confidence (road_boundaries), else an edge's (edges layer)
+
+
+def line_parts(table) -> tuple[list, list[float] | None]:
+    """The LineStrings of a table of lines and, when it has a confidence column
+    (:data:`SCORE_COLUMNS`), each one's confidence (NaN where missing or not a number), so a
+    prediction read from its GeoPackage or GeoJSON keeps the scores graph.json holds."""
+    from csboundary.data.ground_truth import as_linestrings
+
+    column = next((c for c in SCORE_COLUMNS if c in table.columns), None)
+    values = [np.nan] * len(table) if column is None else [_number(v) for v in table[column]]
+    lines, scores = [], []
+    for geom, value in zip(table.geometry, values):
+        for part in as_linestrings(geom):
+            lines.append(part)
+            scores.append(value)
+    return lines, (scores if column is not None else None)
+
+
+def _number(value) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+    return number if math.isfinite(number) else float("nan")
 
 
 def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False) -> tuple[BoundaryGraph, BoundaryGraph,

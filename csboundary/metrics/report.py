@@ -51,14 +51,21 @@ def format_review(report: dict) -> str:
     km = report.get("true_boundary_km")
     scale, unit = (1 / km, "min/km") if km else (1.0, "min")
     target = report["costs"]["target_f1"]
-    lines = [f"review effort ({report['edges']} edges, {report['false_edges']} false; "
+    held = report["held_back_boundaries"]
+    lines = [f"review effort ({report['boundaries']} boundaries, {report['draft_boundaries']} in the review draft"
+             + (f", {held} held back" if held else "") + f"; {report['false_boundaries']} false, {report['cut_pieces']} pieces cut out; "
              + (f"{km:.3f} km of true boundary" if km else f"{report['true_boundary_px']:.0f} px of true boundary") + "):",
              f"  from scratch {_num(report['scratch_minutes'] * scale, 1)} {unit} ({report['scratch_clicks']} clicks)"]
     for name, o in report["orders"].items():
-        lines.append(f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} (look "
+        ratio = o["minutes"] / report["scratch_minutes"] if report["scratch_minutes"] else float("nan")
+        lines.append(f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} = {_num(ratio, 2)}x scratch (look "
                      f"{_num(o['look_minutes'] * scale, 1)}, "
                      f"draw {_num(o['draw_minutes'] * scale, 1)}); F1@5 {_num(o['start_f1'], 3)} -> {_num(o['end_f1'], 3)}; "
                      f"to F1@5 {target:g}: {_num(o['minutes_to_target_f1'] * scale, 1)} {unit}")
+    if "note" in report:
+        lines.append(f"  ({report['note']})")
+    if report.get("metres_per_px_assumed"):
+        lines.append(f"  (lengths priced at an assumed {report['metres_per_px']:g} m per pixel: the frame has no ground size)")
     return "\n".join(lines)
 
 

@@ -1,24 +1,34 @@
 """What a draft saves a reviewer: a simulated review, in minutes (docs/metrics.md, "Review effort").
 
-A reviewer turns a predicted graph into a correct map in two passes:
+The unit a person checks is a **boundary**: a maximal chain of the graph between junctions and
+ends (:func:`csboundary.graph.chains.merge_chains`), with its own confidence (the
+length-weighted mean of its edges' calibrated scores: the expected share of its length that is
+true). The chains are rebuilt from the lines' shared ends, so a prediction read from graph.json,
+its GeoPackage or its GeoJSON is the same set of boundaries and costs the same minutes.
 
-1. **look** at edges in an order (least sure first, or a random order), deleting each false edge
-   (one with less than half its length within 5 px of the ground truth, as
-   :func:`csboundary.metrics.confidence.edge_truth` says) and moving a vertex of a true edge
-   that strays ``fix_px`` pixels or more off the truth onto it (one click; its pixels off the
-   truth go);
-2. **draw** what is still missing: every run of ground truth farther than 5 px from the kept
-   edges, traced as a polyline that stays within ``trace_tolerance_px`` of it
-   (Douglas-Peucker), longest run first. Each run costs a look (to find where it starts) and its
-   clicks; an end of a run that meets a kept line snaps onto it and costs no click; a run costs
-   at least one click.
+1. **The review draft.** A scored boundary is shown only when it is expected to save time
+   (:func:`keeps_boundary`): ``p x seconds to draw it > seconds to look at it + (1 - p) x
+   seconds to delete it``. The rest is held back (``predict`` still writes it, marked), so in
+   expectation a draft never costs more than drawing from scratch.
+2. **Look** at the draft's boundaries in an order (least sure first, or a random order) and act
+   on each. A boundary with less than half its length within 5 px of the ground truth is
+   deleted. Otherwise each run of it off the truth is mended: a run of ``cut_px`` or longer is
+   cut out (a cut at each end that is not the boundary's end, then a delete), a shorter one of
+   ``fix_px`` or more gets a vertex moved onto the truth (its pixels off the truth go).
+3. **Draw** what is still missing: every run of ground truth farther than 5 px from the kept
+   lines, traced as a polyline that stays within ``trace_tolerance_px`` of it (Douglas-Peucker),
+   longest run first; a gap between two kept lines no longer than ``fix_px`` (beyond the two
+   samples that reach back onto them) is left, as a stray that short is. Each run costs
+   finding where it starts, its clicks (an end that meets a
+   kept line snaps onto it and costs no click; a run costs at least one click) and the eye
+   travel along its length.
 
-Drawing the same map from scratch costs a look and the clicks of every ground-truth boundary
-traced the same way. F1@5 is tracked after every action on 1 px rasters, as
-:func:`csboundary.metrics.pixel.relaxed_scores` defines it, so the curve starts at the
-prediction's F1@5. The reviewer may stop looking early and draw from there (the point of a
-confidence: the sure edges need no look); ``minutes_to_target_f1`` is the cheapest such plan that
-reaches the target, searched over stopping points.
+Drawing the same map from scratch costs the same for every ground-truth boundary. F1@5 is
+tracked after every action on 1 px rasters, as :func:`csboundary.metrics.pixel.relaxed_scores`
+defines it, so the curve starts at the draft's F1@5. The reviewer may stop looking early and
+draw from there (the point of a confidence: the sure boundaries need no look);
+``minutes_to_target_f1`` is the cheapest such plan that reaches the target, searched over
+stopping points.
 
 Pure functions on graphs in one pixel frame; costs are parameters (:class:`ReviewCosts`).
 """
@@ -34,9 +44,9 @@ from scipy.spatial import cKDTree
 
 from csboundary.config import Config
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.graph.chains import edge_line, merge_chains
-from csboundary.graph.polyline import points_along
-from csboundary.metrics.confidence import TRUE_SHARE, TRUE_WITHIN_PX, edge_truth
+from csboundary.graph.chains import merge_chains
+from csboundary.graph.polyline import points_along, polyline_between, polyline_length
+from csboundary.metrics.confidence import TRUE_SHARE, TRUE_WITHIN_PX
 from csboundary.metrics.pixel import f1_score, rasterize
 from csboundary.metrics.segments import Segments, flatten
 
@@ -49,16 +59,36 @@ class ReviewCosts(Config):
     """Seconds per action and the drawing tolerance (defaults argued in docs/metrics.md)."""
     config_name = "review costs"
 
-    look_s: float = 2.0  # jump to an edge (one key) and judge it against the image (a yes/no verification)
-    delete_s: float = 1.0  # delete an edge judged false (one more key)
-    vertex_s: float = 1.75  # one click on a visible point (extreme clicking: 7 s for 4 clicks)
+    look_s: float = 1.5  # glance at a whole boundary and judge it against the image (a yes/no verification)
+    look_s_per_20m: float = 0.5  # eye travel and panning along a line, per 20 m: when looking at a boundary and when tracing one
+    delete_s: float = 1.0  # delete a boundary or a cut-out piece judged false (one more key)
+    vertex_s: float = 1.75  # one click: a vertex drawn or moved, a cut (extreme clicking: 7 s for 4 clicks)
+    find_s: float = 2.0  # find where a missing boundary starts before tracing it
     trace_tolerance_px: float = 2.0  # a drawn polyline stays this close to the true boundary
-    fix_px: float = 5.0  # a true edge with this many pixels off the truth gets a vertex moved (one click) onto it
+    fix_px: float = 5.0  # a run this long off the truth gets a vertex moved (one click) onto it
+    cut_px: float = 20.0  # a run this long off the truth is cut out instead (a cut at each inner end, a delete)
     target_f1: float = 0.95
+    assumed_metres_per_px: float = 0.152  # the ground size of a pixel when the frame has none (the paper's imagery)
 
     def __post_init__(self) -> None:
-        if min(self.look_s, self.delete_s, self.vertex_s, self.fix_px) < 0 or self.trace_tolerance_px <= 0 or not 0 < self.target_f1 <= 1:
-            raise ValueError("review costs must be >= 0, the tolerance > 0 and the target F1 in (0, 1]")
+        values = (self.look_s, self.look_s_per_20m, self.delete_s, self.vertex_s, self.find_s, self.fix_px, self.cut_px)
+        if not all(np.isfinite(v) and v >= 0 for v in values) or not self.trace_tolerance_px > 0 \
+                or not 0 < self.target_f1 <= 1 or not self.assumed_metres_per_px > 0:
+            raise ValueError("review costs must be >= 0, the tolerance and the pixel size > 0 and the target F1 in (0, 1]")
+
+    def travel_s(self, length_px: float, metres_per_px: float) -> float:
+        """Eye travel along ``length_px`` of line."""
+        return self.look_s_per_20m * length_px * metres_per_px / 20.0
+
+    def look_seconds(self, length_px: float, metres_per_px: float) -> float:
+        """A look at a boundary of ``length_px``."""
+        return self.look_s + self.travel_s(length_px, metres_per_px)
+
+    def draw_seconds(self, line: np.ndarray, metres_per_px: float, snapped: int = 0) -> float:
+        """Drawing ``line`` by hand: find its start, click its vertices (``snapped`` ends snap onto
+        a kept line for free; one click at least), follow it with the eye."""
+        clicks = max(1, clicks_to_trace(line, self.trace_tolerance_px) - snapped)
+        return self.find_s + clicks * self.vertex_s + self.travel_s(polyline_length(line), metres_per_px)
 
 
 def _line_pixels(line: np.ndarray) -> np.ndarray:
@@ -96,24 +126,73 @@ def scratch_clicks(gt: BoundaryGraph, tolerance_px: float) -> int:
     return sum(clicks_to_trace(chain.polyline, tolerance_px) for chain in merge_chains(gt))
 
 
-class _State:
-    """Which predicted pixels are kept and which ground-truth pixels they cover, updated edge by
-    edge as edges are deleted and runs drawn: F1@5 after every action without re-rasterising."""
+@dataclass(frozen=True, eq=False)
+class Boundary:
+    """What a reviewer checks as one: a chain's pixel ``polyline``, its ``edges`` and its
+    ``confidence`` (NaN when none of its edges has a score)."""
 
-    def __init__(self, pred: BoundaryGraph, gt_pixels: np.ndarray, within_px: float):
+    polyline: np.ndarray
+    edges: np.ndarray
+    confidence: float
+
+    @property
+    def length_px(self) -> float:
+        return polyline_length(self.polyline)
+
+
+def graph_boundaries(graph: BoundaryGraph) -> list[Boundary]:
+    """The graph's boundaries (its chains), each with the length-weighted mean of its edges'
+    scores, ignoring missing ones: a long sure edge outweighs a short doubtful one, and the mean
+    of calibrated scores is the expected share of the boundary's length that is true."""
+    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(graph.n_edges, np.nan), float)
+    lengths = graph.edge_lengths() if graph.n_edges else np.zeros(0)
+    out = []
+    for chain in merge_chains(graph):
+        s, w = scores[chain.edges], lengths[chain.edges]
+        known = np.isfinite(s)
+        if not known.any():
+            confidence = float("nan")
+        elif w[known].sum() > 0:
+            confidence = float(np.dot(s[known], w[known]) / w[known].sum())
+        else:
+            confidence = float(s[known].mean())
+        out.append(Boundary(chain.polyline, chain.edges, confidence))
+    return out
+
+
+def keeps_boundary(confidence: float, line: np.ndarray, costs: ReviewCosts, metres_per_px: float) -> bool:
+    """Whether a boundary belongs in the review draft: its expected saving (``confidence`` x the
+    seconds to draw it) exceeds its expected cost (a look, and a delete when it is false). A
+    boundary without a confidence is shown (nothing says it does not pay)."""
+    if not np.isfinite(confidence):
+        return True
+    look = costs.look_seconds(polyline_length(line), metres_per_px)
+    return bool(confidence * costs.draw_seconds(line, metres_per_px) > look + (1 - confidence) * costs.delete_s)
+
+
+def review_draft(boundaries: list[Boundary], costs: ReviewCosts, metres_per_px: float) -> np.ndarray:
+    """(B,) True for the boundaries the review draft shows (:func:`keeps_boundary`)."""
+    return np.array([keeps_boundary(b.confidence, b.polyline, costs, metres_per_px) for b in boundaries], bool)
+
+
+class _State:
+    """Which predicted pixels are kept and which ground-truth pixels they cover, updated piece by
+    piece (``lines``: the pieces of the draft's boundaries) as pieces are deleted and runs drawn:
+    F1@5 after every action without re-rasterising."""
+
+    def __init__(self, piece_pixels: list[np.ndarray], gt_pixels: np.ndarray, within_px: float):
         self.within = within_px
         self.gt_tree = cKDTree(gt_pixels) if len(gt_pixels) else None
         self.gt_count = len(gt_pixels)
         rows, owner = [], []
-        for k in range(pred.n_edges):
-            px = _line_pixels(edge_line(pred, k))
+        for k, px in enumerate(piece_pixels):
             rows.append(px)
             owner.append(np.full(len(px), k))
         rows = np.concatenate(rows) if rows else np.zeros((0, 2), np.int64)
         owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
         keys, pixel_of_row = np.unique(_keys(rows), return_inverse=True)
         self.pixel_of_row, self.owner = pixel_of_row.ravel(), owner
-        self.rows_of_edge = np.split(np.argsort(owner, kind="stable"), np.cumsum(np.bincount(owner, minlength=pred.n_edges))[:-1])
+        self.rows_of_edge = np.split(np.argsort(owner, kind="stable"), np.cumsum(np.bincount(owner, minlength=len(piece_pixels)))[:-1])
         self.keys = set(keys.tolist())
         self.unique_keys = keys
         unique_px = _pixels(keys)
@@ -153,15 +232,15 @@ class _State:
         return f1_score(p, r)
 
     def edge_pixels(self, k: int) -> np.ndarray:
-        """Indices of edge ``k``'s distinct pixels."""
+        """Indices of piece ``k``'s distinct pixels."""
         return np.unique(self.pixel_of_row[self.rows_of_edge[k]])
 
     def off_truth_px(self, k: int) -> int:
-        """Pixels of edge ``k`` farther than ``within_px`` from the ground truth."""
+        """Pixels of piece ``k`` farther than ``within_px`` from the ground truth."""
         return int(np.count_nonzero(~self.pixel_true[self.edge_pixels(k)]))
 
     def delete(self, k: int, off_truth_only: bool = False) -> None:
-        """Take edge ``k`` out, or only its pixels off the ground truth (a vertex moved onto the
+        """Take piece ``k`` out, or only its pixels off the ground truth (a vertex moved onto the
         boundary: what stays is what was on it)."""
         pixels = self.edge_pixels(k)
         if off_truth_only:
@@ -193,6 +272,8 @@ class _State:
                 self.cover[g] += 1
 
 
+
+
 def boundary_samples(gt: BoundaryGraph) -> list[np.ndarray]:
     """Points every 1 px along each boundary of ``gt`` (chains through degree-2 vertices)."""
     samples = [points_along(chain.polyline, 1.0)[0] for chain in merge_chains(gt)]
@@ -220,12 +301,67 @@ def missing_runs(samples: list[np.ndarray], kept_pixels: np.ndarray, within_px: 
 
 
 @dataclass(frozen=True)
+class BoundaryPlan:
+    """What the reviewer does with one boundary of the draft: its ``pieces`` (pixel polylines, in
+    order along it), what happens to each (``keep``, ``delete`` or ``fix``: the piece's pixels off
+    the truth go) and the seconds it takes, the look included."""
+
+    pieces: list[np.ndarray]
+    actions: list[str]
+    seconds: float
+    false: bool  # deleted as a whole
+
+
+def plan_boundary(line: np.ndarray, near: cKDTree | None, costs: ReviewCosts, metres_per_px: float,
+                  within_px: float = TRUE_WITHIN_PX) -> BoundaryPlan:
+    """The actions on one boundary (module docstring, step 2): its points every 1 px are on the
+    truth when within ``within_px`` of a point of ``near`` (the ground truth's samples)."""
+    length = polyline_length(line)
+    look = costs.look_seconds(length, metres_per_px)
+    pts = points_along(line, 1.0)[0]
+    on = near.query(pts, k=1, distance_upper_bound=within_px)[0] < within_px if near is not None else np.zeros(len(pts), bool)
+    if length <= 0 or on.mean() < TRUE_SHARE:
+        return BoundaryPlan([line], ["delete"], look + costs.delete_s, True)
+    step = length / len(pts)
+    flips = np.flatnonzero(np.diff(on.astype(np.int8))) + 1
+    starts, stops = np.concatenate([[0], flips]), np.concatenate([flips, [len(on)]])
+    pieces, actions, seconds = [], [], look
+    for a, b in zip(starts.tolist(), stops.tolist()):
+        piece = polyline_between(line, a * step, b * step)
+        run = (b - a) * step
+        if on[a] or run < costs.fix_px:
+            action = "keep"
+        elif run >= costs.cut_px:
+            action = "delete"
+            seconds += costs.delete_s + costs.vertex_s * (int(a > 0) + int(b < len(on)))
+        else:
+            action = "fix"
+            seconds += costs.vertex_s
+        pieces.append(piece)
+        actions.append(action)
+    return BoundaryPlan(pieces, actions, seconds, False)
+
+
+def piece_pixels(line: np.ndarray, pieces: list[np.ndarray]) -> list[np.ndarray]:
+    """The raster pixels of ``line`` shared out among its ``pieces`` (each pixel to the piece
+    nearest its centre), so the pieces together are exactly the line's raster, as the pixel
+    metric draws it."""
+    pixels = _line_pixels(line)
+    if len(pieces) == 1:
+        return [pixels]
+    samples = [points_along(piece, 0.5)[0] for piece in pieces]
+    owner = np.concatenate([np.full(len(pts), k) for k, pts in enumerate(samples)])
+    nearest = owner[cKDTree(np.concatenate(samples)).query(pixels + 0.5, k=1)[1]]
+    return [pixels[nearest == k] for k in range(len(pieces))]
+
+
+@dataclass(frozen=True)
 class ReviewTrace:
     """One simulated review: seconds and F1@5 after each action, and its totals."""
 
     seconds: np.ndarray  # (A + 1,) cumulative, starting at 0
     f1: np.ndarray  # (A + 1,) F1@5 after each action
-    look_s: float  # the first pass (the edges looked at, the false ones deleted)
+    look_s: float  # the first pass (the boundaries looked at and acted on)
     clicks: int
 
     @property
@@ -238,27 +374,29 @@ class ReviewTrace:
 
 
 def _draw(state: _State, samples: list[np.ndarray], seconds: list[float], f1: list[float], costs: ReviewCosts, within_px: float,
-          until: float = np.inf) -> ReviewTrace:
+          metres_per_px: float, until: float = np.inf) -> ReviewTrace:
     """Trace the missing runs into ``state`` (changed in place), longest first, extending the
     ``seconds`` and ``f1`` of the look pass; stop once F1@5 reaches ``until``."""
     look_s, clicks = seconds[-1], 0
     for run, snapped in sorted(missing_runs(samples, state.kept_pixels(), within_px), key=lambda r: -len(r[0])):
         if f1[-1] >= until:
             break
-        n = max(1, clicks_to_trace(run, costs.trace_tolerance_px) - snapped)
-        clicks += n
+        if snapped == 2 and polyline_length(run) < costs.fix_px + 2:  # a gap within the eye's tolerance, as a stray shorter than fix_px
+            continue
+        clicks += max(1, clicks_to_trace(run, costs.trace_tolerance_px) - snapped)
         state.draw(_line_pixels(run))
-        seconds.append(seconds[-1] + costs.look_s + n * costs.vertex_s)  # find where it starts, then trace it
+        seconds.append(seconds[-1] + costs.draw_seconds(run, metres_per_px, snapped))
         f1.append(state.f1())
     return ReviewTrace(np.asarray(seconds), np.asarray(f1), look_s, clicks)
 
 
-def simulate_review(state: _State, false: np.ndarray, samples: list[np.ndarray], order: np.ndarray, costs: ReviewCosts, within_px: float,
-                    stops: int = STOPS) -> tuple[ReviewTrace, float]:
-    """Look at every edge of ``order`` (deleting the false ones), then draw: the full review's
-    trace; and the seconds of the cheapest plan "look at the first k edges, then draw runs until
-    F1@5 reaches the target", over k at ``stops`` + 1 evenly spread stopping points (NaN if no
-    plan reaches it). ``state`` is used up."""
+def simulate_review(state: _State, plans: list[BoundaryPlan], first_piece: np.ndarray, samples: list[np.ndarray], order: np.ndarray,
+                    costs: ReviewCosts, within_px: float, metres_per_px: float, stops: int = STOPS) -> tuple[ReviewTrace, float]:
+    """Look at every boundary of ``order`` and act on it (``plans``; its pieces are ``state``'s
+    pieces from ``first_piece``), then draw: the full review's trace; and the seconds of the
+    cheapest plan "look at the first k boundaries, then draw runs until F1@5 reaches the target",
+    over k at ``stops`` + 1 evenly spread stopping points (NaN if no plan reaches it). ``state``
+    is used up."""
     stop_at = set(np.linspace(0, len(order), stops + 1).round().astype(int).tolist())
     seconds, f1 = [0.0], [state.f1()]
     target = costs.target_f1 - 1e-12
@@ -267,59 +405,74 @@ def simulate_review(state: _State, false: np.ndarray, samples: list[np.ndarray],
         if f1[-1] >= target:
             best = min(best, seconds[-1])
         elif i in stop_at and i < len(order) and seconds[-1] < best:  # a later stop has looked longer: it can only win by drawing less
-            trace = _draw(state.copy(), samples, list(seconds), list(f1), costs, within_px, until=target)
+            trace = _draw(state.copy(), samples, list(seconds), list(f1), costs, within_px, metres_per_px, until=target)
             hit = np.flatnonzero(trace.f1 >= target)
             best = min(best, float(trace.seconds[hit[0]])) if len(hit) else best
         if i == len(order):
             break
-        k = int(order[i])
-        cost = costs.look_s
-        if false[k]:
-            state.delete(k)
-            cost += costs.delete_s
-        elif state.off_truth_px(k) >= costs.fix_px:
-            state.delete(k, off_truth_only=True)
-            cost += costs.vertex_s
-        seconds.append(seconds[-1] + cost)
+        b = int(order[i])
+        plan = plans[b]
+        for j, action in enumerate(plan.actions):
+            if action != "keep":
+                state.delete(int(first_piece[b]) + j, off_truth_only=action == "fix")
+        seconds.append(seconds[-1] + plan.seconds)
         f1.append(state.f1())
-    full = _draw(state, samples, seconds, f1, costs, within_px)
+    full = _draw(state, samples, seconds, f1, costs, within_px, metres_per_px)
     hit = np.flatnonzero(full.f1 >= target)
     best = min(best, float(full.seconds[hit[0]])) if len(hit) else best
     return full, (best if np.isfinite(best) else float("nan"))
 
 
-def review_order(pred: BoundaryGraph, order: str, seed: int = 0) -> np.ndarray:
-    """Edge indices in the order a reviewer looks at them: ``confidence`` least sure first
-    (edges without a score last, in edge order), or ``random`` (seeded)."""
+def review_order(confidence: np.ndarray, order: str, seed: int = 0) -> np.ndarray:
+    """Boundary indices in the order a reviewer looks at them: ``confidence`` least sure first
+    (boundaries without a confidence last, in their order), or ``random`` (seeded)."""
+    confidence = np.asarray(confidence, float)
     if order == "confidence":
-        scores = np.asarray(pred.edge_scores if pred.edge_scores is not None else np.full(pred.n_edges, np.nan), float)
-        return np.argsort(np.where(np.isfinite(scores), scores, np.inf), kind="stable")
+        return np.argsort(np.where(np.isfinite(confidence), confidence, np.inf), kind="stable")
     if order == "random":
-        return np.random.default_rng(seed).permutation(pred.n_edges)
+        return np.random.default_rng(seed).permutation(len(confidence))
     raise ValueError(f"review order must be one of {ORDERS}, got {order!r}")
 
 
 def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float | None = None, costs: ReviewCosts = ReviewCosts(),
                   seed: int = 0, within_px: float = TRUE_WITHIN_PX, curve_points: int = 21) -> dict:
-    """The simulated review of ``pred`` against ``gt`` (one pixel frame), in both orders.
+    """The simulated review of ``pred``'s review draft against ``gt`` (one pixel frame).
 
     Returns minutes to a fully corrected map and from scratch, minutes to reach
-    ``costs.target_f1``, each also per km of true boundary when ``metres_per_px`` is given, the
-    action counts, and the F1@5 curve against minutes (``curve_points`` points per order)."""
+    ``costs.target_f1``, each also per km of true boundary when ``metres_per_px`` is given (else
+    the lengths in the costs assume ``costs.assumed_metres_per_px``), the counts of boundaries
+    (in the prediction, in the draft, deleted), and the F1@5 curve against minutes
+    (``curve_points`` points per order). Without a confidence on any boundary every boundary is
+    in the draft and only the random order is reported (``note`` says so)."""
+    mpp = metres_per_px or costs.assumed_metres_per_px
+    units = graph_boundaries(pred)
+    confidence = np.array([b.confidence for b in units], float)
+    scored = bool(np.isfinite(confidence).any())
+    shown = review_draft(units, costs, mpp) if scored else np.ones(len(units), bool)
+    draft = [b for b, keep in zip(units, shown) if keep]
     gt_pixels = rasterize(flatten(gt))
     samples = boundary_samples(gt)
-    false = edge_truth(pred, gt, within_px) < TRUE_SHARE if pred.n_edges else np.zeros(0, bool)
+    near = cKDTree(np.concatenate(samples)) if samples else None
+    plans = [plan_boundary(b.polyline, near, costs, mpp, within_px) for b in draft]
+    first_piece = np.cumsum([0] + [len(p.pieces) for p in plans])[:-1]
     gt_length_px = float(gt.edge_lengths().sum()) if gt.n_edges else 0.0
-    clicks = scratch_clicks(gt, costs.trace_tolerance_px)
-    scratch_s = len(samples) * costs.look_s + clicks * costs.vertex_s
+    scratch_s = sum(costs.draw_seconds(pts, mpp) for pts in samples)
     km = gt_length_px * metres_per_px / 1000 if metres_per_px else None
-    out = {"costs": costs.to_dict(), "edges": int(pred.n_edges), "false_edges": int(false.sum()),
+    out = {"costs": costs.to_dict(), "metres_per_px": mpp, "metres_per_px_assumed": not metres_per_px,
+           "boundaries": len(units), "draft_boundaries": len(draft), "held_back_boundaries": len(units) - len(draft),
+           "held_back_px": float(sum(b.length_px for b, keep in zip(units, shown) if not keep)),
+           "false_boundaries": int(sum(p.false for p in plans)),
+           "cut_pieces": int(sum(p.actions.count("delete") for p in plans if not p.false)),
            "true_boundary_px": gt_length_px, "true_boundary_km": km,
-           "scratch_minutes": scratch_s / 60, "scratch_clicks": clicks, "orders": {}}
-    draft = _State(pred, gt_pixels, within_px)  # rasterised and paired once; each order works on a copy
-    for name in ORDERS:
-        order = review_order(pred, name, seed)
-        trace, to_target = simulate_review(draft.copy(), false, samples, order, costs, within_px)
+           "scratch_minutes": scratch_s / 60, "scratch_clicks": sum(clicks_to_trace(pts, costs.trace_tolerance_px) for pts in samples),
+           "orders": {}}
+    if not scored:
+        out["note"] = "no boundary has a confidence: the draft is the whole prediction, and only the random order is reported"
+    # rasterised once; each order works on a copy
+    draft_state = _State([px for b, p in zip(draft, plans) for px in piece_pixels(b.polyline, p.pieces)], gt_pixels, within_px)
+    for name in ORDERS if scored else ("random",):
+        order = review_order(confidence[shown], name, seed)
+        trace, to_target = simulate_review(draft_state.copy(), plans, first_piece, samples, order, costs, within_px, mpp)
         pick = np.unique(np.linspace(0, len(trace.seconds) - 1, curve_points).round().astype(int))
         out["orders"][name] = {"minutes": trace.total_s / 60, "look_minutes": trace.look_s / 60, "draw_minutes": trace.draw_s / 60,
                                "clicks": trace.clicks, "start_f1": float(trace.f1[0]), "end_f1": float(trace.f1[-1]),
