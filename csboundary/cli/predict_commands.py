@@ -154,13 +154,15 @@ def review(
     ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to show as a toggle (default: the city's own, if any)."),
     bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
     gpkg: Optional[Path] = typer.Option(None, "--gpkg", help="Write this GeoPackage instead of the page, to review in a GIS: "
-                                        "the edges layer to edit and an empty 'complete' polygon layer (apply-review reads it)."),
+                                        "the review draft's boundaries to edit (layer boundaries), those held back from it "
+                                        "(held_back) and an empty 'complete' polygon layer (apply-review reads it)."),
     quiet: QuietOption = False,
 ) -> None:
     """A self-contained review page: imagery with pan and zoom, boundaries coloured by
-    confidence, the least sure first; accept, delete, move and draw, edits exported as GeoJSON
-    for apply-review. Open OUT/index.html (no network needed). With --bounds, one district of
-    the city (its edits merge into the whole city all the same)."""
+    confidence, the least sure first (those not worth a look held back, hidden until asked
+    for); accept, delete or cut a boundary, move a vertex, draw, delete the doubtful boundaries
+    of an area, mark areas complete; edits exported as GeoJSON for apply-review. Open
+    OUT/index.html (no network needed). With --bounds, one district of the city (its edits merge into the whole city all the same)."""
     from csboundary.pipeline.outputs.review import write_review, write_review_layers
 
     box = district_bounds(bounds)
@@ -172,12 +174,14 @@ def review(
                                      param_hint="--gpkg")
 
         done = write_review_layers(prediction, check_output_file(gpkg, (".gpkg",)))
-        typer.echo(f"{done['gpkg']}: {done['edges']} edges to review (layers edges, complete)")
+        typer.echo(f"{done['gpkg']}: {done['boundaries']} boundaries to review ({done['edges']} edges; layers boundaries, "
+                   f"held_back ({done['held_back']} not worth a look), complete)")
         return
     out_dir(out or prediction / "review")
     done = write_review(prediction, out, ground_truth, progress=not quiet, bounds=box)
-    typer.echo(f"{done['page']}: {done['edges']} edges to "
-               f"review{', ground truth ' + str(done['ground_truth']) if done['ground_truth'] else ''}")
+    truth = f", ground truth {done['ground_truth']}" if done["ground_truth"] else ""
+    typer.echo(f"{done['page']}: {done['draft']} boundaries to review ({done['edges']} edges; "
+               f"{done['boundaries'] - done['draft']} held back){truth}")
 
 
 def apply_review(

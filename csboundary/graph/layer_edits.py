@@ -13,6 +13,9 @@ What each change to the layer means:
   feature whose line was only reversed is unchanged;
 * a polygon in the ``complete`` layer: an area marked complete.
 
+The review layers ``review --gpkg`` writes hold boundaries, not edges: :func:`boundary_layer_edits`
+turns their changes into the same edits, a boundary at a time.
+
 Features keep their ``edge_id`` and the ``u`` and ``v`` of the graph they were written from; a
 layer whose ``u``/``v`` disagree with the graph's was written for another prediction and is
 refused, rather than read as a set of moves.
@@ -96,3 +99,98 @@ def _world(graph: BoundaryGraph, line: np.ndarray) -> list[list[float]]:
 def _feature(action: str, coordinates: list[list[float]], **properties) -> dict:
     geometry = {"type": "LineString", "coordinates": coordinates}
     return {"type": "Feature", "properties": {"action": action, **properties}, "geometry": geometry}
+
+
+def boundary_layer_edits(graph: BoundaryGraph, rows: list[tuple[list[int] | None, np.ndarray, bool]],
+                         areas: list[list[list[float]]] = (), held_back: frozenset[tuple[int, ...]] = frozenset()) -> list[dict]:
+    """The review page's edit features equivalent to edited boundary layers (``review --gpkg``):
+    ``rows`` are their features as (edge ids of the boundary, None for a drawn feature; (N, 2)
+    world coordinates; True when the feature lies in the layer of the review draft, False in the
+    layer of held-back boundaries). Per boundary of the graph (a chain,
+    :func:`~csboundary.graph.boundaries.graph_boundaries`):
+
+    * no feature names it: its edges are deleted;
+    * one feature with its line unchanged (or only reversed; copies of one line count once):
+      nothing changes; a boundary of ``held_back`` (its sorted edge ids) copied or moved into the
+      draft's layer is accepted;
+    * one feature whose two ends moved and nothing else: the vertices at its ends move;
+    * otherwise (its line changed inside, or it was split into several features): its edges are
+      deleted and each feature's line is added as drawn.
+
+    Features without edge ids are added (after the replacements, in the layers' order); ``areas``
+    are marked complete. The result goes through :func:`layer_edits`, and from there through the
+    same checks as the page's edits."""
+    from csboundary.graph.boundaries import graph_boundaries
+
+    if graph.transform is None:
+        raise EditError("the graph has no transform: the layer's world coordinates cannot be placed")
+    boundaries = {tuple(sorted(b.edges.tolist())): b for b in graph_boundaries(graph)}
+    by_edges: dict[tuple[int, ...], list[tuple[np.ndarray, bool]]] = {}
+    drawn: list[np.ndarray] = []
+    for number, (edge_ids, coords, in_draft) in enumerate(rows):
+        if edge_ids is None:
+            drawn.append(coords)
+            continue
+        key = tuple(sorted(edge_ids))
+        if key not in boundaries:
+            raise EditError(f"feature {number} of the boundaries layers: edges {';'.join(map(str, edge_ids))} are not one boundary of "
+                            "graph.json: the layer was written for another prediction")
+        by_edges.setdefault(key, []).append((coords, in_draft))
+    edge_rows: list[tuple[int | None, int | None, int | None, np.ndarray]] = []
+    accepted: list[int] = []
+    replaced: list[np.ndarray] = []
+    for key, boundary in boundaries.items():
+        features = by_edges.get(key, [])
+        lines = {k: edge_line(graph, k) for k in key}
+        if not features:
+            continue  # deleted: its edges are missing from the rows
+        before = boundary.polyline
+        distinct = [features[0]]
+        for coords, in_draft in features[1:]:  # a copy of a line (copied into the other layer) is the same feature
+            same = [d for d in distinct
+                    if len(d[0]) == len(coords) and min(np.abs(d[0] - coords).max(), np.abs(d[0][::-1] - coords).max()) <= 1e-9]
+            if same:
+                distinct[distinct.index(same[0])] = (same[0][0], same[0][1] or in_draft)
+            else:
+                distinct.append((coords, in_draft))
+        features = distinct
+        if len(features) == 1:
+            line = _pixels(graph, features[0][0])
+            if len(line) == len(before) and np.abs(line[[0, -1]] - before[[-1, 0]]).max() <= SAME_PX \
+                    and np.abs(line - before[::-1]).max() > SAME_PX >= np.abs(line[::-1] - before).max():
+                line = line[::-1]  # reversed in the GIS: the same boundary
+            if len(line) == len(before) and np.abs(line[1:-1] - before[1:-1]).max(initial=0.0) <= SAME_PX:
+                ends = {int(v): new for v, old, new in ((_end(graph, boundary, 0), before[0], line[0]),
+                                                        (_end(graph, boundary, -1), before[-1], line[-1]))
+                        if np.abs(new - old).max() > SAME_PX}
+                for k, piece in lines.items():
+                    piece = piece.copy()
+                    u, v = (int(x) for x in graph.edges[k])
+                    if u in ends:
+                        piece[0] = ends[u]
+                    if v in ends:
+                        piece[-1] = ends[v]
+                    edge_rows.append((k, u, v, _world_array(graph, piece)))
+                if features[0][1] and key in held_back:
+                    accepted.extend(key)
+                continue
+        replaced.extend(coords for coords, _ in features)  # changed inside, or split: replaced by what was drawn
+    features = layer_edits(graph, edge_rows + [(None, None, None, coords) for coords in replaced + drawn], areas)
+    return features + [_feature("accept", _world(graph, edge_line(graph, k)), edge=k) for k in sorted(accepted)]
+
+
+def _end(graph: BoundaryGraph, boundary, at: int) -> int:
+    """The vertex at the start (``at`` 0) or the end (-1) of a boundary's walk."""
+    chain_first, chain_last = boundary.edges[0], boundary.edges[-1]
+    if at == 0:
+        u, v = graph.edges[chain_first]
+        point = boundary.polyline[0]
+    else:
+        u, v = graph.edges[chain_last]
+        point = boundary.polyline[-1]
+    return int(u if np.abs(graph.vertices[u] - point).max() <= np.abs(graph.vertices[v] - point).max() else v)
+
+
+def _world_array(graph: BoundaryGraph, line: np.ndarray) -> np.ndarray:
+    xs, ys = pixel_to_world(graph.transform, line[:, 0], line[:, 1])
+    return np.stack([np.atleast_1d(xs), np.atleast_1d(ys)], axis=1).astype(float)

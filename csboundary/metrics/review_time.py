@@ -44,6 +44,7 @@ from scipy.spatial import cKDTree
 
 from csboundary.config import Config
 from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.boundaries import Boundary, graph_boundaries
 from csboundary.graph.chains import merge_chains
 from csboundary.graph.polyline import points_along, polyline_between, polyline_length
 from csboundary.metrics.confidence import TRUE_SHARE, TRUE_WITHIN_PX
@@ -124,40 +125,6 @@ def clicks_to_trace(line: np.ndarray, tolerance_px: float) -> int:
 def scratch_clicks(gt: BoundaryGraph, tolerance_px: float) -> int:
     """Clicks to draw every boundary of ``gt`` from nothing (chains through degree-2 vertices)."""
     return sum(clicks_to_trace(chain.polyline, tolerance_px) for chain in merge_chains(gt))
-
-
-@dataclass(frozen=True, eq=False)
-class Boundary:
-    """What a reviewer checks as one: a chain's pixel ``polyline``, its ``edges`` and its
-    ``confidence`` (NaN when none of its edges has a score)."""
-
-    polyline: np.ndarray
-    edges: np.ndarray
-    confidence: float
-
-    @property
-    def length_px(self) -> float:
-        return polyline_length(self.polyline)
-
-
-def graph_boundaries(graph: BoundaryGraph) -> list[Boundary]:
-    """The graph's boundaries (its chains), each with the length-weighted mean of its edges'
-    scores, ignoring missing ones: a long sure edge outweighs a short doubtful one, and the mean
-    of calibrated scores is the expected share of the boundary's length that is true."""
-    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(graph.n_edges, np.nan), float)
-    lengths = graph.edge_lengths() if graph.n_edges else np.zeros(0)
-    out = []
-    for chain in merge_chains(graph):
-        s, w = scores[chain.edges], lengths[chain.edges]
-        known = np.isfinite(s)
-        if not known.any():
-            confidence = float("nan")
-        elif w[known].sum() > 0:
-            confidence = float(np.dot(s[known], w[known]) / w[known].sum())
-        else:
-            confidence = float(s[known].mean())
-        out.append(Boundary(chain.polyline, chain.edges, confidence))
-    return out
 
 
 def keeps_boundary(confidence: float, line: np.ndarray, costs: ReviewCosts, metres_per_px: float) -> bool:

@@ -25,6 +25,7 @@ from tqdm import tqdm
 from csboundary.data.atomic import atomic_path
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow, pixel_to_world, world_to_pixel
+from csboundary.graph.boundaries import graph_boundaries
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.viz.overlay import to_display
 
@@ -70,9 +71,11 @@ def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
     return levels
 
 
-def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=()) -> dict:
-    """What the page draws, in mosaic pixels: vertices, edges (polyline, score, kind) and the
-    ground truth; plus the mosaic's transform to send edits back in world coordinates."""
+def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=(), boundaries: list[dict] | None = None) -> dict:
+    """What the page draws, in mosaic pixels: vertices, edges (polyline, score, kind), the
+    boundaries a reviewer acts on (``boundaries``: each one's ``edges`` in walk order, ``score``,
+    ``draft`` and ``length_m``; by default the graph's chains, all in the draft) and the ground
+    truth; plus the mosaic's transform to send edits back in world coordinates."""
 
     def to_mosaic(points_px: np.ndarray) -> np.ndarray:
         xs, ys = pixel_to_world(graph.transform, points_px[:, 0], points_px[:, 1])
@@ -91,25 +94,32 @@ def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=()
         xy = np.asarray(line.coords)[:, :2]
         cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
         gt.append(np.round(np.stack([cols, rows], axis=1), 2).tolist())
+    if boundaries is None:
+        boundaries = [{"edges": b.edges.tolist(), "score": b.confidence if np.isfinite(b.confidence) else None, "draft": True,
+                       "length_m": None} for b in graph_boundaries(graph)]
     return {"width": mosaic.width, "height": mosaic.height, "tile": TILE, "levels": levels, "crs": graph.crs,
-            "transform": list(mosaic.transform)[:6], "vertices": np.round(vertices, 3).tolist(), "edges": edges, "ground_truth": gt}
+            "transform": list(mosaic.transform)[:6], "vertices": np.round(vertices, 3).tolist(), "edges": edges,
+            "boundaries": boundaries, "ground_truth": gt}
 
 
 def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, ground_truth=(), progress: bool = True,
                       fingerprint: str | None = None, ids: tuple[np.ndarray, np.ndarray] | None = None,
-                      review_costs: dict | None = None) -> Path:
+                      review_costs: dict | None = None, boundaries: list[dict] | None = None, metres_per_px: float | None = None) -> Path:
     """The review folder ``out`` (``index.html``, ``data.js``, the scripts, ``tiles/``);
     ``fingerprint`` (of the graph's file) goes into every edits file the page exports. ``ids``
     (edge numbers, vertex numbers) are those of a district's edges and vertices in the whole
     graph: the exported edits name those. ``review_costs`` (seconds per look and per deletion,
-    :class:`csboundary.metrics.review_time.ReviewCosts`) price the minutes left the page shows."""
+    :class:`csboundary.metrics.review_time.ReviewCosts`) price the minutes left the page shows;
+    ``boundaries`` are what the reviewer acts on (:func:`page_data`), ``metres_per_px`` the graph's
+    pixel size (a boundary cut on the page gets its length from it)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tiles = out / "tiles"
     if tiles.exists():
         shutil.rmtree(tiles)
     levels = write_pyramid(mosaic, tiles, progress)
-    data = page_data(graph, mosaic, levels, ground_truth)
+    data = page_data(graph, mosaic, levels, ground_truth, boundaries)
+    data["metres_per_px"] = metres_per_px
     data["graph_sha256"] = fingerprint
     data["review_costs"] = review_costs
     if ids is not None:

@@ -1,6 +1,7 @@
-"""The review page in a real browser (headless Chromium): it renders the imagery and every
-edge, the lowest-confidence edge is first in the list; deleting it and exporting gives edits
-that apply-review turns into a graph with exactly that edge less. Plus apply_edits by hand."""
+"""The review page in a real browser (headless Chromium): it renders the imagery and the review
+draft's boundaries, the least sure boundary first in the list; deleting it and exporting gives
+edits that apply-review turns into a graph with exactly its edges less; cut and delete-below act
+on boundaries. Plus apply_edits by hand."""
 
 from __future__ import annotations
 
@@ -62,49 +63,84 @@ def _wait(driver, script: str, timeout: float = 20.0):
     raise AssertionError(f"timed out waiting for: {script}")
 
 
-def test_delete_the_least_sure_edge_in_the_browser_and_apply_it(reviewed, browser, tmp_path):
+def test_delete_the_least_sure_boundary_in_the_browser_and_apply_it(reviewed, browser, tmp_path):
     import cv2
     from selenium.webdriver.common.by import By
 
+    from csboundary.graph.boundaries import graph_boundaries
+    from csboundary.metrics.review_time import ReviewCosts
+    from csboundary.pipeline.outputs.review import review_boundaries
+
     graph = json.loads((reviewed / "graph.json").read_text())
-    scores = [e["score"] for e in graph["edges"]]
-    lowest = int(np.argmin(scores))
+    city = BoundaryGraph.read_json(reviewed / "graph.json")
+    boundaries, draft, metres_per_px = review_boundaries(city)
+    assert len(boundaries) == len(graph_boundaries(city)) < city.n_edges  # fewer things to look at than edges
+    shown = [b for b, d in zip(boundaries, draft) if d]
+    least = min(shown, key=lambda b: b.confidence)
 
     browser.get((reviewed / "review" / "index.html").as_uri())
     _wait(browser, "return window.review && window.review.loadedTiles() > 0")
-    rows = browser.find_elements(By.CSS_SELECTOR, "#edge-list li")
-    assert len(rows) == len(graph["edges"]) == browser.execute_script("return window.review.edgeCount()")
-    assert int(rows[0].get_attribute("data-edge")) == lowest
+    rows = [li for li in browser.find_elements(By.CSS_SELECTOR, "#edge-list li") if li.is_displayed()]
+    assert len(rows) == len(shown) == browser.execute_script("return window.review.boundaryCount()")
+    assert sorted(int(k) for k in rows[0].get_attribute("data-edges").split(",")) == sorted(least.edges.tolist())
     shot = cv2.imdecode(np.frombuffer(browser.find_element(By.ID, "view").screenshot_as_png, np.uint8), cv2.IMREAD_COLOR)
     assert shot.std() > 20  # imagery and lines, not an empty canvas
 
+    costs = ReviewCosts()
+    look = lambda b: (costs.look_seconds(b.length_px, metres_per_px) + costs.delete_s * (1 - b.confidence)) / 60  # noqa: E731
     left, minutes = browser.execute_script("return window.review.remaining()")
-    costs = {"look_s": 2.0, "delete_s": 1.0}  # ReviewCosts' defaults; each edge: a look, and a deletion as often as it is false
-    assert left == len(scores)
-    assert minutes == pytest.approx(sum(costs["look_s"] + costs["delete_s"] * (1 - s) for s in scores) / 60, rel=1e-6)
+    assert left == len(shown) and minutes == pytest.approx(sum(look(b) for b in shown), rel=1e-6)
     status = browser.find_element(By.ID, "status").text
-    assert f"{len(scores)} edges left to look at: about {minutes:.1f} min" in status
+    assert f"{len(shown)} boundaries left to look at: about {minutes:.1f} min" in status
 
     rows[0].click()
-    assert browser.execute_script("return window.review.state.selected") == lowest
     browser.find_element(By.ID, "delete").click()
     left_after, minutes_after = browser.execute_script("return window.review.remaining()")
-    assert left_after == left - 1
-    assert minutes_after == pytest.approx(minutes - (costs["look_s"] + costs["delete_s"] * (1 - scores[lowest])) / 60, rel=1e-6)
+    assert left_after == left - 1 and minutes_after == pytest.approx(minutes - look(least), rel=1e-6)
     browser.find_element(By.ID, "export").click()
     edits = browser.find_element(By.ID, "export-text").get_attribute("value")
     collection = json.loads(edits)
-    assert [f["properties"] for f in collection["features"]] == [{"action": "delete", "edge": lowest}]
+    assert sorted(f["properties"]["edge"] for f in collection["features"]) == sorted(least.edges.tolist())
+    assert {f["properties"]["action"] for f in collection["features"]} == {"delete"}
 
     (tmp_path / "edits.geojson").write_text(edits)
     done = run_cli("apply-review", str(reviewed), str(tmp_path / "edits.geojson"))
     assert done.returncode == 0, done.stderr
     after = json.loads((reviewed / "graph.json").read_text())
     strip = lambda e: (e["u"], e["v"], e.get("score"), e.get("kind"))  # noqa: E731
-    assert [strip(e) for e in after["edges"]] == [strip(e) for k, e in enumerate(graph["edges"]) if k != lowest]
-    assert after["vertices"] == graph["vertices"]
+    gone = set(least.edges.tolist())
+    assert [strip(e) for e in after["edges"]] == [strip(e) for k, e in enumerate(graph["edges"]) if k not in gone]
     log = json.loads((reviewed / "review.json").read_text())["reviews"][-1]
-    assert log["deleted_edges"] == [lowest] and log["edges_after"] == len(graph["edges"]) - 1
+    assert sorted(log["deleted_edges"]) == sorted(gone) and log["edges_after"] == len(graph["edges"]) - len(gone)
+
+
+def test_cut_a_boundary_and_sweep_an_area_in_the_browser(reviewed, browser):
+    """Cut splits the selected boundary at the vertex nearest the click: deleting one part
+    exports only its edges. Delete below, over the whole imagery at confidence 1.01, deletes
+    every boundary shown."""
+    assert run_cli("review", str(reviewed), "--quiet").returncode == 0  # a fresh page: another test may have changed graph.json
+    browser.get((reviewed / "review" / "index.html").as_uri())
+    _wait(browser, "return window.review && window.review.loadedTiles() > 0")
+    r = "window.review"
+    long = browser.execute_script(f"return {r}.boundaries.findIndex((b) => b.draft && b.edges.length >= 4)")
+    assert long >= 0
+    edges = browser.execute_script(f"return {r}.boundaries[{long}].edges.slice()")
+    vertices = browser.execute_script(f"return {r}.boundaryVertices({r}.boundaries[{long}])")
+    assert len(vertices) == len(edges) + 1
+    tail = browser.execute_script(f"""const r = {r}; r.select({long}); const p = REVIEW_DATA.vertices[{vertices[2]}];
+                                      r.state.cutting = true; return r.cutAt([p[0] + 0.3, p[1]]);""")
+    assert browser.execute_script(f"return {r}.boundaries[{long}].edges") == edges[:2]
+    assert browser.execute_script(f"return {r}.boundaries[{tail}].edges") == edges[2:]
+    browser.execute_script(f"{r}.select({tail}); {r}.remove();")
+    exported = json.loads(browser.execute_script(f"return {r}.exportEdits()"))
+    assert sorted(f["properties"]["edge"] for f in exported["features"]) == sorted(edges[2:])
+
+    count = browser.execute_script(f"""const r = {r}, w = REVIEW_DATA.width, h = REVIEW_DATA.height;
+                                       return r.sweep([[-1, -1], [w + 1, -1], [w + 1, h + 1], [-1, h + 1]], 1.01);""")
+    shown = browser.execute_script(f"return {r}.boundaries.filter((b) => b.draft).length")
+    assert count == shown - 1  # every shown boundary but the part deleted before
+    left, _ = browser.execute_script(f"return {r}.remaining()")
+    assert left == 0
 
 
 def test_mark_the_view_complete_in_the_browser_and_apply_it(reviewed, browser, tmp_path):
@@ -218,20 +254,22 @@ def test_a_district_page_names_the_city_s_edges(reviewed, browser, tmp_path):
     browser.get((tmp_path / "west" / "index.html").as_uri())
     _wait(browser, "return window.review && window.review.loadedTiles() > 0")
     assert browser.execute_script("return window.review.edgeCount()") == len(inside)
-    rows = browser.find_elements(By.CSS_SELECTOR, "#edge-list li")
+    rows = [li for li in browser.find_elements(By.CSS_SELECTOR, "#edge-list li") if li.is_displayed()]
     rows[0].click()
     browser.find_element(By.ID, "delete").click()
     browser.find_element(By.ID, "export").click()
     edits = json.loads(browser.find_element(By.ID, "export-text").get_attribute("value"))
-    (edge,) = [f["properties"]["edge"] for f in edits["features"]]
-    assert edge in inside and edge == min(inside, key=lambda k: city.edge_scores[k])  # the city's number of the least sure
+    deleted = sorted(f["properties"]["edge"] for f in edits["features"])
+    local = sorted(int(k) for k in rows[0].get_attribute("data-edges").split(","))
+    ids = browser.execute_script("return REVIEW_DATA.edge_ids")
+    assert deleted == sorted(ids[k] for k in local) and set(deleted) <= set(inside)  # the city's numbers of the boundary's edges
 
     (tmp_path / "edits.geojson").write_text(json.dumps(edits))
     done = run_cli("apply-review", str(pred), str(tmp_path / "edits.geojson"))
     assert done.returncode == 0, done.stderr
     after = BoundaryGraph.read_json(pred / "graph.json")
-    assert after.n_edges == city.n_edges - 1
-    assert json.loads((pred / "review.json").read_text())["reviews"][-1]["deleted_edges"] == [edge]
+    assert after.n_edges == city.n_edges - len(deleted)
+    assert sorted(json.loads((pred / "review.json").read_text())["reviews"][-1]["deleted_edges"]) == deleted
 
 
 def _world_bounds(graph: BoundaryGraph) -> tuple[float, float, float, float]:

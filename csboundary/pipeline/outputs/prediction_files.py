@@ -30,11 +30,13 @@ from shapely.geometry import LineString
 
 from csboundary.data.atomic import atomic_path
 from csboundary.data.ground_truth import LAYER as BOUNDARIES_LAYER
-from csboundary.data.units import GroundUnits, ground_units
+from csboundary.data.units import GroundUnits, geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import pixel_to_world, world_to_pixel
 from csboundary.errors import InputError
+from csboundary.graph.boundaries import weighted_mean
 from csboundary.graph.boundary_graph import BoundaryGraph, edge_item, json_header, vertex_items
 from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
+from csboundary.metrics.review_time import ReviewCosts, keeps_boundary
 
 EDGES_LAYER = "edges"
 TRANSFORM_KEY = "csboundary_transform"  # the graph's pixel -> world transform, in the edges layer's metadata
@@ -323,13 +325,18 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
 
     Boundary confidence is the length-weighted mean of its edges' scores (a long confident edge
     should outweigh a short doubtful one), ignoring missing (NaN) scores; NaN if none is known.
+    ``review_draft`` says whether the boundary is in the review draft: whether its expected
+    saving pays for a look (:func:`csboundary.metrics.review_time.keeps_boundary`).
     """
 
     def world(line: np.ndarray) -> np.ndarray:
         return np.stack(pixel_to_world(transform, line[:, 0], line[:, 1]), axis=1)
 
-    rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges",
-                                                 "skeleton_edges", "patches")}
+    rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "review_draft",
+                                                 "corner_edges", "skeleton_edges", "patches")}
+    costs = ReviewCosts()
+    known = units.unit_name != "unknown" and not (units.unit_name == "pixel" and units.metres_per_unit == (1.0, 1.0))
+    metres_per_px = geometric_mean(pixel_size_m(units, transform)) if known else costs.assumed_metres_per_px
     geometry, edge_rows = [], []
     for c, boundary in enumerate(boundaries, start=first_id):
         lines = [world(e.line) for e in boundary.edges]
@@ -341,7 +348,8 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
         geometry.append(LineString(line))
         rows["length_m"].append(units.line_length_m(line))
         rows["n_edges"].append(len(boundary.edges))
-        rows["confidence_mean"].append(_weighted_mean(score[known], length[known]))
+        rows["confidence_mean"].append(weighted_mean(score, length))
+        rows["review_draft"].append(keeps_boundary(rows["confidence_mean"][-1], boundary.polyline, costs, metres_per_px))
         rows["confidence_min"].append(float(score[known].min()) if known.any() else np.nan)
         rows["corner_edges"].append(kinds.count("corner"))
         rows["skeleton_edges"].append(kinds.count("skeleton"))  # added from the segmentation skeleton (graph/skeleton_fill.py)
@@ -359,6 +367,7 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
             "n_edges": np.array(rows["n_edges"], dtype=np.int64),
             "confidence_mean": np.array(rows["confidence_mean"], dtype=float),
             "confidence_min": np.array(rows["confidence_min"], dtype=float),
+            "review_draft": np.array(rows["review_draft"], dtype=bool),
             "corner_edges": np.array(rows["corner_edges"], dtype=np.int64),
             "skeleton_edges": np.array(rows["skeleton_edges"], dtype=np.int64),
             "patches": np.array(rows["patches"], dtype=object),
@@ -403,8 +412,3 @@ def _centre(graph: BoundaryGraph) -> tuple[float, float] | None:
     return float(np.mean(xs)), float(np.mean(ys))
 
 
-def _weighted_mean(values: np.ndarray, weights: np.ndarray) -> float:
-    """Weighted mean; the plain mean when all weights are zero; NaN when there are no values."""
-    if len(values) == 0:
-        return float("nan")
-    return float(np.average(values, weights=weights)) if weights.sum() > 0 else float(values.mean())

@@ -199,7 +199,8 @@ def test_empty_graph_writes_empty_files_with_the_schema(tmp_path):
     assert paths["gpkg"].name == "city.gpkg" and paths["geojson"].name == "city.geojson"
     info = pyogrio.read_info(paths["gpkg"], layer="road_boundaries")
     assert info["features"] == 0 and info["geometry_type"] == "LineString" and info["crs"] == CRS
-    assert list(info["fields"]) == ["boundary_id", "length_m", "n_edges", "confidence_mean", "confidence_min", "corner_edges",
+    assert list(info["fields"]) == ["boundary_id", "length_m", "n_edges", "confidence_mean", "confidence_min", "review_draft",
+                                    "corner_edges",
                                     "skeleton_edges", "patches"]
     info = pyogrio.read_info(paths["gpkg"], layer="edges")
     assert info["features"] == 0

@@ -122,21 +122,27 @@ def test_a_layer_that_is_not_the_prediction_s_is_one_line(demo_run, tmp_path):
     refused(prediction, tmp_path / "junk.gpkg", "not a readable GeoPackage")
     gpd.GeoDataFrame({"name": ["x"]}, geometry=[LineString([(0, 0), (1, 1)])], crs="EPSG:32618").to_file(
         tmp_path / "other.gpkg", layer="roads", driver="GPKG", engine="pyogrio")
-    refused(prediction, tmp_path / "other.gpkg", "has no edges layer")
+    refused(prediction, tmp_path / "other.gpkg", "has no boundaries or edges layer")
 
 
 def test_the_review_layers_come_back_unchanged_as_no_edit_and_never_overwrite_the_prediction(demo_run, tmp_path):
     import pyogrio
+
+    from csboundary.graph.boundaries import graph_boundaries
 
     prediction = tmp_path / "prediction"
     shutil.copytree(demo_run / "prediction", prediction)
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     review = tmp_path / "review.gpkg"
     done = run_cli("review", str(prediction), "--gpkg", str(review))
-    assert done.returncode == 0 and f"{graph.n_edges} edges to review" in done.stdout, done.stderr
-    assert sorted(name for name, _ in pyogrio.list_layers(review)) == ["complete", "edges"]
-    confidence = pyogrio.read_dataframe(review, layer="edges", read_geometry=False)["confidence"].to_numpy()
-    assert len(confidence) == graph.n_edges and (np.diff(confidence) >= 0).all()  # the least sure first
+    chains = graph_boundaries(graph)
+    assert done.returncode == 0 and f"({graph.n_edges} edges;" in done.stdout, done.stderr
+    assert sorted(name for name, _ in pyogrio.list_layers(review)) == ["boundaries", "complete", "held_back"]
+    draft, held = (pyogrio.read_dataframe(review, layer=name, read_geometry=False) for name in ("boundaries", "held_back"))
+    assert len(draft) + len(held) == len(chains) and f"{len(draft)} boundaries to review" in done.stdout
+    assert (np.diff(draft["confidence"].to_numpy()) >= 0).all()  # the least sure first
+    ids = sorted(int(k) for value in list(draft["edge_ids"]) + list(held["edge_ids"]) for k in value.split(";"))
+    assert ids == list(range(graph.n_edges))  # every edge in exactly one boundary
     complete = pyogrio.read_info(review, layer="complete")
     assert complete["features"] == 0 and complete["geometry_type"] == "Polygon" and complete["crs"] == "EPSG:32618"
     done = run_cli("apply-review", str(prediction), str(review))
@@ -151,4 +157,71 @@ def test_the_review_layers_come_back_unchanged_as_no_edit_and_never_overwrite_th
     done = run_cli("review", str(empty), "--gpkg", str(tmp_path / "x.gpkg"))
     assert done.returncode == 2 and "not a finished prediction" in done.stderr and not (tmp_path / "x.gpkg").exists()
     district = run_cli("review", str(prediction), "--gpkg", str(tmp_path / "d.gpkg"), "--bounds", "0,0,1,1")
-    assert district.returncode == 2 and "--gpkg writes the whole city's edges" in district.stderr and not (tmp_path / "d.gpkg").exists()
+    assert district.returncode == 2 and "--gpkg writes the whole city's" in district.stderr and not (tmp_path / "d.gpkg").exists()
+
+
+def test_boundary_layers_edited_in_a_gis_give_the_page_s_graph(two_predictions, tmp_path):
+    """In the layers review --gpkg writes, a reviewer deletes a boundary, splits one and deletes a
+    part, drags the start of a third, draws a line and marks the whole city complete. The page's
+    equivalent edits (the boundaries' edges deleted, the kept part drawn, the vertex moved, the
+    line added, the area) give the same graph and record; held-back boundaries nobody touched
+    inside the area go in both."""
+    import json
+
+    from csboundary.graph.boundaries import graph_boundaries
+
+    page, gis = two_predictions
+    graph = BoundaryGraph.read_json(page / "graph.json")
+    review = tmp_path / "review.gpkg"
+    assert run_cli("review", str(gis), "--gpkg", str(review)).returncode == 0
+    layer = gpd.read_file(review, layer="boundaries")
+    chains = {tuple(sorted(b.edges.tolist())): b for b in graph_boundaries(graph)}
+    ids = [[int(k) for k in value.split(";")] for value in layer["edge_ids"]]
+    gone = 0
+    split = next(i for i, e in enumerate(ids) if i != gone and len(e) >= 3)
+    touches = lambda i, j: bool(set(graph.edges[ids[i]].ravel()) & set(graph.edges[ids[j]].ravel()))  # noqa: E731
+    moved = next(i for i in range(len(ids)) if i not in (gone, split) and not touches(i, split) and not touches(i, gone))
+    coords = {i: np.asarray(line.coords)[:, :2] for i, line in enumerate(layer.geometry)}
+    part = coords[split][: len(coords[split]) // 2 + 1]
+    start = chains[tuple(sorted(ids[moved]))]
+    start_vertex = int(next(v for v in graph.edges[start.edges[0]] if np.allclose(graph.vertices[v], start.polyline[0])))
+    new_start = coords[moved][0] + np.array([0.5, -0.4])
+    drawn = world(graph, np.array([[500.0, 500.0], [540.0, 520.0], [600.0, 520.0]]))
+    w, h = json.loads((gis / "summary.json").read_text())["mosaic_px"]
+    corners = world(graph, np.array([[-5.0, -5.0], [w + 5.0, -5.0], [w + 5.0, h + 5.0], [-5.0, h + 5.0], [-5.0, -5.0]]))
+
+    rows = layer.drop(index=[gone]).copy()
+    geometry = {i: LineString(c) for i, c in coords.items()}
+    geometry[split] = LineString(part)
+    geometry[moved] = LineString(np.concatenate([new_start[None], coords[moved][1:]]))
+    rows = rows.set_geometry(gpd.GeoSeries([geometry[i] for i in rows.index], index=rows.index, crs=layer.crs))
+    blank = {c: None for c in rows.columns if c != "geometry"}
+    rows = gpd.GeoDataFrame(list(rows.to_dict("records")) + [{**blank, "geometry": LineString(drawn)}], geometry="geometry", crs=layer.crs)
+    rows.to_file(review, layer="boundaries", driver="GPKG", engine="pyogrio")
+    gpd.GeoDataFrame({"note": ["all"]}, geometry=[Polygon(corners)], crs=layer.crs).to_file(review, layer="complete", driver="GPKG",
+                                                                                          engine="pyogrio")
+    done = run_cli("apply-review", str(gis), str(review))
+    assert done.returncode == 0, done.stderr
+
+    def line_feature(action, coordinates, **props):
+        return {"type": "Feature", "properties": {"action": action, **props},
+                "geometry": {"type": "LineString", "coordinates": np.asarray(coordinates).tolist()}}
+
+    features = [line_feature("delete", world_line(graph, k), edge=k) for k in sorted(ids[gone] + ids[split])]
+    features += [{"type": "Feature", "properties": {"action": "move", "vertex": start_vertex},
+                  "geometry": {"type": "Point", "coordinates": new_start.tolist()}},
+                 line_feature("add", part), line_feature("add", drawn),
+                 {"type": "Feature", "properties": {"action": "complete"},
+                  "geometry": {"type": "Polygon", "coordinates": [corners.tolist()]}}]
+    done = run_cli("apply-review", str(page), str(edits_file(tmp_path / "edits.geojson", page, features)))
+    assert done.returncode == 0, done.stderr
+
+    a, b = BoundaryGraph.read_json(page / "graph.json"), BoundaryGraph.read_json(gis / "graph.json")
+    assert a.n_edges == b.n_edges and a.n_vertices == b.n_vertices and (a.edges == b.edges).all()
+    assert np.allclose(a.vertices, b.vertices, atol=1e-6)
+    page_record, gis_record = (json.loads((p / "review.json").read_text())["reviews"][-1] for p in (page, gis))
+    for key in ("deleted_edges", "moved_vertices", "added_edges", "held_back_deleted"):
+        assert sorted(page_record[key]) == sorted(gis_record[key]), key
+    held = gpd.read_file(review, layer="held_back")
+    held_edges = sorted(int(k) for value in held["edge_ids"] for k in value.split(";"))
+    assert sorted(gis_record["held_back_deleted"]) == held_edges  # all of the city is complete: every untouched held-back edge goes
