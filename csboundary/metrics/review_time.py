@@ -14,11 +14,12 @@ its GeoPackage or its GeoJSON is the same set of boundaries and costs the same m
    on each. A boundary with less than half its length within 5 px of the ground truth is
    deleted. Otherwise each run of it off the truth is mended: a run of ``cut_px`` or longer is
    cut out (a cut at each end that is not the boundary's end, then a delete), a shorter one of
-   ``fix_px`` or more gets a vertex moved onto the truth (its pixels off the truth go).
+   ``fix_px`` or more gets a vertex moved onto the truth (its pixels off the truth go, and the
+   line runs straight across where it strayed).
 3. **Draw** what is still missing: every run of ground truth farther than 5 px from the kept
    lines, traced as a polyline that stays within ``trace_tolerance_px`` of it (Douglas-Peucker),
-   longest run first; a gap between two kept lines no longer than ``fix_px`` (beyond the two
-   samples that reach back onto them) is left, as a stray that short is. Each run costs
+   longest run first; a run that meets a kept line and is no longer than ``fix_px`` (beyond the
+   samples that reach back onto it) is left, as a stray that short is. Each run costs
    finding where it starts, its clicks (an end that meets a
    kept line snaps onto it and costs no click; a run costs at least one click) and the eye
    travel along its length.
@@ -35,7 +36,6 @@ Pure functions on graphs in one pixel frame; costs are parameters (:class:`Revie
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,8 +48,9 @@ from csboundary.graph.boundaries import Boundary, graph_boundaries
 from csboundary.graph.chains import merge_chains
 from csboundary.graph.polyline import points_along, polyline_between, polyline_length
 from csboundary.metrics.confidence import TRUE_SHARE, TRUE_WITHIN_PX
-from csboundary.metrics.pixel import f1_score, rasterize
-from csboundary.metrics.segments import Segments, flatten
+from csboundary.metrics.pixel import rasterize
+from csboundary.metrics.review_pixels import PixelState, line_pixels, piece_pixels
+from csboundary.metrics.segments import flatten
 
 ORDERS = ("confidence", "random")
 STOPS = 40  # stopping points searched for the cheapest plan to a target F1
@@ -92,24 +93,6 @@ class ReviewCosts(Config):
         return self.find_s + clicks * self.vertex_s + self.travel_s(polyline_length(line), metres_per_px)
 
 
-def _line_pixels(line: np.ndarray) -> np.ndarray:
-    """Distinct 1 px raster pixels (P, 2) of one polyline, as :func:`rasterize` draws them."""
-    n = len(line)
-    return rasterize(Segments(np.asarray(line, float), np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)))
-
-
-_HALF = 1 << 30  # pixel coordinates within +-2^30 pack into one non-negative int64
-
-
-def _keys(pixels: np.ndarray) -> np.ndarray:
-    """One int64 per pixel (col, row), for sets and sorting."""
-    return ((pixels[:, 0].astype(np.int64) + _HALF) << 32) | (pixels[:, 1].astype(np.int64) + _HALF)
-
-
-def _pixels(keys: np.ndarray) -> np.ndarray:
-    return np.stack([(keys >> 32) - _HALF, (keys & ((1 << 32) - 1)) - _HALF], axis=1)
-
-
 def clicks_to_trace(line: np.ndarray, tolerance_px: float) -> int:
     """Vertices of ``line`` simplified (Douglas-Peucker) to stay within ``tolerance_px``: the
     clicks to draw it; a closed line needs its first vertex once."""
@@ -140,105 +123,6 @@ def keeps_boundary(confidence: float, line: np.ndarray, costs: ReviewCosts, metr
 def review_draft(boundaries: list[Boundary], costs: ReviewCosts, metres_per_px: float) -> np.ndarray:
     """(B,) True for the boundaries the review draft shows (:func:`keeps_boundary`)."""
     return np.array([keeps_boundary(b.confidence, b.polyline, costs, metres_per_px) for b in boundaries], bool)
-
-
-class _State:
-    """Which predicted pixels are kept and which ground-truth pixels they cover, updated piece by
-    piece (``lines``: the pieces of the draft's boundaries) as pieces are deleted and runs drawn:
-    F1@5 after every action without re-rasterising."""
-
-    def __init__(self, piece_pixels: list[np.ndarray], gt_pixels: np.ndarray, within_px: float):
-        self.within = within_px
-        self.gt_tree = cKDTree(gt_pixels) if len(gt_pixels) else None
-        self.gt_count = len(gt_pixels)
-        rows, owner = [], []
-        for k, px in enumerate(piece_pixels):
-            rows.append(px)
-            owner.append(np.full(len(px), k))
-        rows = np.concatenate(rows) if rows else np.zeros((0, 2), np.int64)
-        owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
-        keys, pixel_of_row = np.unique(_keys(rows), return_inverse=True)
-        self.pixel_of_row, self.owner = pixel_of_row.ravel(), owner
-        self.rows_of_edge = np.split(np.argsort(owner, kind="stable"), np.cumsum(np.bincount(owner, minlength=len(piece_pixels)))[:-1])
-        self.keys = set(keys.tolist())
-        self.unique_keys = keys
-        unique_px = _pixels(keys)
-        self.owners = np.bincount(self.pixel_of_row, minlength=len(keys))  # kept edges through each pixel
-        self.pixel_true = self._near_gt(unique_px)
-        self.kept, self.kept_true = len(keys), int(self.pixel_true.sum())
-        # every (ground-truth pixel, predicted pixel) pair closer than within_px
-        self.cover = np.zeros(self.gt_count, np.int64)
-        self.pairs_of_pixel: list[np.ndarray] = [np.zeros(0, np.int64)] * len(keys)
-        if self.gt_tree is not None and len(keys):
-            pairs = cKDTree(unique_px).sparse_distance_matrix(self.gt_tree, np.nextafter(within_px, 0), output_type="ndarray")
-            p, g = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
-            order = np.argsort(p, kind="stable")
-            p, g = p[order], g[order]
-            self.pairs_of_pixel = np.split(g, np.cumsum(np.bincount(p, minlength=len(keys)))[:-1])
-            np.add.at(self.cover, g, 1)
-        self.covered = int((self.cover > 0).sum())
-
-    def copy(self) -> "_State":
-        """An independent state (the arrays that change copied, the rest shared)."""
-        other = copy.copy(self)
-        other.owners, other.cover, other.keys = self.owners.copy(), self.cover.copy(), set(self.keys)
-        return other
-
-    def kept_pixels(self) -> np.ndarray:
-        """(P, 2) pixels of the kept edges and of the runs drawn so far."""
-        return _pixels(np.fromiter(self.keys, np.int64, len(self.keys)))
-
-    def _near_gt(self, pixels: np.ndarray) -> np.ndarray:
-        if self.gt_tree is None or not len(pixels):
-            return np.zeros(len(pixels), bool)
-        return self.gt_tree.query(pixels, k=1, distance_upper_bound=self.within)[0] < self.within
-
-    def f1(self) -> float:
-        p = self.kept_true / self.kept if self.kept else 0.0
-        r = self.covered / self.gt_count if self.gt_count else float("nan")
-        return f1_score(p, r)
-
-    def edge_pixels(self, k: int) -> np.ndarray:
-        """Indices of piece ``k``'s distinct pixels."""
-        return np.unique(self.pixel_of_row[self.rows_of_edge[k]])
-
-    def off_truth_px(self, k: int) -> int:
-        """Pixels of piece ``k`` farther than ``within_px`` from the ground truth."""
-        return int(np.count_nonzero(~self.pixel_true[self.edge_pixels(k)]))
-
-    def delete(self, k: int, off_truth_only: bool = False) -> None:
-        """Take piece ``k`` out, or only its pixels off the ground truth (a vertex moved onto the
-        boundary: what stays is what was on it)."""
-        pixels = self.edge_pixels(k)
-        if off_truth_only:
-            pixels = pixels[~self.pixel_true[pixels]]
-        for pixel in pixels.tolist():
-            self.owners[pixel] -= 1
-            if self.owners[pixel] == 0:
-                self.kept -= 1
-                self.keys.discard(int(self.unique_keys[pixel]))
-                self.kept_true -= int(self.pixel_true[pixel])
-                g = self.pairs_of_pixel[pixel]
-                self.cover[g] -= 1
-                self.covered -= int(np.count_nonzero(self.cover[g] == 0))
-
-    def draw(self, pixels: np.ndarray) -> None:
-        """Add a traced run: its pixels count as kept (and true where near the ground truth), and
-        cover the ground truth near them."""
-        new = np.array([key not in self.keys for key in _keys(pixels).tolist()], bool)
-        if not new.any():
-            return
-        pixels = pixels[new]
-        self.keys.update(_keys(pixels).tolist())
-        self.kept += len(pixels)
-        self.kept_true += int(self._near_gt(pixels).sum())
-        if self.gt_tree is not None:
-            for g in self.gt_tree.query_ball_point(pixels, np.nextafter(self.within, 0)):
-                g = np.asarray(g, np.int64)
-                self.covered += int(np.count_nonzero(self.cover[g] == 0))
-                self.cover[g] += 1
-
-
 
 
 def boundary_samples(gt: BoundaryGraph) -> list[np.ndarray]:
@@ -309,19 +193,6 @@ def plan_boundary(line: np.ndarray, near: cKDTree | None, costs: ReviewCosts, me
     return BoundaryPlan(pieces, actions, seconds, False)
 
 
-def piece_pixels(line: np.ndarray, pieces: list[np.ndarray]) -> list[np.ndarray]:
-    """The raster pixels of ``line`` shared out among its ``pieces`` (each pixel to the piece
-    nearest its centre), so the pieces together are exactly the line's raster, as the pixel
-    metric draws it."""
-    pixels = _line_pixels(line)
-    if len(pieces) == 1:
-        return [pixels]
-    samples = [points_along(piece, 0.5)[0] for piece in pieces]
-    owner = np.concatenate([np.full(len(pts), k) for k, pts in enumerate(samples)])
-    nearest = owner[cKDTree(np.concatenate(samples)).query(pixels + 0.5, k=1)[1]]
-    return [pixels[nearest == k] for k in range(len(pieces))]
-
-
 @dataclass(frozen=True)
 class ReviewTrace:
     """One simulated review: seconds and F1@5 after each action, and its totals."""
@@ -340,7 +211,7 @@ class ReviewTrace:
         return self.total_s - self.look_s
 
 
-def _draw(state: _State, samples: list[np.ndarray], seconds: list[float], f1: list[float], costs: ReviewCosts, within_px: float,
+def _draw(state: PixelState, samples: list[np.ndarray], seconds: list[float], f1: list[float], costs: ReviewCosts, within_px: float,
           metres_per_px: float, until: float = np.inf) -> ReviewTrace:
     """Trace the missing runs into ``state`` (changed in place), longest first, extending the
     ``seconds`` and ``f1`` of the look pass; stop once F1@5 reaches ``until``."""
@@ -348,16 +219,16 @@ def _draw(state: _State, samples: list[np.ndarray], seconds: list[float], f1: li
     for run, snapped in sorted(missing_runs(samples, state.kept_pixels(), within_px), key=lambda r: -len(r[0])):
         if f1[-1] >= until:
             break
-        if snapped == 2 and polyline_length(run) < costs.fix_px + 2:  # a gap within the eye's tolerance, as a stray shorter than fix_px
+        if snapped and polyline_length(run) < costs.fix_px + 2:  # a gap or stub within the eye's tolerance, as a stray shorter than fix_px
             continue
         clicks += max(1, clicks_to_trace(run, costs.trace_tolerance_px) - snapped)
-        state.draw(_line_pixels(run))
+        state.draw(line_pixels(run))
         seconds.append(seconds[-1] + costs.draw_seconds(run, metres_per_px, snapped))
         f1.append(state.f1())
     return ReviewTrace(np.asarray(seconds), np.asarray(f1), look_s, clicks)
 
 
-def simulate_review(state: _State, plans: list[BoundaryPlan], first_piece: np.ndarray, samples: list[np.ndarray], order: np.ndarray,
+def simulate_review(state: PixelState, plans: list[BoundaryPlan], first_piece: np.ndarray, samples: list[np.ndarray], order: np.ndarray,
                     costs: ReviewCosts, within_px: float, metres_per_px: float, stops: int = STOPS) -> tuple[ReviewTrace, float]:
     """Look at every boundary of ``order`` and act on it (``plans``; its pieces are ``state``'s
     pieces from ``first_piece``), then draw: the full review's trace; and the seconds of the
@@ -382,6 +253,9 @@ def simulate_review(state: _State, plans: list[BoundaryPlan], first_piece: np.nd
         for j, action in enumerate(plan.actions):
             if action != "keep":
                 state.delete(int(first_piece[b]) + j, off_truth_only=action == "fix")
+            if action == "fix":  # the vertex moved onto the truth: the line now runs straight across the stray
+                piece = plan.pieces[j]
+                state.draw(line_pixels(piece[[0, -1]]))
         seconds.append(seconds[-1] + plan.seconds)
         f1.append(state.f1())
     full = _draw(state, samples, seconds, f1, costs, within_px, metres_per_px)
@@ -436,7 +310,7 @@ def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float |
     if not scored:
         out["note"] = "no boundary has a confidence: the draft is the whole prediction, and only the random order is reported"
     # rasterised once; each order works on a copy
-    draft_state = _State([px for b, p in zip(draft, plans) for px in piece_pixels(b.polyline, p.pieces)], gt_pixels, within_px)
+    draft_state = PixelState([px for b, p in zip(draft, plans) for px in piece_pixels(b.polyline, p.pieces)], gt_pixels, within_px)
     for name in ORDERS if scored else ("random",):
         order = review_order(confidence[shown], name, seed)
         trace, to_target = simulate_review(draft_state.copy(), plans, first_piece, samples, order, costs, within_px, mpp)

@@ -71,7 +71,9 @@ class Feedback(QgsProcessingFeedback):
 
 def layer_report(layer):
     renderer = layer.renderer()
-    report = {"name": layer.name(), "source": layer.source(), "type": layer.type(), "features": None, "renderer": None}
+    node = QgsProject.instance().layerTreeRoot().findLayer(layer.id())
+    report = {"name": layer.name(), "source": layer.source(), "type": layer.type(), "features": None, "renderer": None,
+              "visible": node.isVisible() if node is not None else None}
     if isinstance(layer, QgsVectorLayer):
         report.update(features=layer.featureCount(), geometry_type=layer.geometryType(), crs=layer.crs().authid(),
                       fields=[f.name() for f in layer.fields()], renderer=renderer.type())
@@ -113,7 +115,7 @@ def detect():
     if request.get("picture"):
         tiles = [QgsRasterLayer(path, os.path.basename(path)) for path in request["parameters"]["INPUT"]]
         by_name = {layer.name(): layer for layer in layers}
-        shown = [by_name["areas checked"], by_name["edges to review"]] + tiles
+        shown = [by_name["areas checked"], by_name["boundaries to review"]] + tiles
         extent = QgsRectangle()
         for tile in tiles:
             extent.combineExtentWith(tile.extent())
@@ -124,13 +126,14 @@ def detect():
 
 
 def review():
-    """Edit as a person does in QGIS: delete a feature, drag a line end (every line at that vertex
-    follows, as topological editing does), draw a line, draw a polygon; save; Apply review."""
+    """Edit as a person does in QGIS: delete a boundary, drag a boundary end (every boundary ending
+    at that vertex follows, as topological editing does), draw a line, draw a polygon; save; Apply
+    review."""
     edited = request["edited"]
     refusals = {}
     for name, parameters in (("same_file", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": edited}),
                              ("unsaved", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": request["next_review"]})):
-        open_layer = QgsVectorLayer(f"{edited}|layername=edges", "edges to review", "ogr")
+        open_layer = QgsVectorLayer(f"{edited}|layername=boundaries", "boundaries to review", "ogr")
         QgsProject.instance().addMapLayer(open_layer)
         if name == "unsaved":  # a deletion not saved yet
             open_layer.startEditing()
@@ -144,18 +147,18 @@ def review():
         if open_layer.isEditable():
             open_layer.rollBack()
         QgsProject.instance().removeMapLayer(open_layer.id())
-    edges = QgsVectorLayer(f"{edited}|layername=edges", "edges", "ogr")
+    edges = QgsVectorLayer(f"{edited}|layername=boundaries", "boundaries", "ogr")
     complete = QgsVectorLayer(f"{edited}|layername=complete", "complete", "ogr")
     assert edges.isValid() and complete.isValid()
     edges.startEditing()
-    by_edge = {f["edge_id"]: f for f in edges.getFeatures()}
-    edges.deleteFeature(by_edge[request["delete_edge"]].id())
-    x, y = request["move_to"]
+    gone = next(f for f in edges.getFeatures() if request["delete_edge"] in [int(k) for k in f["edge_ids"].split(";")])
+    edges.deleteFeature(gone.id())
+    (fx, fy), (x, y) = request["move_from"], request["move_to"]
     moved = 0
     for feature in edges.getFeatures():
         line = feature.geometry().asPolyline()
-        for end, index in (("u", 0), ("v", len(line) - 1)):
-            if feature[end] == request["move_vertex"]:
+        for index in sorted({0, len(line) - 1}):
+            if abs(line[index].x() - fx) < 1e-6 and abs(line[index].y() - fy) < 1e-6:
                 edges.moveVertex(x, y, feature.id(), index)
                 moved += 1
     drawn = QgsFeature(edges.fields())
@@ -168,11 +171,14 @@ def review():
     complete.addFeature(area)
     assert complete.commitChanges(), complete.commitErrors()
     del edges, complete  # close the GeoPackage before csboundary reads it
+    shown = QgsVectorLayer(f"{edited}|layername=boundaries", "boundaries to review", "ogr")  # as Detect left it in the project
+    QgsProject.instance().addMapLayer(shown)
     feedback = Feedback()
-    results = processing.run("csboundary:applyreview", {"PREDICTION": request["prediction"], "EDITED": edited,
-                                                        "NEXT_REVIEW": request["next_review"]}, feedback=feedback)
+    results = processing.runAndLoadResults("csboundary:applyreview", {"PREDICTION": request["prediction"], "EDITED": edited,
+                                                                      "NEXT_REVIEW": request["next_review"]}, feedback=feedback)
+    sources = [layer.source() for layer in QgsProject.instance().mapLayers().values()]
     return {"results": {k: str(v) for k, v in results.items()}, "line_ends_moved": moved, "lines": feedback.lines,
-            "refusals": refusals}
+            "refusals": refusals, "sources_after": sources}
 
 
 def cancel():

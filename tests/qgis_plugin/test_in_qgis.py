@@ -73,11 +73,17 @@ def test_qgis_process_lists_the_algorithms_and_runs_detect_on_the_demo_city(qgis
     done = subprocess.run(args, env=qgis["env"], capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     results = json.loads(done.stdout[done.stdout.index("{"):])["results"]
-    assert results["OUTPUT"] == str(out) and results["REVIEW_EDGES"] == f"{out / 'review.gpkg'}|layername=edges"
+    assert results["OUTPUT"] == str(out) and results["REVIEW_BOUNDARIES"] == f"{out / 'review.gpkg'}|layername=boundaries"
+    assert results["REVIEW_HELD_BACK"] == f"{out / 'review.gpkg'}|layername=held_back"
     import pyogrio
 
+    from csboundary.graph import BoundaryGraph
+    from csboundary.graph.boundaries import graph_boundaries
+
     graph = json.loads((out / "graph.json").read_text())
-    assert pyogrio.read_info(out / "review.gpkg", layer="edges")["features"] == len(graph["edges"]) > 100
+    boundaries = len(graph_boundaries(BoundaryGraph.read_json(out / "graph.json")))
+    counts = [pyogrio.read_info(out / "review.gpkg", layer=name)["features"] for name in ("boundaries", "held_back")]
+    assert sum(counts) == boundaries and 0 < boundaries < len(graph["edges"])
     assert pyogrio.read_info(out / "review.gpkg", layer="complete")["geometry_type"] == "Polygon"
     # the lanelet2 export and the evaluation, through qgis_process too
     osm = tmp_path / "map.osm"
@@ -116,11 +122,13 @@ def test_detect_loads_the_boundaries_and_review_layers_styled_by_confidence(qgis
     finally:
         shutil.rmtree(out.parent, ignore_errors=True)
     layers = {layer["name"]: layer for layer in report["layers"]}
-    assert set(layers) == {"road boundaries", "edges to review", "areas checked"}
-    edges, boundaries, areas = layers["edges to review"], layers["road boundaries"], layers["areas checked"]
-    assert edges["features"] == len(graph["edges"]) and edges["geometry_type"] == 1 and edges["crs"] == "EPSG:32618"
-    assert boundaries["features"] > 0 and areas["features"] == 0 and areas["geometry_type"] == 2
-    for layer, field in ((edges, "confidence"), (boundaries, "confidence_min")):
+    assert set(layers) == {"road boundaries", "boundaries to review", "held back from the review", "areas checked"}
+    edges, held = layers["boundaries to review"], layers["held back from the review"]
+    boundaries, areas = layers["road boundaries"], layers["areas checked"]
+    assert edges["features"] + held["features"] == boundaries["features"] and edges["geometry_type"] == 1 and edges["crs"] == "EPSG:32618"
+    assert 0 < boundaries["features"] < len(graph["edges"]) and areas["features"] == 0 and areas["geometry_type"] == 2
+    assert edges["visible"] and not held["visible"]  # the held-back boundaries are off until asked for
+    for layer, field in ((edges, "confidence"), (held, "confidence"), (boundaries, "confidence_mean")):
         assert layer["renderer"] == "graduatedSymbol" and layer["class_attribute"] == f'coalesce("{field}", -1)'
         drawn, lowest, highest = layer["classes"][0], layer["classes"][1], layer["classes"][-1]
         assert drawn["lower"] < -1 < drawn["upper"] < 0 and lowest["lower"] == 0 and highest["upper"] >= 1
@@ -132,9 +140,10 @@ def test_detect_loads_the_boundaries_and_review_layers_styled_by_confidence(qgis
 
 
 def test_apply_review_of_a_layer_edited_with_qgis_gives_the_page_s_graph(qgis, demo_run, tmp_path):
-    """Delete a line, drag a vertex (both its lines), draw a line, draw a checked area: with
-    QGIS's editing API on the review GeoPackage, then Apply review; the same edits exported by
-    the review page and applied by the command give the same graph."""
+    """Delete a boundary, drag a junction (every boundary ending there), draw a line, draw a
+    checked area: with QGIS's editing API on the review GeoPackage, then Apply review; the same
+    edits exported by the review page and applied by the command give the same graph, and the
+    edited file's layers leave the project."""
     from csboundary.data.windows import pixel_to_world
     from csboundary.graph import BoundaryGraph
     from helpers import run_cli
@@ -152,20 +161,28 @@ def test_apply_review_of_a_layer_edited_with_qgis_gives_the_page_s_graph(qgis, d
         xs, ys = pixel_to_world(graph.transform, points[:, 0], points[:, 1])
         return np.stack([np.atleast_1d(xs), np.atleast_1d(ys)], axis=-1)
 
+    from csboundary.graph.boundaries import graph_boundaries
+    from csboundary.pipeline.outputs.review import review_boundaries
+
     degree = np.bincount(graph.edges.ravel(), minlength=graph.n_vertices)
     deleted = 3
-    vertex = int(next(i for i in range(graph.n_vertices) if degree[i] == 2 and deleted not in np.flatnonzero((graph.edges == i).any(1))))
+    gone = next(b for b in graph_boundaries(graph) if deleted in b.edges)
+    vertex = int(next(i for i in range(graph.n_vertices) if degree[i] == 3 and i not in graph.edges[gone.edges].ravel()))
+    moved_from = world(graph.vertices[vertex][None])[0].tolist()
     moved_to = world((graph.vertices[vertex] + np.array([4.0, -3.0]))[None])[0].tolist()
+    chains, draft, _ = review_boundaries(graph)
+    ends_here = sum(int(np.allclose(b.polyline[j], graph.vertices[vertex])) for b, d in zip(chains, draft) if d for j in (0, -1))
     drawn = world(np.array([[500.0, 500.0], [540.0, 520.0], [600.0, 520.0]])).tolist()
     area = world(np.array([[100.0, 100.0], [900.0, 100.0], [900.0, 900.0], [100.0, 900.0], [100.0, 100.0]])).tolist()
     report = session(qgis, {"mode": "review", "edited": str(gis / "review.gpkg"), "prediction": str(gis),
-                            "next_review": str(gis / "review-2.gpkg"), "delete_edge": deleted, "move_vertex": vertex,
+                            "next_review": str(gis / "review-2.gpkg"), "delete_edge": deleted, "move_from": moved_from,
                             "move_to": moved_to, "draw": drawn, "area": area}, tmp_path)
-    assert report["line_ends_moved"] == 2
+    assert report["line_ends_moved"] == ends_here > 0
     assert report["refusals"]["same_file"].endswith("the next review GeoPackage must be a new file, not the edited one")
-    assert report["refusals"]["unsaved"] == "edges to review has unsaved edits: save them (Save Layer Edits) before Apply review"
-    features = [{"type": "Feature", "properties": {"action": "delete", "edge": deleted},
-                 "geometry": {"type": "LineString", "coordinates": world_line(graph, deleted)}},
+    assert report["refusals"]["unsaved"] == "boundaries to review has unsaved edits: save them (Save Layer Edits) before Apply review"
+    features = [{"type": "Feature", "properties": {"action": "delete", "edge": k},
+                 "geometry": {"type": "LineString", "coordinates": world_line(graph, k)}} for k in sorted(gone.edges.tolist())]
+    features += [
                 {"type": "Feature", "properties": {"action": "move", "vertex": vertex},
                  "geometry": {"type": "Point", "coordinates": moved_to}},
                 {"type": "Feature", "properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": drawn}},
@@ -173,15 +190,17 @@ def test_apply_review_of_a_layer_edited_with_qgis_gives_the_page_s_graph(qgis, d
     done = run_cli("apply-review", str(page), str(edits_file(tmp_path / "edits.geojson", page, features)))
     assert done.returncode == 0, done.stderr
     a, b = BoundaryGraph.read_json(page / "graph.json"), BoundaryGraph.read_json(gis / "graph.json")
-    assert a.n_edges == b.n_edges == graph.n_edges and a.n_vertices == b.n_vertices
+    assert a.n_edges == b.n_edges and a.n_vertices == b.n_vertices
     assert np.allclose(a.vertices, b.vertices, atol=1e-6) and (a.edges == b.edges).all() and a.edge_kinds == b.edge_kinds
     page_record, gis_record = (json.loads((p / "review.json").read_text())["reviews"][-1] for p in (page, gis))
-    for key in ("deleted_edges", "moved_vertices", "added_edges", "edge_index_map"):
+    for key in ("deleted_edges", "moved_vertices", "added_edges", "edge_index_map", "held_back_deleted"):
         assert page_record[key] == gis_record[key], key
     assert len(gis_record["complete_areas"]) == len(page_record["complete_areas"]) == 1
     import pyogrio
 
-    assert pyogrio.read_info(gis / "review-2.gpkg", layer="edges")["features"] == b.n_edges  # the next round's layer
+    next_round = sum(pyogrio.read_info(gis / "review-2.gpkg", layer=name)["features"] for name in ("boundaries", "held_back"))
+    assert next_round == len(graph_boundaries(b))  # the next round's layers
+    assert not any(str(gis / "review.gpkg") in source for source in report["sources_after"])  # the edited file's layers are gone
 
 
 def test_cancel_stops_detect_within_5_s_and_running_it_again_continues(qgis, demo_run, tmp_path):

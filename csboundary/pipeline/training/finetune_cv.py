@@ -2,7 +2,8 @@
 (``csboundary evaluate-finetune``): the set's cities in K folds; for each fold, fine-tune on the
 other K-1 and score the held-out cities with the base and the tuned bundle. Every city is scored
 once by each, never by a bundle that trained on it; the difference of the means comes with a
-paired bootstrap interval over the cities.
+paired bootstrap interval over the cities. The mapping loop is priced in a reviewer's minutes
+(:func:`mapping_loop`): review a few blocks, fine-tune, correct the re-drafted rest.
 """
 
 from __future__ import annotations
@@ -31,8 +32,44 @@ def folds_of(cities: list[Path], k: int) -> list[list[Path]]:
 
 
 def _scores(cities: list[Path], weights: Path, device: str, engine: str, seed: int, desc: str, progress: bool) -> dict[str, dict]:
+    """Each city's metrics, with the minutes of its simulated review under ``review``."""
     model = load_predictor(weights, device, engine=engine)
-    return {c.name: evaluate_city_dir(c, model, seed)["metrics"] for c in tqdm(cities, desc=desc, unit="city", disable=not progress)}
+    out = {}
+    for city in tqdm(cities, desc=desc, unit="city", disable=not progress):
+        scores = evaluate_city_dir(city, model, seed)
+        out[city.name] = {**scores["metrics"], "review": review_minutes(scores.get("review_effort"))}
+    return out
+
+
+def review_minutes(report: dict | None) -> dict | None:
+    """The few numbers of a simulated review the mapping loop needs: minutes to correct the draft
+    (least sure first when there is a confidence), from scratch, and the km of true boundary."""
+    if not report:
+        return None
+    order = report["orders"].get("confidence") or report["orders"]["random"]
+    return {"corrected_minutes": order["minutes"], "scratch_minutes": report["scratch_minutes"], "km": report["true_boundary_km"]}
+
+
+def mapping_loop(records: list[dict], per_city: dict) -> list[dict]:
+    """Per fold, what reviewing a few blocks and fine-tuning buys a person mapping a city: the
+    minutes to review the base bundle's drafts of the training cities, to correct the tuned
+    bundle's drafts of the held-out cities (and the base bundle's, for comparison), and to draw
+    each from scratch. The base bundle's review of a city is fold-independent: it is the one
+    scored when that city was held out."""
+    def total(names, bundle, key):
+        values = [(per_city[n][bundle].get("review") or {}).get(key) for n in names]
+        return float(sum(values)) if values and all(v is not None for v in values) else float("nan")
+
+    out = []
+    for r in records:
+        train, held = r["train"], r["held_out"]
+        out.append({"fold": r["fold"], "train_km": total(train, "base", "km"), "held_out_km": total(held, "base", "km"),
+                    "train_review_minutes": total(train, "base", "corrected_minutes"),
+                    "train_scratch_minutes": total(train, "base", "scratch_minutes"),
+                    "held_out_tuned_minutes": total(held, "finetuned", "corrected_minutes"),
+                    "held_out_base_minutes": total(held, "base", "corrected_minutes"),
+                    "held_out_scratch_minutes": total(held, "base", "scratch_minutes")})
+    return out
 
 
 def _held_out_confidence(cities: list[Path], tuned: Path, base: Path, device: str, progress: bool) -> dict:
@@ -115,7 +152,7 @@ def evaluate_finetune(set_dir: Path, out: Path, *, folds: int = 2, weights: Path
         for name in record["held_out"]:
             per_city[name] = {"fold": i, "base": record["base"][name], "finetuned": record["finetuned"][name]}
     summary = {}
-    for metric in COMPARED:
+    for metric in COMPARED:  # a fold written by an older build holds the metrics alone: they are read the same
         a = [score_value(per_city[n]["base"].get(metric)) for n in per_city]
         b = [score_value(per_city[n]["finetuned"].get(metric)) for n in per_city]
         diff, low, high, wins = paired_bootstrap(a, b, seed=seed)
@@ -124,7 +161,8 @@ def evaluate_finetune(set_dir: Path, out: Path, *, folds: int = 2, weights: Path
     result = {"set": str(set_dir), "folds": folds, "base_weights": str(base), "budget": budget.to_dict(), "seed": seed,
               "fold_seconds": [r["seconds"] for r in fold_records], "summary": summary, "per_city": per_city,
               "confidence": confidence_summary([r["confidence"] for r in fold_records], seed),
-              "confidence_refit": [r.get("confidence_refit") for r in fold_records]}
+              "confidence_refit": [r.get("confidence_refit") for r in fold_records],
+              "mapping_loop": mapping_loop(fold_records, per_city)}
     with atomic_path(out / "evaluate-finetune.json") as tmp:
         tmp.write_text(json.dumps(result, indent=1) + "\n")
     return result
@@ -149,4 +187,14 @@ def format_finetune(result: dict) -> str:
     for i, refit in enumerate(result.get("confidence_refit") or []):
         if refit:
             lines.append(f"  fold {i}: {refit['reason']}")
+    loop = [f for f in result.get("mapping_loop") or [] if f["train_km"] == f["train_km"]]  # NaN: folds of an older build
+    if loop:
+        lines.append("the mapping loop in minutes (simulated review; per km of true boundary):")
+        for f in loop:
+            tk, hk = f["train_km"] or float("nan"), f["held_out_km"] or float("nan")
+            lines.append(f"  fold {f['fold']}: review the training cities' drafts {f['train_review_minutes']:.1f} min "
+                         f"({f['train_review_minutes'] / tk:.1f} min/km; from scratch {f['train_scratch_minutes'] / tk:.1f}); "
+                         f"correct the held-out re-drafts {f['held_out_tuned_minutes']:.1f} min "
+                         f"({f['held_out_tuned_minutes'] / hk:.1f} min/km; base draft {f['held_out_base_minutes'] / hk:.1f}, "
+                         f"from scratch {f['held_out_scratch_minutes'] / hk:.1f})")
     return "\n".join(lines)

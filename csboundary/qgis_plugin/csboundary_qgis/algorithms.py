@@ -22,9 +22,10 @@ from .styles import Styler
 ENGINES = ("auto", "torch", "onnx")
 DEVICES = ("auto", "cpu", "cuda")
 BOUNDARIES_LAYER = "road_boundaries"  # in the prediction's boundaries.gpkg
-EDGES_LAYER = "edges"  # in the prediction's boundaries.gpkg and in the review GeoPackage
+DRAFT_LAYER = "boundaries"  # the review draft's boundaries, in the review GeoPackage
+HELD_BACK_LAYER = "held_back"  # the boundaries not worth a look, in the review GeoPackage (loaded hidden)
 COMPLETE_LAYER = "complete"  # polygons a reviewer marks checked, in the review GeoPackage
-REVIEW_GPKG = "review.gpkg"  # the copy of the edges that a reviewer edits, beside the prediction
+REVIEW_GPKG = "review.gpkg"  # the boundaries that a reviewer edits, beside the prediction
 
 
 class CsboundaryAlgorithm(QgsProcessingAlgorithm):
@@ -129,6 +130,13 @@ def load(context, source, name, output, kind):
     context.addLayerToLoadOnCompletion(source, details)
 
 
+def load_review(context, review, boundaries_output, held_output, complete_output):
+    """The review GeoPackage's three layers: the draft's boundaries, those held back (hidden) and the areas checked."""
+    load(context, f"{review}|layername={DRAFT_LAYER}", "boundaries to review", boundaries_output, "review")
+    load(context, f"{review}|layername={HELD_BACK_LAYER}", "held back from the review", held_output, "held")
+    load(context, f"{review}|layername={COMPLETE_LAYER}", "areas checked", complete_output, "complete")
+
+
 def prediction_crs(prediction):
     """The CRS a prediction was made in (its summary.json, small, rather than its graph.json)."""
     try:
@@ -158,9 +166,12 @@ class Detect(CsboundaryAlgorithm):
     TITLE = "Detect road boundaries"
     HELP = ("<p>Predicts the road-boundary graph of aerial imagery (one or more GeoTIFF tiles of one mosaic) with "
             "<code>csboundary predict</code>, and loads the boundaries and the review layers, coloured by the "
-            "calibrated confidence of each edge: the least sure in red.</p>"
-            "<p>To review: edit the <i>edges</i> layer of review.gpkg (delete false edges, move vertices, draw missing "
-            "boundaries) and draw the areas you checked in its <i>complete</i> layer, then run Apply review.</p>"
+            "calibrated confidence of each boundary: the least sure in red.</p>"
+            "<p>To review: edit the <i>boundaries to review</i> layer of review.gpkg, a boundary per feature (delete "
+            "false ones, split one and delete a part, move vertices, draw missing boundaries) and draw the areas you "
+            "checked in its <i>complete</i> layer, then run Apply review. Boundaries not worth a look (their expected "
+            "review cost exceeds what they save) are in the hidden <i>held back</i> layer; inside an area you mark "
+            "complete, those you leave there are deleted (copy one into the boundaries layer to keep it).</p>"
             "<p>An interrupted or canceled run continues where it stopped when run again into the same output folder.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -171,7 +182,8 @@ class Detect(CsboundaryAlgorithm):
         self.engine_parameters()
         self.addParameter(QgsProcessingParameterFolderDestination("OUTPUT", "Prediction folder"))
         self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
-        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_EDGES", "Edges to review", QgsProcessing.TypeVectorLine))
+        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_BOUNDARIES", "Boundaries to review", QgsProcessing.TypeVectorLine))
+        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_HELD_BACK", "Held back from the review", QgsProcessing.TypeVectorLine))
         self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_COMPLETE", "Areas checked", QgsProcessing.TypeVectorPolygon))
         self.addOutput(QgsProcessingOutputFile("GRAPH", "graph.json"))
 
@@ -188,10 +200,10 @@ class Detect(CsboundaryAlgorithm):
             self.csboundary(["review", out, "--gpkg", review, "--quiet"], feedback)
         results = {"OUTPUT": out, "GRAPH": os.path.join(out, "graph.json"),
                    "BOUNDARIES": f"{os.path.join(out, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}",
-                   "REVIEW_EDGES": f"{review}|layername={EDGES_LAYER}", "REVIEW_COMPLETE": f"{review}|layername={COMPLETE_LAYER}"}
+                   "REVIEW_BOUNDARIES": f"{review}|layername={DRAFT_LAYER}", "REVIEW_HELD_BACK": f"{review}|layername={HELD_BACK_LAYER}",
+                   "REVIEW_COMPLETE": f"{review}|layername={COMPLETE_LAYER}"}
         load(context, results["BOUNDARIES"], "road boundaries", "BOUNDARIES", "boundaries")
-        load(context, results["REVIEW_EDGES"], "edges to review", "REVIEW_EDGES", "edges")
-        load(context, results["REVIEW_COMPLETE"], "areas checked", "REVIEW_COMPLETE", "complete")
+        load_review(context, review, "REVIEW_BOUNDARIES", "REVIEW_HELD_BACK", "REVIEW_COMPLETE")
         return results
 
 
@@ -264,10 +276,11 @@ class ApplyReview(CsboundaryAlgorithm):
     NAME = "applyreview"
     TITLE = "Apply review"
     HELP = ("<p>Merges the review done in QGIS into the prediction (<code>csboundary apply-review</code>): the "
-            "deleted, moved, reshaped and drawn lines of the review GeoPackage's <i>edges</i> layer and the polygons "
-            "of its <i>complete</i> layer become the same edits as the review page's, checked the same way and "
-            "recorded in review.json (the complete areas are labels for Fine-tune). Save your edits first. "
-            "A fresh review GeoPackage of the corrected graph is written for the next round.</p>")
+            "deleted, split, moved, reshaped and drawn boundaries of the review GeoPackage's <i>boundaries</i> layer and "
+            "the polygons of its <i>complete</i> layer become the same edits as the review page's, checked the same way "
+            "and recorded in review.json (the complete areas are labels for Fine-tune). Save your edits first. "
+            "A fresh review GeoPackage of the corrected graph is written for the next round, and replaces the edited "
+            "one's layers in the project.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
@@ -299,9 +312,19 @@ class ApplyReview(CsboundaryAlgorithm):
         results = {"PREDICTION": prediction, "NEXT_REVIEW": next_review,
                    "BOUNDARIES": f"{os.path.join(prediction, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}"}
         load(context, results["BOUNDARIES"], "road boundaries (reviewed)", "BOUNDARIES", "boundaries")
-        load(context, f"{next_review}|layername={EDGES_LAYER}", "edges to review", "NEXT_REVIEW", "edges")
-        load(context, f"{next_review}|layername={COMPLETE_LAYER}", "areas checked", "NEXT_REVIEW", "complete")
+        load_review(context, next_review, "NEXT_REVIEW", "NEXT_REVIEW", "NEXT_REVIEW")
+        self.edited = os.path.realpath(edited)
         return results
+
+    def postProcessAlgorithm(self, context, feedback):  # noqa: N802 (on the main thread, where the project may change)
+        """The edited file's layers leave the project: the next round's replace them."""
+        edited = getattr(self, "edited", None)
+        project = context.project()
+        if edited and project is not None:
+            stale = [layer.id() for layer in project.mapLayers().values()
+                     if isinstance(layer, QgsVectorLayer) and os.path.realpath(layer.source().split("|")[0]) == edited]
+            project.removeMapLayers(stale)
+        return {}
 
 
 class Finetune(CsboundaryAlgorithm):

@@ -1,7 +1,7 @@
-"""How the loaded layers look: edges and boundaries graduated by confidence, the least sure in a
+"""How the loaded layers look: boundaries graduated by confidence (held-back ones hidden), the least sure in a
 warm colour (the order in which a reviewer looks at them), checked areas as green outlines."""
 
-from qgis.core import (QgsFillSymbol, QgsGraduatedSymbolRenderer, QgsLineSymbol, QgsProcessingLayerPostProcessorInterface,
+from qgis.core import (QgsFillSymbol, QgsGraduatedSymbolRenderer, QgsLineSymbol, QgsProcessingLayerPostProcessorInterface, QgsProject,
                        QgsRendererRange, QgsSingleSymbolRenderer)
 
 # (lower, upper, colour, label): the classes of the calibrated probability that an edge is a true
@@ -45,10 +45,14 @@ class Styler(QgsProcessingLayerPostProcessorInterface):
         return styler
 
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802 (QGIS's name; runs on the main thread)
-        if self.kind == "edges":
-            layer.setRenderer(confidence_renderer("confidence"))
+        if self.kind in ("review", "held"):
+            layer.setRenderer(confidence_renderer("confidence", width=1.0))
         elif self.kind == "boundaries":
-            layer.setRenderer(confidence_renderer("confidence_min", width=1.0))
+            layer.setRenderer(confidence_renderer("confidence_mean", width=1.0))
         elif self.kind == "complete":
             layer.setRenderer(complete_renderer())
+        if self.kind == "held":  # not worth a look: off until the reviewer asks for it
+            node = (context.project() or QgsProject.instance()).layerTreeRoot().findLayer(layer.id())
+            if node is not None:
+                node.setItemVisibilityChecked(False)
         layer.triggerRepaint()

@@ -200,7 +200,9 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
 
     def fake_scores(cities, weights, *args):
         tuned = "fold-" in str(weights)
-        return {c.name: {"f1@5": 0.5 + (0.1 if tuned else 0.0) + 0.01 * "abcd".index(c.name), "apls": None if c.name == "d" else 0.4}
+        return {c.name: {"f1@5": 0.5 + (0.1 if tuned else 0.0) + 0.01 * "abcd".index(c.name), "apls": None if c.name == "d" else 0.4,
+                         "review": {"corrected_minutes": (6.0 if tuned else 10.0) + "abcd".index(c.name), "scratch_minutes": 8.0,
+                                    "km": 0.5}}
                 for c in cities}
 
     def fake_confidence(cities, tuned, base, *args):  # per held-out city: one true edge and one false
@@ -216,6 +218,11 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
     assert f1["base"] == pytest.approx(0.515) and f1["finetuned"] == pytest.approx(0.615) and f1["difference"] == pytest.approx(0.1)
     assert result["summary"]["apls"]["base"] == pytest.approx(0.3)  # undefined counts 0, as in evaluate-set
     assert "1.5 min" in cv.format_finetune(result)
+    # the mapping loop of fold 0: the base reviews b and d (11 + 13 min), the tuned re-drafts of a and c take 6 + 8
+    loop = result["mapping_loop"][0]
+    assert loop["train_review_minutes"] == 24.0 and loop["train_scratch_minutes"] == 16.0 and loop["train_km"] == 1.0
+    assert loop["held_out_tuned_minutes"] == 14.0 and loop["held_out_base_minutes"] == 22.0 and loop["held_out_scratch_minutes"] == 16.0
+    assert "review the training cities' drafts 24.0 min (24.0 min/km; from scratch 16.0)" in cv.format_finetune(result)
     confidence = result["confidence"]  # pooled over both folds' held-out edges
     assert confidence["edges"] == 8 and confidence["base"]["auc"] == 0.0 and confidence["tuned"]["auc"] == 1.0
     assert confidence["tuned"]["ece"] == pytest.approx((0.1 * 4 + 0.2 * 4) / 8)  # bins 0.9 (all true) and 0.2 (all false)
