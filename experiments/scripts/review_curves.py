@@ -1,5 +1,6 @@
 """Picture: F1@5 against minutes of simulated review per km, least sure first and in a random order,
-with drawing from scratch marked, for cities scored by ``evaluate-set --json`` (docs/metrics.md).
+with drawing from scratch marked, for cities scored by ``evaluate-set --json`` or
+``experiments/scripts/review_sets.py --json`` (docs/metrics.md).
 
     .venv/bin/python experiments/scripts/review_curves.py OUT.svg SCORES.json:CITY [SCORES.json:CITY ...]
 """
@@ -52,7 +53,10 @@ def main(argv: list[str]) -> None:
              f'font-size="12"><rect width="100%" height="100%" fill="white"/>']
     for k, item in enumerate(items):
         path, city = item.rsplit(":", 1)
-        review = json.loads(Path(path).read_text())["per_city"][city]["review_effort"]
+        scores = json.loads(Path(path).read_text())
+        sets = [scores] if "per_city" in scores else list(scores.values())  # evaluate-set's JSON, or review_sets.py's (one per set)
+        found = next(s["per_city"][city] for s in sets if city in s["per_city"])
+        review = found.get("review_effort") or found["review"]
         parts += panel(review, f"{city}: F1@5 during review", k * width, width, height)
     legend = " ".join(f'<tspan fill="{c}">&#9644; {n} order</tspan>' for n, c in COLOURS.items())
     parts.append(f'<text x="10" y="{height + 14}">{legend} (least sure first = confidence)</text></svg>')

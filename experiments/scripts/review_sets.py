@@ -8,7 +8,8 @@ file); or PRED a folder of prediction folders and GT a folder of city folders of
 (a set: the Ottawa crops). RASTER gives the frame where GT is a vector file in world coordinates.
 Per set: mean F1@2 / F1@5 / APLS over its cities; boundaries and review-draft boundaries per km
 of true boundary; minutes per km from scratch and to correct the draft (least sure first and at
-random), their ratio, and the ratio to reach F1@5 0.95; the per-city scores for paired
+random), their ratio, and the ratio to reach F1@5 0.95; how well the boundaries' confidence is
+calibrated (per class, the length-weighted true share); the per-city scores for paired
 comparisons in the JSON.
 """
 
@@ -22,9 +23,39 @@ from pathlib import Path
 
 import numpy as np
 
+from scipy.spatial import cKDTree
+
+from csboundary.graph.boundaries import graph_boundaries
+from csboundary.graph.polyline import points_along
 from csboundary.metrics import apls, pixel_scores
 from csboundary.metrics.io import frame_metres_per_px, load_pair
-from csboundary.metrics.review_time import review_report
+from csboundary.metrics.review_time import boundary_samples, review_report
+
+BINS = (0.0, 0.3, 0.5, 0.7, 0.85, 1.0001)  # boundary confidence classes of the calibration table
+
+
+def boundary_truth(pred, gt) -> list[tuple[float, float, float]]:
+    """(confidence, length px, share of length within 5 px of the truth) of every boundary."""
+    samples = boundary_samples(gt)
+    near = cKDTree(np.concatenate(samples)) if samples else None
+    out = []
+    for b in graph_boundaries(pred):
+        pts = points_along(b.polyline, 1.0)[0]
+        on = near.query(pts, k=1, distance_upper_bound=5.0)[0] < 5.0 if near is not None else np.zeros(len(pts), bool)
+        out.append((b.confidence, b.length_px, float(on.mean())))
+    return out
+
+
+def calibration(rows: list[tuple[float, float, float]]) -> list[dict]:
+    """Per confidence class: boundaries, their length-weighted mean confidence and true share."""
+    table = []
+    for lo, hi in zip(BINS[:-1], BINS[1:]):
+        picked = [(c, w, t) for c, w, t in rows if lo <= c < hi]
+        if picked:
+            c, w, t = (np.array(x) for x in zip(*picked))
+            table.append({"from": lo, "to": min(hi, 1.0), "boundaries": len(picked), "mean_confidence": float(np.dot(c, w) / w.sum()),
+                          "true_share": float(np.dot(t, w) / w.sum())})
+    return table
 
 
 def pairs(spec: str) -> tuple[str, list[tuple[str, Path, Path, Path | None]]]:
@@ -37,12 +68,13 @@ def pairs(spec: str) -> tuple[str, list[tuple[str, Path, Path, Path | None]]]:
 
 
 def score_set(items) -> dict:
-    cities, totals = {}, {}
+    cities, totals, truth = {}, {}, []
     for city, pred_path, gt_path, raster in items:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             pred, gt, frame = load_pair(pred_path, gt_path, raster=raster)
         ps = pixel_scores(pred, gt)
+        truth += boundary_truth(pred, gt)
         review = review_report(pred, gt, frame_metres_per_px(frame))
         cities[city] = {"f1@2": ps[2.0][2], "f1@5": ps[5.0][2], "apls": apls(pred, gt), "review": review}
         for key in ("scratch_minutes", "true_boundary_km", "boundaries", "draft_boundaries"):
@@ -62,7 +94,7 @@ def score_set(items) -> dict:
             out[f"{order}_ratio"] = totals[f"{order}_minutes"] / scratch
             out[f"{order}_to_target_ratio"] = totals[f"{order}_minutes_to_target_f1"] / scratch  # NaN if a city never reaches it
             out["draft_f1@5"] = totals[f"{order}_start_f1"] / n
-    return {"summary": out, "per_city": cities}
+    return {"summary": out, "calibration": calibration(truth), "per_city": cities}
 
 
 def main() -> None:
@@ -81,6 +113,10 @@ def main() -> None:
               f"{s['draft_f1@5']:.4f}); from scratch {s['scratch_min_per_km']:.2f} min/km; corrected draft "
               + ", ".join(f"{o} {s[o + '_min_per_km']:.2f} min/km = {s[o + '_ratio']:.2f}x (to F1@5 0.95: "
                           f"{s[o + '_to_target_ratio']:.2f}x)" for o in ("confidence", "random") if o + "_ratio" in s), flush=True)
+        print("  boundary confidence -> true share by length: " + "; ".join(
+            f"[{row['from']:g}, {row['to']:g}): {row['boundaries']} boundaries, mean {row['mean_confidence']:.2f}, "
+            f"true {row['true_share']:.2f}"
+            for row in results[name]["calibration"]), flush=True)
     if args.json:
         args.json.write_text(json.dumps(results, indent=1, default=lambda v: None if isinstance(v, float) and math.isnan(v) else v) + "\n")
 
