@@ -1,7 +1,8 @@
 """Load a prediction and a ground truth into one pixel frame for evaluation.
 
 Inputs are the project's graph JSON (``csboundary-graph``), any OGR vector file of LineStrings
-(GeoPackage, GeoJSON, ...) or a city directory (its ``ground_truth.gpkg``). The common frame is,
+(GeoPackage, GeoJSON, ...), a prediction folder (its ``graph.json``) or a city directory (its
+``ground_truth.gpkg``). The common frame is,
 in this order: ``--pixels`` (coordinates already are pixels), the raster given with ``--raster``
 (a city directory, GeoTIFF(s) or a directory of tiles), the city directory given as an input,
 the transform stored in a graph JSON input, or ``--gsd`` (a north-up grid of that pixel size at
@@ -78,7 +79,10 @@ def read_source(path: str | Path) -> Source:
     if path.is_dir():
         if layout.is_city_dir(path) and layout.ground_truth_path(path).exists():
             return Source(path, lines=read_ground_truth(layout.ground_truth_path(path)))
-        raise InputError(path, "is a directory but not a city directory with ground_truth.gpkg")
+        if (path / "graph.json").is_file():  # a prediction folder: its graph
+            return read_source(path / "graph.json")
+        raise InputError(path, "is a directory but neither a city directory with ground_truth.gpkg nor a prediction folder with "
+                               "graph.json")
     if path.suffix.lower() == ".json":
         try:
             data = json.loads(path.read_text())

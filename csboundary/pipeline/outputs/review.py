@@ -13,6 +13,7 @@ import numpy as np
 
 from csboundary.data import city as layout
 from csboundary.data.atomic import atomic_path, check_output_dir
+from csboundary.data.folder_lock import folder_lock
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
@@ -165,6 +166,14 @@ def apply_review(prediction: Path, edits: Path) -> dict:
     with an optional ``complete`` polygon layer (:mod:`csboundary.graph.layer_edits`). Edits
     made on another version of graph.json are refused; a file applied before changes nothing
     (the result then has ``already_applied``: that earlier record)."""
+    if not prediction.is_dir():
+        raise InputError(prediction, "not a prediction folder")
+    with folder_lock(prediction):  # two reviews applied at once: the second waits for nobody, it is refused
+        return _apply_review(prediction, edits)
+
+
+def _apply_review(prediction: Path, edits: Path) -> dict:
+    """:func:`apply_review` under the prediction folder's lock."""
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     try:
         raw = edits.read_bytes()
@@ -243,12 +252,20 @@ def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
         if frame is not None and graph.crs is not None and frame.crs is not None and not frame.crs.equals(graph.crs):
             raise InputError(path, f"its {name} layer is in {frame.crs.to_string()}, the prediction in {graph.crs}")
     areas = []
-    for geometry in [] if complete is None else complete.geometry:
+    for number, geometry in enumerate([] if complete is None else complete.geometry):
         for polygon in getattr(geometry, "geoms", [geometry]):
             if polygon is None or polygon.geom_type != "Polygon":
                 raise InputError(path, f"its {COMPLETE_LAYER} layer holds a {getattr(polygon, 'geom_type', 'missing')} geometry; "
                                        "draw polygons there")
+            if polygon.is_empty:
+                raise InputError(path, f"feature {number} of its {COMPLETE_LAYER} layer is an empty polygon: draw the area, or delete "
+                                       "the feature")
             areas.append([[float(x), float(y)] for x, y, *_ in polygon.exterior.coords])
+    features_in = sum(len(frame) for frame in frames.values())
+    if features_in == 0 and graph.n_edges:
+        raise InputError(path, f"its {', '.join(frames)} layer{'s hold' if len(frames) > 1 else ' holds'} no feature: applied, that "
+                               f"would delete all {graph.n_edges} edges; to start the map afresh, delete graph.json's edges on "
+                               "purpose (review page: Delete below over the whole city)")
     try:
         if boundary_route:
             rows = [(_edge_ids(value, path, name, number), line, name == DRAFT_LAYER)
@@ -259,8 +276,8 @@ def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
             return boundary_layer_edits(graph, rows, areas, held)
         edges = frames[EDGES_LAYER]
         rows = []
-        for edge_id, u, v, line in zip(edges["edge_id"], edges["u"], edges["v"], _lines(edges, path, EDGES_LAYER)):
-            known = [None if value is None or value != value else int(value) for value in (edge_id, u, v)]  # NULL: a drawn feature
+        for number, (edge_id, u, v, line) in enumerate(zip(edges["edge_id"], edges["u"], edges["v"], _lines(edges, path, EDGES_LAYER))):
+            known = [_whole(value, path, number, name) for value, name in ((edge_id, "edge_id"), (u, "u"), (v, "v"))]  # NULL: drawn
             rows.append((*(known if known[0] is not None else (None, None, None)), line))
         return layer_edits(graph, rows, areas)
     except EditError as exc:
@@ -276,6 +293,19 @@ def _lines(frame, path: Path, layer: str) -> list[np.ndarray]:
             raise InputError(path, f"feature {number} of its {layer} layer is not one line")
         out.append(np.asarray(lines[0].coords, float)[:, :2])
     return out
+
+
+def _whole(value, path: Path, number: int, column: str) -> int | None:
+    """A whole number of the edges layer (None for NULL: a drawn feature), or one line naming the feature."""
+    if value is None or (isinstance(value, float) and value != value):
+        return None
+    try:
+        number_value = float(value)
+        if number_value == int(number_value):
+            return int(number_value)
+    except (TypeError, ValueError, OverflowError):
+        pass
+    raise InputError(path, f"feature {number} of its {EDGES_LAYER} layer: {column} {str(value)[:40]!r} is not a whole number")
 
 
 def _edge_ids(value, path: Path, layer: str, number: int) -> list[int] | None:

@@ -12,21 +12,26 @@ Everything lands in a work folder; the same command continues a stopped run.
 
 from __future__ import annotations
 
+import shutil
+
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from csboundary.config import Config
 from csboundary.data import city as layout
 from csboundary.data.model_view import model_view
 from csboundary.data.raster import Mosaic
 from csboundary.data.units import MODEL_GSD
+from csboundary.data.folder_lock import LOCK_FILE, folder_lock
 from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
 from csboundary.models.training.adapt import AdaptConfig
-from csboundary.models.training.unlabelled import UnlabelledImagery
+from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.training.finetune import FinetuneBudget, _train, checked_base, training_configs
 from csboundary.pipeline.outputs.review import prediction_inputs
@@ -100,6 +105,33 @@ def open_imagery_views(groups: list[list[Path]], gsd: float | None, model_gsd: f
 def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None, budget: AdaptBudget = AdaptBudget(),
           method: AdaptConfig = AdaptConfig(), seed: int = 0, cache: Path | None = None, gsd: float | None = None, device: str = "auto",
           progress: bool = True) -> dict:
+    """The checks every caller gets (the command line and the Python API alike), then
+    :func:`_adapt` holding the work folder's lock: a second run into the same work folder is
+    refused in one line instead of spoiling this one's runs."""
+    if not imagery:
+        raise InputError("<imagery>", "no imagery given: name at least one")
+    out = Path(out)
+    work = Path(work) if work else default_work(out)
+    if work.exists() and not work.is_dir():
+        raise InputError(work, "is a file: the work folder must be a folder (give --work another path)")
+    made = not work.exists()
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(work, f"cannot make the work folder ({exc.strerror or exc})") from exc
+    try:
+        with folder_lock(work):
+            return _adapt(imagery, out, weights=weights, work=work, budget=budget, method=method, seed=seed, cache=cache, gsd=gsd,
+                          device=device, progress=progress)
+    except InputError:
+        if made and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made: leave nothing
+            shutil.rmtree(work, ignore_errors=True)
+        raise
+
+
+def _adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None, budget: AdaptBudget = AdaptBudget(),
+          method: AdaptConfig = AdaptConfig(), seed: int = 0, cache: Path | None = None, gsd: float | None = None, device: str = "auto",
+          progress: bool = True) -> dict:
     """Adapt the bundle ``weights`` (default: the shipped one) to the unlabelled ``imagery`` and
     write the adapted bundle ``out``. ``work`` keeps the runs (default ``OUT-adapt/``), ``cache``
     the synthetic cities (default: in ``work``); ``gsd`` is the pixel size of imagery without a
@@ -121,6 +153,11 @@ def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: 
         if target.pixels < least:
             raise InputError(groups[0][0], f"too little imagery to learn from: {target.pixels} px at the model's pixel size, "
                                            f"adapt needs at least {least} (four {budget.crop} px windows)")
+        try:  # one window before any work: imagery that is all no-data where windows fall is refused here, not mid-training
+            target.sample(np.random.default_rng(seed), budget.crop)
+        except ValueError:
+            raise InputError(groups[0][0], f"{DRAWS} random {budget.crop} px windows of the imagery held no valid pixel: it is all "
+                                           "no-data where they fall") from None
         records = [{"path": str(p.resolve()), "sha256": file_sha256(p)} for group in groups for p in group]
         tune = FinetuneBudget(fpn_steps=budget.fpn_steps, afanet_steps=budget.afanet_steps, user_share=0.5,
                               synthetic_cities=budget.synthetic_cities, fpn_lr=budget.fpn_lr, afanet_lr=budget.afanet_lr,

@@ -23,6 +23,7 @@ from pathlib import Path
 from csboundary.config import Config
 from csboundary.data import city as layout
 from csboundary.data.atomic import atomic_path
+from csboundary.data.folder_lock import LOCK_FILE, folder_lock
 from csboundary.errors import InputError
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
@@ -123,6 +124,33 @@ def labelled_record(city: Path) -> dict:
 def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None,
              budget: FinetuneBudget = FinetuneBudget(), seed: int = 0, cache: Path | None = None, device: str = "auto",
              progress: bool = True) -> dict:
+    """The checks every caller gets (the command line and the Python API alike), then
+    :func:`_finetune` holding the work folder's lock: a second run into the same work folder is
+    refused in one line instead of spoiling this one's runs."""
+    if not labelled:
+        raise InputError("<labelled>", "no labelled cities given: name at least one")
+    out = Path(out)
+    work = Path(work) if work else default_work(out)
+    if work.exists() and not work.is_dir():
+        raise InputError(work, "is a file: the work folder must be a folder (give --work another path)")
+    made = not work.exists()
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(work, f"cannot make the work folder ({exc.strerror or exc})") from exc
+    try:
+        with folder_lock(work):
+            return _finetune(labelled, out, weights=weights, work=work, budget=budget, seed=seed, cache=cache, device=device,
+                             progress=progress)
+    except InputError:
+        if made and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made: leave nothing
+            shutil.rmtree(work, ignore_errors=True)
+        raise
+
+
+def _finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None,
+             budget: FinetuneBudget = FinetuneBudget(), seed: int = 0, cache: Path | None = None, device: str = "auto",
+             progress: bool = True) -> dict:
     """Fine-tune the bundle ``weights`` (default: the shipped one) on the ``labelled`` cities,
     sets or reviewed predictions, and write the tuned bundle ``out``. ``work`` keeps the runs
     (default: ``OUT-finetune/`` beside ``out``); ``cache`` the synthetic cities (default: in
@@ -130,7 +158,7 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     out, base_path = Path(out), Path(weights) if weights else shipped_weights()
     work = Path(work) if work else default_work(out)
     base = checked_base(base_path)
-    made = not work.exists()
+    made = not any(p.name != LOCK_FILE for p in work.iterdir())  # nothing of an earlier run in it
     try:
         cities = labelled_cities(labelled, work)  # every input checked before anything is made
     except InputError:
