@@ -168,6 +168,7 @@ def apply_review(prediction: Path, edits: Path) -> dict:
     (the result then has ``already_applied``: that earlier record)."""
     if not prediction.is_dir():
         raise InputError(prediction, "not a prediction folder")
+    check_output_dir(prediction)  # a folder that cannot be written is named, before its lock file is tried
     with folder_lock(prediction):  # two reviews applied at once: the second waits for nobody, it is refused
         return _apply_review(prediction, edits)
 

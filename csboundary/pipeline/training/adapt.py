@@ -124,7 +124,7 @@ def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: 
             return _adapt(imagery, out, weights=weights, work=work, budget=budget, method=method, seed=seed, cache=cache, gsd=gsd,
                           device=device, progress=progress)
     except InputError:
-        if made and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made: leave nothing
+        if made and work.is_dir() and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made
             shutil.rmtree(work, ignore_errors=True)
         raise
 

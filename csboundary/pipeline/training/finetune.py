@@ -143,7 +143,7 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
             return _finetune(labelled, out, weights=weights, work=work, budget=budget, seed=seed, cache=cache, device=device,
                              progress=progress)
     except InputError:
-        if made and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made: leave nothing
+        if made and work.is_dir() and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made
             shutil.rmtree(work, ignore_errors=True)
         raise
 
