@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.pipeline.prediction.patch import PatchPredictor
@@ -43,7 +44,7 @@ def predict(imagery: str | Path | Sequence[str | Path], out: str | Path, model: 
     from csboundary.pipeline.prediction.predict import predict_to_folder
 
     inputs = [imagery] if isinstance(imagery, (str, Path)) else list(imagery)
-    return predict_to_folder(inputs, out, model or load_model(), progress=progress, **options)
+    return predict_to_folder(inputs, out, _model(model), progress=progress, **options)
 
 
 def predict_patch(image: str | Path, out: str | Path, model: PatchPredictor | None = None, *, gsd: float | None = None) -> BoundaryGraph:
@@ -51,7 +52,17 @@ def predict_patch(image: str | Path, out: str | Path, model: PatchPredictor | No
     would make it, written into ``out`` (graph.json, boundaries.geojson, overlay.png)."""
     from csboundary.pipeline.prediction.predict import predict_patch_to_folder
 
-    return predict_patch_to_folder(image, out, model or load_model(), gsd)
+    return predict_patch_to_folder(image, out, _model(model), gsd)
+
+
+def _model(model) -> PatchPredictor:
+    """``model``, or :func:`load_model`'s default when None; anything else (a path or a name given
+    where a loaded model belongs) is one line saying what to do."""
+    if model is None:
+        return load_model()
+    if not isinstance(model, PatchPredictor):
+        raise InputError(str(model)[:80], "is not a loaded model: give csboundary.load_model(WEIGHTS), or leave model out")
+    return model
 
 
 def evaluate(prediction: str | Path, ground_truth: str | Path, *, seed: int = 0, gsd: float | None = None) -> dict:

@@ -13,6 +13,7 @@ from typing import Annotated, Callable, Optional, Sequence
 import typer
 
 from csboundary.errors import InputError
+from csboundary.graph.settings import GRAPH_OVERRIDE_RANGES
 
 SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check)."
 LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit)."
@@ -74,23 +75,16 @@ def _graph_option(flag: str, metavar: str, help: str, low: float = 0.0, high: fl
                                                   help=help, rich_help_panel=GRAPH_PANEL)]
 
 
-# The graph options: one per field of GraphOverrides, declared here only. Commands take them as one
+# The graph options: one per field of GraphOverrides, their ranges GraphOverrides' (graph/settings.py). Commands take them as one
 # ``graph: GraphOverrides`` parameter through ``with_graph_options``.
-GRAPH_OPTIONS = {
-    "edge_threshold": _graph_option("--edge-threshold", "P", THRESHOLD_HELP, high=1.0),
-    "min_edge_support": _graph_option("--min-edge-support", "P", SUPPORT_HELP, high=1.0),
-    "max_edge_length": _graph_option("--max-edge-length", "PX", LENGTH_HELP),
-    "max_edge_gap": _graph_option("--max-edge-gap", "PX", GAP_HELP),
-    "fill_min_length": _graph_option("--fill-min-length", "PX", FILL_HELP),
-    "join_ends": _graph_option("--join-ends", "PX", JOIN_HELP),
-    "attach_ends": _graph_option("--attach-ends", "PX", ATTACH_HELP),
-    "attach_backed": _graph_option("--attach-backed", "PX", ATTACH_BACKED_HELP),
-    "surface_check": _graph_option("--surface-check", "P", SURFACE_HELP, high=1.0),
-    "surface_gate": _graph_option("--surface-gate", "PX", GATE_HELP, high=200.0),
-    "max_degree": _graph_option("--max-degree", "N", DEGREE_HELP, low=0, kind=int),
-    "min_fragment_length": _graph_option("--min-fragment-length", "PX", FRAGMENT_HELP),
-    "min_confidence": _graph_option("--min-confidence", "P", CONFIDENCE_HELP, high=1.0),
-}
+GRAPH_HELP = {"edge_threshold": ("P", THRESHOLD_HELP), "min_edge_support": ("P", SUPPORT_HELP), "max_edge_length": ("PX", LENGTH_HELP),
+              "max_edge_gap": ("PX", GAP_HELP), "fill_min_length": ("PX", FILL_HELP), "join_ends": ("PX", JOIN_HELP),
+              "attach_ends": ("PX", ATTACH_HELP), "attach_backed": ("PX", ATTACH_BACKED_HELP), "surface_check": ("P", SURFACE_HELP),
+              "surface_gate": ("PX", GATE_HELP), "max_degree": ("N", DEGREE_HELP), "min_fragment_length": ("PX", FRAGMENT_HELP),
+              "min_confidence": ("P", CONFIDENCE_HELP)}
+GRAPH_OPTIONS = {name: _graph_option("--" + name.replace("_", "-"), metavar, help, low=GRAPH_OVERRIDE_RANGES[name][0],
+                                     high=GRAPH_OVERRIDE_RANGES[name][1], kind=int if name == "max_degree" else float)
+                 for name, (metavar, help) in GRAPH_HELP.items()}  # the ranges: GraphOverrides' own
 
 
 def with_graph_options(command: Callable) -> Callable:

@@ -41,10 +41,21 @@ GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": (
                  "surface_gate_min_piece_px": ("min_piece_px", int)}  # bundle key -> SurfaceGateConfig field and type
 
 
+# each graph option's range (low, high; None: no upper bound), checked by GraphOverrides for the
+# command line and the Python API alike; the command line declares the same bounds from it
+GRAPH_OVERRIDE_RANGES = {"edge_threshold": (0.0, 1.0), "min_edge_support": (0.0, 1.0), "max_edge_length": (0.0, None),
+                         "max_edge_gap": (0.0, None), "fill_min_length": (0.0, None), "join_ends": (0.0, None),
+                         "attach_ends": (0.0, None), "attach_backed": (0.0, None), "surface_check": (0.0, 1.0),
+                         "surface_gate": (0.0, 200.0), "max_degree": (0, None), "min_fragment_length": (0.0, None),
+                         "min_confidence": (0.0, 1.0)}
+
+
 @dataclass(frozen=True)
 class GraphOverrides:
     """The command line's graph options, by their option names (``--edge-threshold`` is
-    ``edge_threshold``); None keeps the bundle's value. ``max_degree`` 0 means no cap."""
+    ``edge_threshold``); None keeps the bundle's value. ``max_degree`` 0 means no cap. A value
+    outside its range (:data:`GRAPH_OVERRIDE_RANGES`), NaN or infinite is refused with the one line
+    the command line gives."""
 
     edge_threshold: float | None = None
     min_edge_support: float | None = None
@@ -59,6 +70,22 @@ class GraphOverrides:
     max_degree: int | None = None
     min_fragment_length: float | None = None
     min_confidence: float | None = None
+
+    def __post_init__(self) -> None:
+        for name, (low, high) in GRAPH_OVERRIDE_RANGES.items():
+            value = getattr(self, name)
+            if value is None:
+                continue
+            flag = "--" + name.replace("_", "-")
+            if name == "max_degree":
+                if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                    raise InputError(flag, f"must be a whole number >= {low}, got {value!r}")
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise InputError(flag, f"must be a finite number, got {value!r}")
+            if value < low or (high is not None and value > high):
+                raise InputError(flag, f"must be from {low:g} to {high:g}, got {value:g}" if high is not None else
+                                 f"must be >= {low:g}, got {value:g}")
 
 
 @dataclass(frozen=True)

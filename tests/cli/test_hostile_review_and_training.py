@@ -146,3 +146,25 @@ def test_imagery_that_is_all_no_data_is_refused_before_any_work(tmp_path):
     result = run_cli("adapt", str(empty), "--out", str(tmp_path / "a.pt"), "--device", "cpu")
     one_error(result, "empty.tif", "held no valid pixel")
     assert not (tmp_path / "a.pt").exists() and not (tmp_path / "a-adapt").exists()
+
+
+@pytest.mark.parametrize("values, phrase", [({"edge_threshold": float("nan")}, "--edge-threshold: must be a finite number"),
+                                            ({"min_confidence": float("nan")}, "--min-confidence: must be a finite number"),
+                                            ({"edge_threshold": 5.0}, "--edge-threshold: must be from 0 to 1, got 5"),
+                                            ({"max_degree": -3}, "--max-degree: must be a whole number >= 0")])
+def test_graph_settings_from_python_are_checked_as_on_the_command_line(values, phrase):
+    """NaN once dropped every decoded edge (or kept none) without a word; the ranges are
+    GraphOverrides' own, so the API and the command line refuse the same values."""
+    import csboundary
+
+    with pytest.raises(InputError, match=phrase.replace("(", r"\(")):
+        csboundary.GraphOverrides(**values)
+    assert csboundary.GraphOverrides(edge_threshold=0.3, max_degree=0).edge_threshold == 0.3
+
+
+def test_predict_from_python_with_a_name_for_a_model_is_one_line(tmp_path):
+    import csboundary
+
+    with pytest.raises(InputError, match="notamodel: is not a loaded model"):
+        csboundary.predict(tmp_path / "x.tif", tmp_path / "out", model="notamodel")
+    assert not (tmp_path / "out").exists()
