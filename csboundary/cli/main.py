@@ -134,6 +134,19 @@ class Interrupted(BaseException):
         self.signum = signum
 
 
+# what an interrupted command keeps, by subcommand (the message the interruption ends with)
+RESUMES = {"predict": "a predict run keeps its finished patches: the same command continues it",
+           "finetune": "fine-tuning keeps its runs in its work folder: the same command continues them",
+           "adapt": "adapting keeps its runs in its work folder: the same command continues them",
+           "evaluate-finetune": "the finished folds are kept: the same command continues with the next",
+           "train": "training keeps its last checkpoint (RUN-last.pt): --resume it to continue"}
+
+
+def _subcommand() -> str | None:
+    """The subcommand this process runs (the first argument that is not an option)."""
+    return next((arg for arg in sys.argv[1:] if not arg.startswith("-")), None)
+
+
 def _on_signal(signum, frame) -> None:
     raise Interrupted(signum)
 
@@ -177,6 +190,6 @@ def main() -> None:
     except (Interrupted, KeyboardInterrupt) as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
         typer.echo(f"interrupted ({signal.Signals(signum).name}): temporaries removed; no partial file was left under a final name "
-                   "(a predict run keeps its finished patches: the same command continues it)", err=True)
+                   f"({RESUMES.get(_subcommand(), 'run the command again to redo it')})", err=True)
         sys.exit(128 + signum)
     sys.exit(code if isinstance(code, int) else 0)

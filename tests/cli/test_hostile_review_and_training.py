@@ -168,3 +168,29 @@ def test_predict_from_python_with_a_name_for_a_model_is_one_line(tmp_path):
     with pytest.raises(InputError, match="notamodel: is not a loaded model"):
         csboundary.predict(tmp_path / "x.tif", tmp_path / "out", model="notamodel")
     assert not (tmp_path / "out").exists()
+
+
+def test_read_prediction_of_a_file_that_is_not_one_names_it(tmp_path):
+    """It named boundaries.gpkg beside the file, a file nobody gave."""
+    import csboundary
+
+    tif = _geotiff(tmp_path / "x.tif", 100)
+    with pytest.raises(InputError, match=r"x\.tif: not a prediction: give its folder, its graph\.json or its boundaries\.gpkg"):
+        csboundary.read_prediction(tif)
+
+
+def test_an_interrupted_command_says_what_it_keeps(tmp_path):
+    """Ctrl-C in any command spoke of "a predict run"; a command that keeps nothing says so."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    run = subprocess.Popen([sys.executable, "-m", "csboundary", "synth", str(tmp_path / "city"), "--tiles", "2x2", "--tile-size", "3000"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4)  # past the imports, rendering
+    run.send_signal(signal.SIGINT)
+    _, err = run.communicate(timeout=120)
+    last = err.strip().splitlines()[-1]
+    assert run.returncode == 130 and last.startswith("interrupted (SIGINT)"), err
+    assert "predict" not in last and "run the command again" in last

@@ -212,6 +212,10 @@ def read_prediction_graph(source: str | Path, bounds: tuple[float, float, float,
     from graph.json when there is one and no ``bounds``, else from the GeoPackage
     (:func:`read_district`)."""
     source = Path(source)
+    if not source.exists():
+        raise InputError(source, "not found")
+    if source.is_file() and source.suffix.lower() not in (".json", ".gpkg"):
+        raise InputError(source, "not a prediction: give its folder, its graph.json or its boundaries.gpkg")
     folder = source if source.is_dir() else source.parent
     if bounds is None and source.suffix != ".gpkg" and (source.suffix == ".json" or (folder / "graph.json").exists()):
         return BoundaryGraph.read_json(source if source.suffix == ".json" else folder / "graph.json")
