@@ -138,6 +138,10 @@ def export_lanelet2(
     if min_confidence:
         if graph.n_edges and (graph.edge_scores is None or not np.isfinite(graph.edge_scores).all()):
             raise InputError(source, "its edges carry no confidence to compare with --min-confidence (predicted without one)")
+        if not predicted_with_confidence(prediction):
+            raise InputError(source, "was predicted with weights that have no edge confidence: its scores are the network's, not "
+                                     "calibrated probabilities, so --min-confidence would filter on them (fit-confidence, then "
+                                     "predict again)")
         kept = graph.edge_subgraph(graph.edge_scores >= min_confidence) if graph.n_edges else graph
         typer.echo(f"--min-confidence {min_confidence:g}: {kept.n_edges} of {graph.n_edges} edges kept")
         graph = kept
@@ -146,6 +150,18 @@ def export_lanelet2(
     written = write_lanelet2(graph, out, at)
     typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
                f"in {written['projector_info']}")
+
+
+def predicted_with_confidence(prediction: Path) -> bool:
+    """False when the prediction's summary says its bundle had no edge confidence (its scores are
+    then the networks'); True otherwise, and for predictions of builds that did not say."""
+    import json
+
+    summary = (prediction if prediction.is_dir() else prediction.parent) / "summary.json"
+    try:
+        return json.loads(summary.read_text()).get("settings", {}).get("edge_confidence", True) is not False
+    except (OSError, ValueError, AttributeError):
+        return True
 
 
 def review(

@@ -194,3 +194,18 @@ def test_an_interrupted_command_says_what_it_keeps(tmp_path):
     last = err.strip().splitlines()[-1]
     assert run.returncode == 130 and last.startswith("interrupted (SIGINT)"), err
     assert "predict" not in last and "run the command again" in last
+
+
+def test_export_lanelet2_never_filters_raw_network_scores(tmp_path):
+    """A bundle without an edge confidence leaves the networks' scores on the edges; predict
+    refuses --min-confidence there, and export-lanelet2 now does too (it filtered on them)."""
+    from test_hostile_inputs import image, tiny_bundle
+
+    bundle, tif = tiny_bundle(tmp_path / "bundle.pt"), image(tmp_path / "ok.tif")
+    done = run_cli("predict", str(tif), "--out", str(tmp_path / "pred"), "--weights", str(bundle), "--quiet", "--device", "cpu",
+                   "--engine", "torch", "--edge-threshold", "0.0")
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "pred" / "summary.json").read_text())["settings"]["edge_confidence"] is False
+    one_error(run_cli("export-lanelet2", str(tmp_path / "pred"), "--out", str(tmp_path / "map.osm"), "--min-confidence", "0.5"),
+              "predicted with weights that have no edge confidence")
+    assert not (tmp_path / "map.osm").exists()
