@@ -209,3 +209,11 @@ def test_export_lanelet2_never_filters_raw_network_scores(tmp_path):
     one_error(run_cli("export-lanelet2", str(tmp_path / "pred"), "--out", str(tmp_path / "map.osm"), "--min-confidence", "0.5"),
               "predicted with weights that have no edge confidence")
     assert not (tmp_path / "map.osm").exists()
+
+
+def test_a_step_count_no_one_means_is_refused(tmp_path):
+    """adapt --fpn-steps 1000000000 started a run of about 2.4 million hours without a word."""
+    image = _geotiff(tmp_path / "a.tif", 300)
+    one_error(run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--fpn-steps", "1000000000"),
+              "--fpn-steps: must be a whole number from 1 to 1,000,000, got 1000000000")
+    assert not (tmp_path / "a.pt").exists() and not (tmp_path / "a-adapt").exists()

@@ -33,7 +33,7 @@ from csboundary.models.device import resolve_device
 from csboundary.models.training.adapt import AdaptConfig
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
-from csboundary.pipeline.training.finetune import FinetuneBudget, _train, checked_base, training_configs
+from csboundary.pipeline.training.finetune import FinetuneBudget, _train, check_budget, checked_base, training_configs
 from csboundary.pipeline.outputs.review import prediction_inputs
 
 RASTER_SUFFIXES = (".tif", ".tiff")
@@ -51,6 +51,9 @@ class AdaptBudget(Config):
     fpn_lr: float = 1e-4
     afanet_lr: float = 3e-4
     crop: int = 256
+
+    def __post_init__(self) -> None:
+        check_budget(self)
 
 
 def default_work(out: Path) -> Path:

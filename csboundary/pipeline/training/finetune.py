@@ -15,6 +15,7 @@ cities), so a run stopped at any point continues where it stopped when given aga
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import time
 from dataclasses import dataclass
@@ -47,6 +48,31 @@ class FinetuneBudget(Config):
     crop: int = 256
     batch: int = 4
     refit_confidence: bool = True  # refit the edge confidence with the tuned networks when the labelled cities give enough edges
+
+    def __post_init__(self) -> None:
+        check_budget(self)
+
+
+MAX_STEPS = 1_000_000  # far beyond any budget measured; a typo's billion steps would run for years on a CPU
+
+
+def check_budget(budget) -> None:
+    """A training budget's values in their ranges (fine-tuning's and adapting's alike), each
+    refused in the command line's one line, named by its option."""
+    for name in ("fpn_steps", "afanet_steps"):
+        value = getattr(budget, name)
+        low = 1 if name == "fpn_steps" else 0
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= MAX_STEPS:
+            raise InputError("--" + name.replace("_", "-"), f"must be a whole number from {low} to {MAX_STEPS:,}, got {value!r}")
+    for name in ("fpn_lr", "afanet_lr"):
+        value = getattr(budget, name)
+        if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            raise InputError("--" + name.replace("_", "-"), f"must be a finite number above 0, got {value!r}")
+    if not isinstance(budget.synthetic_cities, int) or budget.synthetic_cities < 0:
+        raise InputError("--synthetic-cities", f"must be a whole number >= 0, got {budget.synthetic_cities!r}")
+    share = getattr(budget, "user_share", 0.5)
+    if not isinstance(share, (int, float)) or not 0 <= share <= 1:
+        raise InputError("--user-share", f"must be from 0 to 1, got {share!r}")
 
 
 FINETUNE_VALID = CitySpec(split="valid", seed=0, tiles=(1, 1), tile_size=1500)  # a small synthetic city: forgetting shows there
