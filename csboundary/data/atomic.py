@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import zipfile
 import re
 import shutil
 from pathlib import Path
@@ -85,14 +86,23 @@ def check_output_dir(path: str | Path, create: bool = False, inputs: Sequence[st
 
 def check_output_file(path: str | Path, suffixes: tuple[str, ...] = ()) -> Path:
     """Check that a file can be written at ``path``: not a folder, one of ``suffixes`` when given,
-    in a writable place (its folder may not exist yet). Raises InputError naming the file."""
+    not an existing file of another kind where a bundle or a zip goes (:data:`ZIP_SUFFIXES`), in
+    a writable place (its folder may not exist yet). Raises InputError naming the file."""
     path = Path(path)
     if path.is_dir():
         raise InputError(path, "is a folder; give a file name")
     if suffixes and path.suffix.lower() not in suffixes:
         raise InputError(path, f"needs one of the extensions {', '.join(suffixes)}")
+    if path.suffix.lower() in ZIP_SUFFIXES and path.is_file() and not zipfile.is_zipfile(path):
+        raise InputError(path, f"exists and is not {ZIP_SUFFIXES[path.suffix.lower()]}: writing would destroy it (give another name, "
+                               "or move it away)")
     _probe(_writable_ancestor(path.parent, path), path)
     return path
+
+
+# outputs that are zip archives (a PyTorch checkpoint is one): an existing file of that name that
+# is not a zip was not written by csboundary, and is not overwritten
+ZIP_SUFFIXES = {".pt": "a weights bundle", ".zip": "a zip"}
 
 
 def _writable_ancestor(folder: Path, name: Path) -> Path:

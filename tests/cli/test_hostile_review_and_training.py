@@ -217,3 +217,14 @@ def test_a_step_count_no_one_means_is_refused(tmp_path):
     one_error(run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--fpn-steps", "1000000000"),
               "--fpn-steps: must be a whole number from 1 to 1,000,000, got 1000000000")
     assert not (tmp_path / "a.pt").exists() and not (tmp_path / "a-adapt").exists()
+
+
+@pytest.mark.parametrize("args, name, kind", [(["qgis-plugin", "--out"], "notes.zip", "a zip"),
+                                              (["adapt", "IMAGE", "--out"], "notes.pt", "a weights bundle")])
+def test_an_output_name_that_holds_something_else_is_never_overwritten(tmp_path, args, name, kind):
+    image = _geotiff(tmp_path / "a.tif", 300)
+    target = tmp_path / name
+    target.write_text("my notes")
+    command = [str(image) if a == "IMAGE" else a for a in args] + [str(target)]
+    one_error(run_cli(*command), name, f"exists and is not {kind}")
+    assert target.read_text() == "my notes"
