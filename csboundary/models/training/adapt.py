@@ -184,8 +184,8 @@ def train_adapt(config: TrainConfig, imagery: UnlabelledImagery, out_dir: Path, 
     settings = AdaptConfig.from_dict(config.options.get("method", {}))
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
-    source_cities = training_cities(config)
-    valid_city = TrainingCity(config.valid_city.ensure(config.cache))
+    source_cities = training_cities(config, progress)
+    valid_city = TrainingCity(config.valid_city.ensure(config.cache, progress))
     student, model_config = starting_fpn(config, device)
     if not model_config.surface and (settings.mix or settings.surface_anchor):
         raise ValueError("mixing and the surface anchor need an FPN with a road-surface head")

@@ -89,8 +89,8 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     if not config.fpn_weights:
         raise ValueError("AfANet training needs fpn_weights: the trained FPN whose maps it reads")
     fpn = load_fpn(config.fpn_weights, device)
-    train_cities = training_cities(config)
-    cities = {"valid": TrainingCity(config.valid_city.ensure(config.cache))}
+    train_cities = training_cities(config, progress)
+    cities = {"valid": TrainingCity(config.valid_city.ensure(config.cache, progress))}
     for city in (*train_cities, cities["valid"]):
         city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)
     del fpn

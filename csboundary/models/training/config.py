@@ -104,7 +104,7 @@ def training_pixel_size(config: dict) -> float | None:
     return sizes.pop() if len(sizes) == 1 else None
 
 
-def training_cities(config: TrainConfig) -> list[TrainingCity]:
+def training_cities(config: TrainConfig, progress: bool = True) -> list[TrainingCity]:
     """The synthetic ``train_city`` and ``worlds`` cities (built on first use) and every
     ``extra_train_cities`` directory."""
     specs = [config.train_city] if config.train_city is not None else []
@@ -112,7 +112,7 @@ def training_cities(config: TrainConfig) -> list[TrainingCity]:
         specs += WorldsConfig.from_dict(config.worlds).specs()
     if not specs and not config.extra_train_cities:
         raise ValueError("the training config names no training city (train_city, worlds or extra_train_cities)")
-    paths = [spec.ensure(config.cache, progress=len(specs) == 1) for spec in specs] + list(config.extra_train_cities)
+    paths = [spec.ensure(config.cache, progress=progress and len(specs) == 1) for spec in specs] + list(config.extra_train_cities)
     for path in config.extra_train_cities:
         if not layout.is_city_dir(path):
             raise InputError(path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)")

@@ -151,8 +151,8 @@ def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, 
 def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
-    train_cities = training_cities(config)
-    valid_city = TrainingCity(config.valid_city.ensure(config.cache))
+    train_cities = training_cities(config, progress)
+    valid_city = TrainingCity(config.valid_city.ensure(config.cache, progress))
     model, model_config = starting_fpn(config, device)
     add_style_mixing(model, config.style_mix, config.style_mix_alpha)
     groups = [{"params": [p for p in model.parameters() if p.requires_grad],

@@ -132,14 +132,16 @@ def test_folds_deal_cities_in_turn_and_the_bootstrap_of_a_constant_gain_is_that_
     assert diff == pytest.approx(0.0) and low < 0 < high
 
 
-def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_training_again(city, tmp_path):
+def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_training_again(city, tmp_path, capfd):
     from csboundary.models.checkpoint import file_sha256, load_checkpoint, shipped_weights
     from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
     from csboundary.pipeline.prediction.patch import load_predictor
 
     budget = FinetuneBudget(fpn_steps=2, afanet_steps=2, synthetic_cities=1, crop=128, batch=2)
     kwargs = dict(weights=None, work=tmp_path / "work", budget=budget, cache=tmp_path / "synthetic", device="cpu", progress=False)
+    capfd.readouterr()
     done = finetune([city], tmp_path / "tuned.pt", **kwargs)
+    assert "render tiles" not in capfd.readouterr().err  # progress=False (--quiet): the synthetic cities render without a bar
     bundle = load_checkpoint(tmp_path / "tuned.pt", ("bundle",))
     record = bundle["provenance"]["finetune"]
     assert record["base_sha256"] == file_sha256(shipped_weights())
