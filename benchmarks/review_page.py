@@ -9,11 +9,11 @@ index.html from disk in Debian's Chromium (headless, 1400 x 900 window) and prin
 * **open**: from navigation start until the script has built the page and every image tile of
   the first (whole-city) view is drawn;
 * **redraw**: the time of one full redraw (tiles + every edge) at the whole-city view, zoomed in 8x
-  and 64x on the lowest-confidence edge, the median of 20 each (``window.review.drawNow``);
-* **select**: clicking the first row of the edge list until the view is centred on it (at full
-  resolution, ground truth shown).
+  and 64x on the least sure boundary, the median of 20 each (``window.review.drawNow``);
+* **select**: clicking the first row of the boundary list until the view is centred on it (at
+  full resolution, ground truth shown).
 
-``--screenshot`` saves the page with the least sure edge selected (the README's picture).
+``--screenshot`` saves the page with the least sure boundary selected (the README's picture).
 """
 
 from __future__ import annotations
@@ -72,7 +72,8 @@ def main() -> None:
     data = (folder / "data.js").read_text()
     meta = json.loads(data[data.index("=") + 1 : data.rindex(";")])
     tiles = sum(1 for _ in (folder / "tiles").rglob("*.jpg"))
-    print(f"page of {meta['width']}x{meta['height']} px, {len(meta['edges'])} edges, {meta['levels']} pyramid levels, {tiles} tiles, "
+    print(f"page of {meta['width']}x{meta['height']} px, {len(meta['edges'])} edges in {len(meta.get('boundaries') or [])} boundaries, "
+          f"{meta['levels']} pyramid levels, {tiles} tiles, "
           f"data.js {len(data) / 1e6:.1f} MB")
     driver = browser()
     try:
@@ -82,13 +83,14 @@ def main() -> None:
         print(f"open: {opened / 1000:.2f} s until the page is built and the first view's "
               f"{driver.execute_script('return window.review.loadedTiles()')} "
               "tiles are drawn")
-        lowest = int(driver.execute_script("return +document.querySelector('#edge-list li').dataset.edge"))
+        first = "document.querySelector('#edge-list li:not([hidden])')"  # the least sure boundary of the draft
+        lowest = int(driver.execute_script(f"return +{first}.dataset.boundary"))
         times = {}
         for name, factor in (("whole city", 1), ("zoom 8x", 8), ("zoom 64x", 64)):
             driver.execute_script("const r = window.review; r.select(null);")
             if factor > 1:
-                driver.execute_script(f"""const r = window.review, e = REVIEW_DATA.edges[{lowest}], p = e.line[Math.floor(e.line.length /
-                2)];
+                driver.execute_script(f"""const r = window.review, e = REVIEW_DATA.edges[r.boundaries[{lowest}].edges[0]];
+                    const p = e.line[Math.floor(e.line.length / 2)];
                     const c = document.getElementById('view'); r.state.scale = Math.min(c.width / REVIEW_DATA.width, c.height /
                     REVIEW_DATA.height) * {factor};
                     r.state.ox = p[0] - c.width / 2 / r.state.scale; r.state.oy = p[1] - c.height / 2 / r.state.scale; r.render();""")
@@ -98,7 +100,7 @@ def main() -> None:
         print("redraw (median of 20): " + ", ".join(f"{k} {v:.1f} ms" for k, v in times.items()))
         driver.execute_script("window.review.fit(); document.getElementById('show-gt').click();")
         start = time.perf_counter()
-        driver.find_element("css selector", "#edge-list li").click()
+        driver.find_element("css selector", "#edge-list li:not([hidden])").click()
         wait(driver, f"return window.review.state.selected === {lowest}")
         print(f"select from the list: {1000 * (time.perf_counter() - start):.0f} ms (click to selection, through WebDriver)")
         if args.screenshot:
