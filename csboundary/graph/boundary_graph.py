@@ -104,10 +104,15 @@ class BoundaryGraph:
         )
 
     def world_vertices(self) -> np.ndarray:
+        return self.to_world(self.vertices)
+
+    def to_world(self, points: np.ndarray) -> np.ndarray:
+        """(N, 2) world coordinates of (N, 2) pixel points of this graph's frame."""
         if self.transform is None:
             raise ValueError("graph has no transform: its coordinates are pixels only")
-        xs, ys = pixel_to_world(self.transform, self.vertices[:, 0], self.vertices[:, 1])
-        return np.stack([xs, ys], axis=1)
+        points = np.asarray(points, float).reshape(-1, 2)
+        xs, ys = pixel_to_world(self.transform, points[:, 0], points[:, 1])
+        return np.stack([np.atleast_1d(xs), np.atleast_1d(ys)], axis=1).astype(float)
 
     def to_linestrings(self, world: bool = False) -> list[LineString]:
         """One LineString per edge, in pixels or (``world=True``) world coordinates."""

@@ -170,7 +170,7 @@ def boundary_layer_edits(graph: BoundaryGraph, rows: list[tuple[list[int] | None
                         piece[0] = ends[u]
                     if v in ends:
                         piece[-1] = ends[v]
-                    edge_rows.append((k, u, v, _world_array(graph, piece)))
+                    edge_rows.append((k, u, v, graph.to_world(piece)))
                 if features[0][1] and key in held_back:
                     accepted.extend(key)
                 continue
@@ -189,8 +189,3 @@ def _end(graph: BoundaryGraph, boundary, at: int) -> int:
         u, v = graph.edges[chain_last]
         point = boundary.polyline[-1]
     return int(u if np.abs(graph.vertices[u] - point).max() <= np.abs(graph.vertices[v] - point).max() else v)
-
-
-def _world_array(graph: BoundaryGraph, line: np.ndarray) -> np.ndarray:
-    xs, ys = pixel_to_world(graph.transform, line[:, 0], line[:, 1])
-    return np.stack([np.atleast_1d(xs), np.atleast_1d(ys)], axis=1).astype(float)

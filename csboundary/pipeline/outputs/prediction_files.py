@@ -67,6 +67,13 @@ def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "
     return paths
 
 
+def metres_per_px(units: GroundUnits, transform, costs: ReviewCosts) -> float:
+    """Ground size of a pixel of ``transform`` in ``units``, the size the review costs assume
+    where the units do not say it (no CRS, no stated pixel size)."""
+    known = units.unit_name != "unknown" and not (units.unit_name == "pixel" and units.metres_per_unit == (1.0, 1.0))
+    return geometric_mean(pixel_size_m(units, transform)) if known else costs.assumed_metres_per_px
+
+
 def graph_units(graph: BoundaryGraph) -> GroundUnits:
     """Ground units of a graph's CRS around its middle (the CRS's own units without one)."""
     return ground_units(graph.crs, _centre(graph)) or GroundUnits((1.0, 1.0), "unknown")
@@ -339,8 +346,7 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
     rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "review_draft",
                                                  "corner_edges", "skeleton_edges", "patches")}
     costs = ReviewCosts()
-    known = units.unit_name != "unknown" and not (units.unit_name == "pixel" and units.metres_per_unit == (1.0, 1.0))
-    metres_per_px = geometric_mean(pixel_size_m(units, transform)) if known else costs.assumed_metres_per_px
+    pixel_m = metres_per_px(units, transform, costs)
     geometry, edge_rows = [], []
     for c, boundary in enumerate(boundaries, start=first_id):
         lines = [world(e.line) for e in boundary.edges]
@@ -353,7 +359,7 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
         rows["length_m"].append(units.line_length_m(line))
         rows["n_edges"].append(len(boundary.edges))
         rows["confidence_mean"].append(weighted_mean(score, length))
-        rows["review_draft"].append(keeps_boundary(rows["confidence_mean"][-1], boundary.polyline, costs, metres_per_px))
+        rows["review_draft"].append(keeps_boundary(rows["confidence_mean"][-1], boundary.polyline, costs, pixel_m))
         rows["confidence_min"].append(float(score[known].min()) if known.any() else np.nan)
         rows["corner_edges"].append(kinds.count("corner"))
         rows["skeleton_edges"].append(kinds.count("skeleton"))  # added from the segmentation skeleton (graph/skeleton_fill.py)

@@ -17,15 +17,14 @@ from csboundary.data.folder_lock import folder_lock
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
-from csboundary.data.units import geometric_mean, pixel_size_m
-from csboundary.data.windows import pixel_to_world
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.boundaries import Boundary, graph_boundaries
 from csboundary.graph.chains import edge_line
 from csboundary.graph.layer_edits import boundary_layer_edits, layer_edits
 from csboundary.graph.review_edits import EditError, apply_edits
 from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
-from csboundary.pipeline.outputs.prediction_files import EDGES_LAYER, graph_units, imagery_extent, read_district, write_graph_outputs
+from csboundary.pipeline.outputs.prediction_files import (EDGES_LAYER, graph_units, imagery_extent, metres_per_px, read_district,
+                                                          write_graph_outputs)
 from csboundary.metrics.review_time import ReviewCosts, review_draft
 from csboundary.viz.review_page import write_review_page
 
@@ -37,9 +36,7 @@ HELD_BACK_LAYER = "held_back"  # the boundaries not worth a look (review --gpkg;
 
 def graph_metres_per_px(graph: BoundaryGraph, costs: ReviewCosts = ReviewCosts()) -> float:
     """Ground size of the graph's pixels (the costs' assumed size when the graph has no CRS)."""
-    units = graph_units(graph)
-    known = graph.transform is not None and units.unit_name not in ("unknown", "pixel")
-    return geometric_mean(pixel_size_m(units, graph.transform)) if known else costs.assumed_metres_per_px
+    return metres_per_px(graph_units(graph), graph.transform, costs) if graph.transform is not None else costs.assumed_metres_per_px
 
 
 def review_boundaries(graph: BoundaryGraph, costs: ReviewCosts = ReviewCosts()) -> tuple[list[Boundary], np.ndarray, float]:
@@ -128,7 +125,7 @@ def write_review_layers(prediction: Path, path: Path) -> dict:
     def frame(keep: bool):
         picked = [b for b, d in zip(boundaries, draft) if d == keep]
         picked.sort(key=lambda b: (not np.isfinite(b.confidence), b.confidence if np.isfinite(b.confidence) else 0.0))
-        world = [np.stack(graph_world(graph, b.polyline), axis=1) for b in picked]
+        world = [graph.to_world(b.polyline) for b in picked]
         return gpd.GeoDataFrame({"edge_ids": np.array([";".join(map(str, b.edges.tolist())) for b in picked], dtype=object),
                                  "n_edges": np.array([len(b.edges) for b in picked], dtype=np.int64),
                                  "confidence": np.array([b.confidence for b in picked], dtype=float),
@@ -143,12 +140,6 @@ def write_review_layers(prediction: Path, path: Path) -> dict:
         pyogrio.write_dataframe(frame(False), tmp, layer=HELD_BACK_LAYER, driver="GPKG", geometry_type="LineString", append=True)
         pyogrio.write_dataframe(complete, tmp, layer=COMPLETE_LAYER, driver="GPKG", geometry_type="Polygon", append=True)
     return {"gpkg": path, "boundaries": int(draft.sum()), "held_back": int((~draft).sum()), "edges": graph.n_edges}
-
-
-def graph_world(graph: BoundaryGraph, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World x and y of a pixel line of the graph."""
-    xs, ys = pixel_to_world(graph.transform, line[:, 0], line[:, 1])
-    return np.asarray(xs, float), np.asarray(ys, float)
 
 
 def graph_fingerprint(prediction: Path) -> str:
@@ -176,12 +167,13 @@ def apply_review(prediction: Path, edits: Path) -> dict:
 def _apply_review(prediction: Path, edits: Path) -> dict:
     """:func:`apply_review` under the prediction folder's lock."""
     graph = BoundaryGraph.read_json(prediction / "graph.json")
+    reviewed = review_boundaries(graph)  # what the reviewer saw, for the GIS layers and the held-back boundaries alike
     try:
         raw = edits.read_bytes()
     except FileNotFoundError as exc:
         raise InputError(edits, "file not found") from exc
     if edits.suffix.lower() == ".gpkg":
-        collection = {"properties": {}, "features": gpkg_edits(graph, edits)}
+        collection = {"properties": {}, "features": gpkg_edits(graph, edits, reviewed)}
     else:
         try:
             collection = json.loads(raw)
@@ -205,7 +197,7 @@ def _apply_review(prediction: Path, edits: Path) -> dict:
     if made_on is not None and made_on != before:
         raise InputError(edits, "made on another version of graph.json (its fingerprint differs): "
                                 "write the review page again (csboundary review) and redo the edits there")
-    held = held_back_deletions(graph, features)
+    held = held_back_deletions(graph, features, reviewed)
     try:
         updated, record = apply_edits(graph, features + held, extent=imagery_extent(prediction))
     except EditError as exc:
@@ -225,7 +217,7 @@ def _apply_review(prediction: Path, edits: Path) -> dict:
 
 
 
-def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
+def gpkg_edits(graph: BoundaryGraph, path: Path, reviewed: tuple[list[Boundary], np.ndarray, float] | None = None) -> list[dict]:
     """The page's edit features equivalent to ``path``: the review GeoPackage ``review --gpkg``
     wrote (its ``boundaries`` and ``held_back`` layers as a person edited them,
     :func:`~csboundary.graph.layer_edits.boundary_layer_edits`), or a copy of the prediction's
@@ -272,7 +264,7 @@ def gpkg_edits(graph: BoundaryGraph, path: Path) -> list[dict]:
             rows = [(_edge_ids(value, path, name, number), line, name == DRAFT_LAYER)
                     for name, frame in frames.items()
                     for number, (value, line) in enumerate(zip(frame["edge_ids"], _lines(frame, path, name)))]
-            boundaries, draft, _ = review_boundaries(graph)
+            boundaries, draft, _ = reviewed or review_boundaries(graph)
             held = frozenset(tuple(sorted(b.edges.tolist())) for b, d in zip(boundaries, draft) if not d)
             return boundary_layer_edits(graph, rows, areas, held)
         edges = frames[EDGES_LAYER]
@@ -320,7 +312,8 @@ def _edge_ids(value, path: Path, layer: str, number: int) -> list[int] | None:
                                "numbers (3;4;5)") from None
 
 
-def held_back_deletions(graph: BoundaryGraph, features: list[dict]) -> list[dict]:
+def held_back_deletions(graph: BoundaryGraph, features: list[dict],
+                        reviewed: tuple[list[Boundary], np.ndarray, float] | None = None) -> list[dict]:
     """Delete edits for the boundaries held back from the review draft that lie inside an area the
     edits mark complete (their middle inside it) and that no edit touches: the reviewer vouches for
     what the page or the GIS showed there, and fine-tuning must not learn them as curbs."""
@@ -332,17 +325,17 @@ def held_back_deletions(graph: BoundaryGraph, features: list[dict]) -> list[dict
         return []
     touched = {f["properties"].get("edge") for f in features if f.get("properties", {}).get("action") in ("delete", "accept")}
     moved = {f["properties"].get("vertex") for f in features if f.get("properties", {}).get("action") == "move"}
-    boundaries, draft, _ = review_boundaries(graph)
+    boundaries, draft, _ = reviewed or review_boundaries(graph)
     out = []
     for boundary, shown in zip(boundaries, draft):
         edges = boundary.edges.tolist()
         if shown or touched.intersection(edges) or moved.intersection(graph.edges[edges].ravel().tolist()):
             continue
         middle = boundary.polyline[len(boundary.polyline) // 2]
-        x, y = pixel_to_world(graph.transform, middle[:1], middle[1:])
-        if any(area.contains(Point(float(np.ravel(x)[0]), float(np.ravel(y)[0]))) for area in areas):
+        x, y = graph.to_world(middle)[0]
+        if any(area.contains(Point(x, y)) for area in areas):
             for k in edges:
-                line = np.stack(graph_world(graph, edge_line(graph, k)), axis=1)
+                line = graph.to_world(edge_line(graph, k))
                 out.append({"type": "Feature", "properties": {"action": "delete", "edge": int(k)},
                             "geometry": {"type": "LineString", "coordinates": line.tolist()}})
     return out

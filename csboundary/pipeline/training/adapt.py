@@ -12,8 +12,6 @@ Everything lands in a work folder; the same command continues a stopped run.
 
 from __future__ import annotations
 
-import shutil
-
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +23,6 @@ from csboundary.data import city as layout
 from csboundary.data.model_view import model_view
 from csboundary.data.raster import Mosaic
 from csboundary.data.units import MODEL_GSD
-from csboundary.data.folder_lock import LOCK_FILE, folder_lock
 from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
@@ -33,7 +30,7 @@ from csboundary.models.device import resolve_device
 from csboundary.models.training.adapt import AdaptConfig
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
-from csboundary.pipeline.training.finetune import FinetuneBudget, _train, check_budget, checked_base, training_configs
+from csboundary.pipeline.training.finetune import FinetuneBudget, _train, check_budget, checked_base, locked_work, training_configs
 from csboundary.pipeline.outputs.review import prediction_inputs
 
 RASTER_SUFFIXES = (".tif", ".tiff")
@@ -115,21 +112,9 @@ def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: 
         raise InputError("<imagery>", "no imagery given: name at least one")
     out = Path(out)
     work = Path(work) if work else default_work(out)
-    if work.exists() and not work.is_dir():
-        raise InputError(work, "is a file: the work folder must be a folder (give --work another path)")
-    made = not work.exists()
-    try:
-        work.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(work, f"cannot make the work folder ({exc.strerror or exc})") from exc
-    try:
-        with folder_lock(work):
-            return _adapt(imagery, out, weights=weights, work=work, budget=budget, method=method, seed=seed, cache=cache, gsd=gsd,
-                          device=device, progress=progress)
-    except InputError:
-        if made and work.is_dir() and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made
-            shutil.rmtree(work, ignore_errors=True)
-        raise
+    with locked_work(work):
+        return _adapt(imagery, out, weights=weights, work=work, budget=budget, method=method, seed=seed, cache=cache, gsd=gsd,
+                      device=device, progress=progress)
 
 
 def _adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None, budget: AdaptBudget = AdaptBudget(),

@@ -14,12 +14,14 @@ cities), so a run stopped at any point continues where it stopped when given aga
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from csboundary.config import Config
 from csboundary.data import city as layout
@@ -157,6 +159,16 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
         raise InputError("<labelled>", "no labelled cities given: name at least one")
     out = Path(out)
     work = Path(work) if work else default_work(out)
+    with locked_work(work):
+        return _finetune(labelled, out, weights=weights, work=work, budget=budget, seed=seed, cache=cache, device=device,
+                         progress=progress)
+
+
+@contextlib.contextmanager
+def locked_work(work: Path) -> Iterator[None]:
+    """The training work folder ``work``, made if missing and held under its lock for the block
+    (a second run into it is refused in one line); a folder this call made is removed again when
+    the block is refused (InputError) before anything but the lock file is in it."""
     if work.exists() and not work.is_dir():
         raise InputError(work, "is a file: the work folder must be a folder (give --work another path)")
     made = not work.exists()
@@ -166,8 +178,7 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
         raise InputError(work, f"cannot make the work folder ({exc.strerror or exc})") from exc
     try:
         with folder_lock(work):
-            return _finetune(labelled, out, weights=weights, work=work, budget=budget, seed=seed, cache=cache, device=device,
-                             progress=progress)
+            yield
     except InputError:
         if made and work.is_dir() and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made
             shutil.rmtree(work, ignore_errors=True)
