@@ -121,6 +121,26 @@ def write_tif():
     return write_raster
 
 
+@pytest.fixture(scope="session", autouse=True)
+def onnx_cache(tmp_path_factory):
+    """The ONNX export cache of the whole run (``$CSBOUNDARY_CACHE``, which the commands the
+    tests start inherit): never the user's ~/.cache. One folder for every pytest-xdist worker of
+    the run, so the shipped networks are exported (and quantized) at most once per run, in the
+    first test that needs them; kept when the caller set ``CSBOUNDARY_CACHE`` (a CI cache kept
+    between runs). A test that changes how exports are made uses a folder of its own."""
+    from csboundary.models.onnx_session import CACHE_ENV
+
+    if os.environ.get(CACHE_ENV):
+        yield Path(os.environ[CACHE_ENV])
+        return
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "onnx-cache"  # the run's folder, above the workers'
+    folder.mkdir(parents=True, exist_ok=True)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(CACHE_ENV, str(folder))
+        yield folder
+
+
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory) -> Path:
     """``csboundary demo`` run once per session (the shipped model on the demo city): its folder

@@ -7,7 +7,6 @@ import contextlib
 import io
 import json
 import re
-import shutil
 from pathlib import Path
 
 from csboundary.data.synth.city import synthesize_city
@@ -33,9 +32,6 @@ def test_the_api_doc_examples_run(tmp_path, monkeypatch):
             return {"work": str(tmp_path / "work")}
         return run
 
-    shipped_cache = _shipped().parent / ".onnx-cache"  # the stand-in's bundle is the shipped one: its exports are reused
-    if shipped_cache.is_dir():
-        shutil.copytree(shipped_cache, tmp_path / ".onnx-cache")
     monkeypatch.setattr(finetune_module, "finetune", stand_in("finetune"))
     monkeypatch.setattr(adapt_module, "adapt", stand_in("adapt"))
     namespace: dict = {}

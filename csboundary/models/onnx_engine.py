@@ -3,8 +3,10 @@
 PyTorch stays the engine for training and for CUDA; on a CPU, ``predict`` exports the FPN and
 AfANet to ONNX on first use and runs them with ONNX Runtime's CPU provider when the optional
 ``onnxruntime`` package is installed (``pip install 'csboundary[onnx]'``). The exported files are
-cached, keyed by the SHA-256 of the weights file (a changed file gets a new export): next to the
-weights when that folder is writable, else under ``$XDG_CACHE_HOME/csboundary/onnx``.
+cached in the user's cache folder (``$CSBOUNDARY_CACHE``, else ``$XDG_CACHE_HOME/csboundary/onnx``,
+else ``~/.cache/csboundary/onnx``: :func:`cache_dir`), keyed by the networks themselves
+(:func:`network_key`): a copy of a weights file in another folder, or a bundle saved again with
+other provenance, reuses the export; a changed tensor or config gets a new one.
 
 The FPN is exported for the city grid's 1100 x 1100 windows (any batch); other sizes
 (``PatchPredictor.maps`` on an image of its own) run in PyTorch. AfANet is exported from its
@@ -16,8 +18,9 @@ bytes and opens its sessions there on first use.
 
 from __future__ import annotations
 
+import hashlib
 import io
-import os
+import json
 import sys
 import warnings
 from pathlib import Path
@@ -26,20 +29,46 @@ import numpy as np
 import torch
 
 from csboundary.errors import InputError
-from csboundary.models.onnx_session import DEFAULT_LEVEL, WINDOW, open_session
+from csboundary.models.onnx_session import CACHE_ENV, DEFAULT_LEVEL, WINDOW, cache_folder, open_session
 
 OPSET = 17
 EXPORT_VERSION = 3  # bump when the export changes, so cached files are made again (3: AfANet from its views)
 
 
-def cache_dir(weights: Path) -> Path:
-    """Where the exports of ``weights`` go: beside it if writable, else the user cache."""
+def cache_dir() -> Path:
+    """The folder of the cached exports (``onnx_session.cache_folder``), made if missing.
+
+    One that cannot be made or written is one InputError naming it and ``CSBOUNDARY_CACHE``,
+    not a fallback to a temporary folder: there every run would export and quantize again
+    (about a minute, and 3 GB for the quantizer) with nothing but a warning to say why, and
+    either leave some 35 MB behind or share a fixed folder under /tmp that other users could
+    fill. The line tells what to set once (or ``--engine torch``, which needs no export)."""
     from csboundary.data.atomic import check_output_dir
 
+    folder = cache_folder()
     try:
-        return check_output_dir(weights.parent / ".onnx-cache", create=True)
-    except InputError:
-        return check_output_dir(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "csboundary" / "onnx", create=True)
+        return check_output_dir(folder, create=True)
+    except InputError as exc:
+        raise InputError(folder, f"cannot hold the cached ONNX exports ({exc.problem}); set {CACHE_ENV} to a writable folder "
+                                 "or use --engine torch") from exc
+
+
+def network_key(fpn, afanet) -> str:
+    """Hex SHA-256 of what the exports are made from: the opset, and for the FPN then AfANet
+    the class, the config (JSON, sorted keys) and every state-dict entry in name order (name,
+    dtype, shape and the bytes of the values in row-major order, whatever the memory format).
+    Not the file: its path, provenance and metadata do not change the networks. The export and
+    quantization versions are in each cached file's name (``<key[:16]>-fpn-v3.onnx``,
+    ``-fpn-int8-v3q3.onnx``). 40-80 ms for the shipped bundle's 28.6 MB of tensors (2 shared cores)."""
+    digest = hashlib.sha256(f"opset {OPSET}\n".encode())
+    for name, network in (("fpn", fpn), ("afanet", afanet)):
+        config = network.config.to_dict() if hasattr(network.config, "to_dict") else vars(network.config)
+        digest.update(json.dumps([name, type(network).__name__, config], sort_keys=True, default=str).encode() + b"\n")
+        for key, tensor in sorted(network.state_dict().items()):
+            values = tensor.detach().cpu().contiguous()
+            digest.update(f"{key} {values.dtype} {tuple(values.shape)}\n".encode())
+            digest.update(values.reshape(-1).view(torch.uint8).numpy())
+    return digest.hexdigest()
 
 
 class _AfANetLogits(torch.nn.Module):
@@ -122,20 +151,23 @@ class OnnxNetworks:
         self.spare_core = True
 
     @classmethod
-    def for_weights(cls, weights: Path, digest: str, fpn, afanet, int8: bool = False) -> "OnnxNetworks":
-        """The cached exports of ``weights`` (SHA-256 ``digest``), made first if missing (and the
-        FPN quantized to int8 when ``int8``), with each network's graph optimisation level timed
-        on this machine (once, cached beside them)."""
+    def for_networks(cls, fpn, afanet, int8: bool = False) -> "OnnxNetworks":
+        """The cached exports of ``fpn`` and ``afanet`` (:func:`network_key`, in :func:`cache_dir`),
+        made first if missing (and the FPN quantized to int8 when ``int8``), with each network's
+        graph optimisation level timed on this machine (once, cached beside them). Each file is
+        written under a temporary name and renamed into place (data/atomic.py), so processes
+        sharing the cache never read half a file (two that export at once each rename a whole one)."""
         from csboundary.data.atomic import atomic_path
         from csboundary.models.onnx_quantization import QUANTIZATION_VERSION, quantize_fpn
         from csboundary.models.onnx_tuning import machine_key, tuned_levels
 
-        folder = cache_dir(weights)
+        folder, key = cache_dir(), network_key(fpn, afanet)[:16]
 
         def cached(name: str, make, version: str = f"v{EXPORT_VERSION}") -> bytes:
-            path = folder / f"{digest[:16]}-{name}-{version}.onnx"
+            path = folder / f"{key}-{name}-{version}.onnx"
             if not path.exists():
-                print(f"csboundary: preparing the {name} network for ONNX Runtime (once per weights file)", file=sys.stderr, flush=True)
+                print(f"csboundary: preparing the {name} network for ONNX Runtime (once per network, cached in {folder})",
+                      file=sys.stderr, flush=True)
                 data = make()
                 with atomic_path(path) as tmp:
                     tmp.write_bytes(data)
@@ -146,10 +178,16 @@ class OnnxNetworks:
         int8_model = cached("fpn-int8", lambda: quantize_fpn(fpn_model), f"v{EXPORT_VERSION}q{QUANTIZATION_VERSION}") if int8 else None
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
         networks = cls(fpn_model, afanet_model, fpn_int8_model=int8_model)
-        networks.tuning_path = folder / f"{digest[:16]}-tuning-v{EXPORT_VERSION}.json"
+        networks.tuning_path = folder / f"{key}-tuning-v{EXPORT_VERSION}.json"
         networks.levels = tuned_levels(networks.tuning_path, networks.models, networks.thread_count)
         networks.tuned_for = machine_key(networks.thread_count)
         return networks
+
+    @classmethod
+    def for_weights(cls, weights: Path, digest: str, fpn, afanet, int8: bool = False) -> "OnnxNetworks":
+        """:meth:`for_networks`, for callers that name the weights file the networks came from
+        and its SHA-256 ``digest``: neither decides the cache, the networks do."""
+        return cls.for_networks(fpn, afanet, int8)
 
     def fpn_seconds(self) -> dict[str, float]:
         """The fastest timed run of each network at its chosen level on this machine, from the

@@ -1,13 +1,28 @@
-"""What every ONNX Runtime module shares: the window the FPN is exported for, the graph
-optimisation levels, and the session opener. The engine (:mod:`onnx_engine`), the per-machine
+"""What every ONNX Runtime module shares: the window the FPN is exported for, the folder the
+exports are cached in, the graph optimisation levels, and the session opener. The engine (:mod:`onnx_engine`), the per-machine
 timing of levels (:mod:`onnx_tuning`) and int8 quantization (:mod:`onnx_quantization`) all use
 it, and it uses none of them."""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 from csboundary.errors import InputError
 
 WINDOW = 1100  # the city grid's expanded patch side: the FPN input the export is made for
+
+CACHE_ENV = "CSBOUNDARY_CACHE"  # the folder of the cached exports, in place of the user cache
+
+
+def cache_folder() -> Path:
+    """Where the exports are cached (one folder per user, shared by every weights file, keyed by
+    the networks: onnx_engine.network_key): ``$CSBOUNDARY_CACHE`` when set, else
+    ``$XDG_CACHE_HOME/csboundary/onnx``, else ``~/.cache/csboundary/onnx``. Not checked or made
+    here (onnx_engine.cache_dir does that)."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV]).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "csboundary" / "onnx"
 
 
 def onnxruntime_available() -> bool:
@@ -43,4 +58,4 @@ def open_session(model: bytes, threads: int, level: str, name: str):
         return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # a damaged cache file: one line, not a traceback
         raise InputError(f"<onnx {name}>", f"ONNX Runtime cannot load the exported network ({str(exc).splitlines()[0]}); "
-                                           "delete the .onnx-cache folder beside the weights") from exc
+                                           f"delete the cached exports in {cache_folder()} (made again on next use)") from exc

@@ -31,19 +31,32 @@ def patch_image(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def predictors(tmp_path_factory):
+def cache(tmp_path_factory):
+    """This module's own export cache: its int8 FPN is calibrated on fewer windows (a faster
+    test) and must not reach the run's shared cache (conftest.onnx_cache)."""
+    from csboundary.models.onnx_session import CACHE_ENV
+
+    folder = tmp_path_factory.mktemp("onnx-cache")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(CACHE_ENV, str(folder))
+        yield folder
+
+
+@pytest.fixture(scope="module")
+def predictors(tmp_path_factory, cache):
     import shutil
 
     from csboundary.models.checkpoint import shipped_weights
 
     weights = tmp_path_factory.mktemp("w") / "bundle.pt"
-    shutil.copy(shipped_weights(), weights)  # the export is cached beside it, not in the package
+    shutil.copy(shipped_weights(), weights)
     torch_engine = PatchPredictor.load(weights, torch.device("cpu"))
     onnx_engine = PatchPredictor.load(weights, torch.device("cpu"))
     assert onnx_engine.use_engine("onnx", weights) == "onnx" and torch_engine.use_engine("torch", weights) == "torch"
-    assert len(list((weights.parent / ".onnx-cache").glob("*.onnx"))) == 2
+    assert len(list(cache.glob("*.onnx"))) == 2
     assert set(onnx_engine.onnx.levels) == {"fpn", "afanet"}  # timed on this machine and recorded beside the exports
-    assert len(list((weights.parent / ".onnx-cache").glob("*-tuning-*.json"))) == 1
+    assert len(list(cache.glob("*-tuning-*.json"))) == 1
+    assert not (weights.parent / ".onnx-cache").exists() and sorted(p.name for p in weights.parent.iterdir()) == ["bundle.pt"]
     return torch_engine, onnx_engine, weights
 
 
@@ -90,22 +103,26 @@ def test_bfloat16_runs_the_fpn_in_pytorch_whatever_the_engine(patch_image, predi
     assert 0 < np.abs(half - full).max() < 0.5
 
 
-def test_the_export_is_reused_and_a_changed_weights_file_gets_its_own(predictors, tmp_path):
+def test_the_export_is_reused_by_the_same_networks_in_another_file(predictors, cache, tmp_path):
+    """Keyed by the networks, not the file: the same file again, and a copy elsewhere with
+    trailing bytes (torch ignores them; the file's hash changes), export and time nothing.
+    A changed tensor gets its own export: tests/models/test_onnx_cache.py."""
     import shutil
 
     _, _, weights = predictors
-    cache = weights.parent / ".onnx-cache"
     stamps = {p.name: p.stat().st_mtime_ns for p in cache.glob("*")}
     again = PatchPredictor.load(weights, torch.device("cpu"))
     again.use_engine("onnx", weights)
     assert {p.name: p.stat().st_mtime_ns for p in cache.glob("*")} == stamps  # not exported or timed again
-    other = tmp_path / "other.pt"
+    other = tmp_path / "elsewhere" / "other.pt"
+    other.parent.mkdir()
     shutil.copy(weights, other)
     with open(other, "ab") as f:
-        f.write(b"\0")  # another file (torch ignores trailing bytes): another hash
+        f.write(b"\0")
     moved = PatchPredictor.load(other, torch.device("cpu"))
     moved.use_engine("auto", other)
-    assert moved.engine == "onnx" and len(list((tmp_path / ".onnx-cache").glob("*.onnx"))) == 2
+    assert moved.engine == "onnx" and {p.name: p.stat().st_mtime_ns for p in cache.glob("*")} == stamps
+    assert moved.onnx.fpn_model == again.onnx.fpn_model and list(other.parent.iterdir()) == [other]
 
 
 def test_the_onnx_engine_is_refused_off_the_cpu_and_unknown_engines(predictors):
@@ -121,7 +138,7 @@ def test_the_onnx_engine_is_refused_off_the_cpu_and_unknown_engines(predictors):
         torch_engine.device = torch.device("cpu")
 
 
-def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors, monkeypatch):
+def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors, cache, monkeypatch):
     import onnx
 
     from csboundary.models import onnx_quantization
@@ -148,7 +165,7 @@ def test_int8_runs_the_quantized_fpn_near_the_float_one(patch_image, predictors,
     from csboundary.models.onnx_engine import EXPORT_VERSION
     from csboundary.models.onnx_quantization import QUANTIZATION_VERSION
 
-    made = list((weights.parent / ".onnx-cache").glob("*-fpn-int8-*.onnx"))  # cached, versioned with the quantization
+    made = list(cache.glob("*-fpn-int8-*.onnx"))  # cached, versioned with the quantization
     assert [p.name.endswith(f"-fpn-int8-v{EXPORT_VERSION}q{QUANTIZATION_VERSION}.onnx") for p in made] == [True]
     assert onnx_engine.onnx.fpn_int8_model is None  # float32 again: the float export only
 
