@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from csboundary.cli.options import QuietOption, finite, no_file_at, positive, out_dir, out_file, parse_numbers, parse_tiles
+from csboundary.errors import InputError
 
 
 def synth(
@@ -17,7 +18,11 @@ def synth(
     seed: int = typer.Option(0, min=0, help="City seed; the split is mixed in, so splits never share a city."),
     tiles: str = typer.Option("1x1", help="Tile grid as ROWSxCOLS."),
     tile_size: int = typer.Option(5000, min=64, help="Tile side in pixels."),
-    gsd: float = typer.Option(0.152, callback=finite, min=0.01, help="Ground sampling distance, metres per pixel."),
+    gsd: float = typer.Option(0.152, callback=finite, min=0.01,
+                              help="Ground sampling distance in metres per pixel on the ground, whatever --crs counts in."),
+    crs: str = typer.Option("EPSG:32618",
+                            help="CRS of the tiles and ground truth (default UTM 18N, metres); in any other (US feet, degrees) "
+                            "the city stays in the same place with the same pixels."),
     split: str = typer.Option("train", help="train | valid | test."),
     style: str = typer.Option("classic",
                               help="City style: classic, grid, downtown, suburb, rural, irregular, residential, leafy, or mix (one drawn "
@@ -25,7 +30,7 @@ def synth(
     quiet: QuietOption = False,
 ) -> None:
     """Synthesize an aerial city with exact vector road-boundary ground truth."""
-    from csboundary.data.synth.city import synthesize_city
+    from csboundary.data.synth.city import in_crs, synthesize_city
     from csboundary.data.synth.config import SPLITS
     from csboundary.data.synth.styles import MIX, STYLES, draw_style, style_config
 
@@ -35,8 +40,14 @@ def synth(
         raise typer.BadParameter(f"unknown style {style!r}; choose one of {', '.join(STYLES)} or {MIX}", param_hint="--style")
     if style == MIX:
         style = draw_style(split, seed)
+    config = style_config(style, tile_size=tile_size, gsd=gsd)
+    if crs != config.crs:
+        try:
+            config = in_crs(config, crs)
+        except ValueError as exc:
+            raise InputError("--crs", str(exc)) from exc
     no_file_at(out)
-    meta = synthesize_city(out, seed, split, parse_tiles(tiles), style_config(style, tile_size=tile_size, gsd=gsd), progress=not quiet)
+    meta = synthesize_city(out, seed, split, parse_tiles(tiles), config, progress=not quiet)
     counts = meta["counts"]
     typer.echo(
         f"{out}: {style} city, {len(meta['tiles'])} tile(s) of {tile_size}x{tile_size} px, {counts['boundaries']} boundaries "
@@ -73,7 +84,8 @@ def import_masks_cmd(
     source: Path = typer.Argument(..., help="Folder of images and their label masks."),
     out: Path = typer.Option(..., "--out", help="Folder for one city per image, plus set.json listing them."),
     gsd: Optional[float] = typer.Option(None, callback=positive,
-                                        help="Pixel size of the images in metres (needed when they carry no georeference)."),
+                                        help="Pixel size in metres of images without a georeference; a georeferenced image's CRS gives "
+                                        "its own, and a --gsd more than 2 % off it is refused."),
     target_gsd: float = typer.Option(0.152, callback=positive, help="Pixel size to resample to (the shipped model's: 0.152 m)."),
     image_pattern: str = typer.Option("{id}_image.png", help="Image file names; {id} is the part shared with the mask."),
     mask_pattern: str = typer.Option("{id}_edge.png", help="Mask file names."),

@@ -31,7 +31,8 @@ SOURCE = "user"
 def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path, complete=None) -> dict[str, Any]:
     """Check ``tiles`` and ``ground_truth``, then write the city ``out`` (tiles linked); returns its
     metadata. ``complete``: a GeoDataFrame of the polygons where the boundaries are complete
-    (labels elsewhere are unknown); None: complete everywhere."""
+    (labels elsewhere are unknown); None: complete everywhere. With ``complete``, ground truth
+    without a single boundary is a label too: every pixel inside the areas is a negative."""
     with Mosaic.open(tiles) as mosaic:
         paths = [Path(t.path).resolve() for t in mosaic.tiles]
         crs = mosaic.crs
@@ -49,9 +50,10 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     frame = read_ground_truth(ground_truth, crs)
     if frame.crs is None:
         raise InputError(ground_truth, "has no CRS: cannot tell whether it matches the tiles")
-    if len(frame) == 0:
+    if len(frame) == 0 and complete is None:  # nothing to learn from: no boundary, and no area said to have none
         raise InputError(ground_truth, "holds no road boundaries")
-    if not frame.intersects(box(xs.min(), ys.min(), xs.max(), ys.max())).any():
+    # none inside a complete area is a label ("no curb here"); some, all off the tiles, is a wrong CRS
+    if len(frame) and not frame.intersects(box(xs.min(), ys.min(), xs.max(), ys.max())).any():
         raise InputError(ground_truth, f"no boundary lies on the tiles (checked in {crs}); is its CRS right?")
     if abs(pixel_m / MODEL_GSD - 1) > 0.15:
         warnings.warn(f"{paths[0]}: pixel size {pixel_m:.3g} m differs from the model's {MODEL_GSD:g} m; resample the tiles "

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -43,7 +45,7 @@ from csboundary.data.atomic import atomic_path
 from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, tile_name, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
-from csboundary.data.units import geometric_mean, ground_units, pixel_size_m
+from csboundary.data.units import GroundUnits, geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import pixel_to_world
 from csboundary.errors import InputError
 from csboundary.graph.skeleton_graph import SkeletonConfig, skeleton_graph
@@ -69,17 +71,58 @@ class MaskRule:
             raise ValueError(f"mask kind must be edge or surface, got {self.kind!r}")
 
 
-def read_picture(path: str | Path) -> tuple[np.ndarray, Affine | None, str | None]:
-    """(bands, h, w) pixels of any raster GDAL reads, its transform and CRS (None when absent)."""
+@contextmanager
+def opened(path: str | Path) -> Iterator[rasterio.DatasetReader]:
+    """The raster at ``path``, open; a file GDAL cannot read is an InputError naming it."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
             with rasterio.open(path) as src:
-                data = src.read()
-                georeferenced = src.crs is not None and not src.transform.is_identity
-                return data, (src.transform if georeferenced else None), (src.crs.to_string() if georeferenced else None)
+                yield src
     except RasterioIOError as exc:
         raise InputError(path, f"not a readable image ({str(exc).splitlines()[0]})") from exc
+
+
+def georeference(src: rasterio.DatasetReader) -> tuple[Affine | None, str | None]:
+    """An open raster's transform and CRS, both None when it has no georeference."""
+    georeferenced = src.crs is not None and not src.transform.is_identity
+    return (src.transform, src.crs.to_string()) if georeferenced else (None, None)
+
+
+def read_picture(path: str | Path) -> tuple[np.ndarray, Affine | None, str | None]:
+    """(bands, h, w) pixels of any raster GDAL reads, its transform and CRS (None when absent)."""
+    with opened(path) as src:
+        return src.read(), *georeference(src)
+
+
+GSD_AGREEMENT = 0.02  # a --gsd within 2 % of a georeferenced image's own pixel size is the same size, rounded
+
+
+def source_pixel_m(image_path: str | Path, transform: Affine | None, crs: str | None, units: GroundUnits,
+                   gsd: float | None) -> tuple[float, float]:
+    """(east, north) metres per pixel of an image: its georeference's when it has one (a ``gsd``
+    that disagrees is refused, neither silently applied nor silently ignored), else ``gsd``."""
+    if transform is None:
+        if gsd is None or not np.isfinite(gsd) or gsd <= 0:
+            raise InputError(image_path, "has no georeference: give its pixel size in metres (--gsd)")
+        return gsd, gsd
+    own = pixel_size_m(units, transform)
+    if not all(np.isfinite(v) and v > 0 for v in own):
+        raise InputError(image_path, f"its georeference gives no pixel size ({transform.a:g} x {transform.e:g}: rotated?)")
+    if gsd is not None and max(abs(v / gsd - 1) for v in own) > GSD_AGREEMENT:
+        size = f"{own[0]:.4g} m" if abs(own[0] / own[1] - 1) <= GSD_AGREEMENT else f"{own[0]:.4g} x {own[1]:.4g} m"
+        raise InputError(image_path, f"--gsd {gsd:g} m disagrees with the {size} pixel its CRS {crs} gives: leave --gsd out "
+                                     "(it is for images without a georeference) or fix the georeference")
+    return own
+
+
+def check_pixel_size(image_path: Path, gsd: float | None) -> None:
+    """Refuse an image whose pixel size is unknown or contradicts ``gsd``, reading only its header:
+    :func:`import_masks` checks every image this way before it writes any city."""
+    with opened(image_path) as src:
+        transform, crs = georeference(src)
+        centre = transform @ (src.width / 2, src.height / 2) if transform is not None else None
+    source_pixel_m(image_path, transform, crs, ground_units(crs or PLACEHOLDER_CRS, centre), gsd)
 
 
 def label_mask(picture: np.ndarray, rule: MaskRule, path: str | Path = "<mask>") -> np.ndarray:
@@ -125,6 +168,7 @@ class ImportedCity:
     city_dir: Path
     boundaries: int
     size: tuple[int, int]
+    source_m: float  # metres per pixel of the image as given (its georeference's, or --gsd)
 
 
 def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float | None, rule: MaskRule,
@@ -139,14 +183,10 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
     if picture.shape[1:] != image.shape[1:]:
         raise InputError(mask_path,
                          f"is {picture.shape[2]}x{picture.shape[1]} px; its image {image_path.name} is {image.shape[2]}x{image.shape[1]}")
-    if transform is None and (gsd is None or not np.isfinite(gsd) or gsd <= 0):
-        raise InputError(image_path, "has no georeference: give its pixel size in metres (--gsd)")
     out_crs = crs or PLACEHOLDER_CRS
     centre = transform @ (image.shape[2] / 2, image.shape[1] / 2) if transform is not None else None
     units = ground_units(out_crs, centre)  # the CRS's units may be feet or degrees: pixel sizes compare in metres
-    source_m = pixel_size_m(units, transform) if transform is not None else (gsd, gsd)
-    if not all(np.isfinite(v) and v > 0 for v in source_m):
-        raise InputError(image_path, f"its georeference gives no pixel size ({transform.a:g} x {transform.e:g}: rotated?)")
+    source_m = source_pixel_m(image_path, transform, crs, units, gsd)
     factor = (source_m[0] / target_gsd, source_m[1] / target_gsd)
     lines = mask_polylines(label_mask(picture, rule, mask_path), rule)
     out_image = resample(image, factor) if max(abs(f - 1) for f in factor) > 1e-6 else image
@@ -180,7 +220,8 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
             "" if transform is not None else f" Not georeferenced: placed at (0, 0) of {out_crs} with the given pixel size."),
     }
     write_meta(city_dir, meta)
-    return ImportedCity(name or city_dir.name, city_dir, len(world), (int(out_image.shape[2]), int(out_image.shape[1])))
+    return ImportedCity(name or city_dir.name, city_dir, len(world), (int(out_image.shape[2]), int(out_image.shape[1])),
+                        geometric_mean(source_m))
 
 
 def find_pairs(source: Path, image_pattern: str, mask_pattern: str) -> list[tuple[str, Path, Path]]:
@@ -217,6 +258,8 @@ def import_masks(source: str | Path, out_dir: str | Path, *, gsd: float | None, 
         pairs = [p for p in pairs if p[0] in set(ids)]
     if not pairs:
         raise InputError(source, f"no image matching {image_pattern!r} with a mask {mask_pattern!r}")
+    for _, image, _ in pairs:  # a pixel size unknown or contradicted stops the import before any city is written
+        check_pixel_size(image, gsd)
     out_dir.mkdir(parents=True, exist_ok=True)
     cities = []
     for ident, image, mask in tqdm(pairs, desc="import masks", unit="image", disable=not progress):
@@ -224,7 +267,7 @@ def import_masks(source: str | Path, out_dir: str | Path, *, gsd: float | None, 
     listing = out_dir / SET_FILE
     earlier = json.loads(listing.read_text()).get("cities", []) if listing.exists() else []
     new = [{"name": c.name, "dir": c.city_dir.name, "boundaries": c.boundaries, "size": list(c.size), "source": str(source),
-            "source_gsd": gsd, "mask_rule": asdict(rule)} for c in cities]
+            "source_gsd": c.source_m, "mask_rule": asdict(rule)} for c in cities]
     names = {c["dir"] for c in new}
     report = {"target_gsd": target_gsd, "cities": [c for c in earlier if c.get("dir") not in names] + new}
     with atomic_path(listing) as tmp:

@@ -1,12 +1,17 @@
 """Synthesize a whole city: street network and scene once, then every tile, then ground truth.
 
 A city is a function of (config, split, seed, tiles): the same arguments give the same bytes.
+It is designed and rendered in metres on the ground (``gsd`` is metres per pixel), then placed in
+its CRS through that CRS's units at the origin, so a city in US feet or degrees has the same
+pixels on the same ground as one in UTM metres.
 """
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import geopandas as gpd
@@ -18,6 +23,7 @@ from csboundary import __version__
 from csboundary.data import city as layout
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
+from csboundary.data.units import GroundUnits, ground_units
 from csboundary.data.synth.config import SynthConfig, city_rng
 from csboundary.data.synth.render import CameraLook, TileFrame, apply_look, render_tile, resample
 from csboundary.data.synth.scene import Scene, build_scene
@@ -48,15 +54,28 @@ class SyntheticCity:
         side = self.config.tile_size * self.config.gsd
         return TileFrame(x0=col * side, y1=self.size_m[1] - row * side, size=self.config.tile_size, gsd=self.config.gsd)
 
+    @cached_property
+    def units(self) -> GroundUnits:
+        """The CRS's units at the city's origin: the city is laid out in metres, its CRS may count
+        feet or degrees, so every world coordinate is converted through them."""
+        return crs_units(self.config)
+
+    def to_world(self, geometry):
+        """A geometry in local metres (origin at the city's south-west corner) in the city's CRS."""
+        scale = np.asarray(self.units.metres_per_unit)  # 1.0 in a metre CRS: the coordinates are unchanged, bit for bit
+        shift = np.asarray((self.config.origin_x, self.config.origin_y))
+        return shapely.transform(geometry, lambda xy: xy / scale + shift)
+
     def transform(self, row: int, col: int) -> Affine:
-        """World transform of tile (row, col) in the city's CRS."""
+        """World transform of tile (row, col) in the city's CRS: ``gsd`` metres per pixel on the
+        ground, whatever unit the CRS counts in."""
         f = self.frame(row, col)
-        return Affine(f.gsd, 0.0, self.config.origin_x + f.x0, 0.0, -f.gsd, self.config.origin_y + f.y1)
+        east, north = self.units.metres_per_unit
+        return Affine(f.gsd / east, 0.0, self.config.origin_x + f.x0 / east, 0.0, -f.gsd / north, self.config.origin_y + f.y1 / north)
 
     def ground_truth(self) -> gpd.GeoDataFrame:
         """Road boundaries in world coordinates, one LineString per row, with kind and closedness."""
-        shift = (self.config.origin_x, self.config.origin_y)
-        lines = [shapely.transform(line, lambda xy: xy + np.asarray(shift)) for line, _ in self.scene.network.boundaries]
+        lines = [self.to_world(line) for line, _ in self.scene.network.boundaries]
         kinds = [kind for _, kind in self.scene.network.boundaries]
         return gpd.GeoDataFrame(
             {"kind": kinds, "closed": [bool(line.is_closed) for line in lines]}, geometry=lines, crs=self.config.crs
@@ -65,11 +84,10 @@ class SyntheticCity:
     def road_surface(self) -> gpd.GeoDataFrame:
         """The roadway (islands and medians cut out) clipped to the city, in world coordinates:
         the FPN's road-surface target."""
-        shift = (self.config.origin_x, self.config.origin_y)
         width, height = self.size_m
         roadway = shapely.clip_by_rect(self.scene.network.roadway, 0.0, 0.0, width, height)
         parts = [p for p in getattr(roadway, "geoms", [roadway]) if p.geom_type == "Polygon" and not p.is_empty]
-        return gpd.GeoDataFrame(geometry=[shapely.transform(p, lambda xy: xy + np.asarray(shift)) for p in parts], crs=self.config.crs)
+        return gpd.GeoDataFrame(geometry=[self.to_world(p) for p in parts], crs=self.config.crs)
 
     def render(self, row: int, col: int) -> np.ndarray:
         rng = city_rng(self.split, self.seed, 1, row, col)
@@ -81,6 +99,38 @@ class SyntheticCity:
         else:
             image = render_tile(self.scene, frame, rng, self.config.noise_sigma)
         return apply_look(image, self.look)
+
+
+def crs_units(config: SynthConfig) -> GroundUnits:
+    """The units of ``config.crs`` at its origin; ValueError for a CRS pyproj does not know or an
+    origin that is no place in it (degrees beyond the globe: an origin left in UTM metres)."""
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    try:
+        crs = CRS.from_user_input(config.crs)
+    except CRSError as exc:
+        raise ValueError(f"unknown CRS {config.crs!r}") from exc
+    if crs.is_geographic and not (abs(config.origin_x) <= 180 and abs(config.origin_y) < 90):
+        raise ValueError(f"origin ({config.origin_x:g}, {config.origin_y:g}) is no place in the geographic CRS {config.crs}")
+    return ground_units(crs, (config.origin_x, config.origin_y))
+
+
+def in_crs(config: SynthConfig, crs: str) -> SynthConfig:
+    """``config`` placed in ``crs``: the origin moved to the same place on the ground (New York
+    for the default), so the city is the same, only counted in another CRS's units."""
+    from pyproj import CRS, Transformer
+    from pyproj.exceptions import CRSError, ProjError
+
+    try:
+        target = CRS.from_user_input(crs)
+        x, y = Transformer.from_crs(config.crs, target, always_xy=True).transform(config.origin_x, config.origin_y, errcheck=True)
+    except (CRSError, ProjError) as exc:
+        raise ValueError(f"cannot place the city in {crs!r} ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"the city's place has no coordinates in {crs!r}")
+    name = f"{target.to_authority()[0]}:{target.to_authority()[1]}" if target.to_authority() else target.to_wkt()
+    return replace(config, crs=name, origin_x=float(x), origin_y=float(y))
 
 
 def draw_look(config: SynthConfig, split: str, seed: int) -> CameraLook:
@@ -105,6 +155,7 @@ def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]
     if rows < 1 or cols < 1:
         raise ValueError(f"tiles must be at least 1x1, got {rows}x{cols}")
     rng = city_rng(split, seed, 0)
+    crs_units(config)  # a CRS the city cannot be placed in is refused before any work
     side = config.tile_size * config.gsd
     network = build_network(config, rng, cols * side, rows * side)
     scene = build_scene(config, rng, network)
@@ -145,11 +196,13 @@ def synthesize_city(
         "tiles": records,
         "tile_grid": [rows, cols],
         "crs": config.crs,
-        "gsd": config.gsd,
+        "gsd": config.gsd / city.units.metres_per_unit[0],  # CRS units, as every city.json's
+        "units": city.units.unit_name,
+        "pixel_m": config.gsd,  # metres: --gsd
         "config": config.to_dict(),
         "counts": {
             "boundaries": len(gt),
-            "boundary_km": round(float(gt.length.sum()) / 1000, 3),
+            "boundary_km": round(sum(line.length for line, _ in city.scene.network.boundaries) / 1000, 3),  # metres, in any CRS
             "blocks": len(city.scene.network.blocks),
             "islands": len(city.scene.network.islands),
             "medians": len(city.scene.network.medians),

@@ -24,10 +24,10 @@ class SynthConfig(Config):
 
     # raster
     tile_size: int = 5000  # px per tile side
-    gsd: float = 0.152  # metres per pixel (NYC: 0.5 ft)
-    crs: str = "EPSG:32618"  # WGS 84 / UTM 18N (New York), metres
-    origin_x: float = 583000.0  # world x of the city's west edge
-    origin_y: float = 4507000.0  # world y of the city's south edge
+    gsd: float = 0.152  # metres per pixel on the ground (NYC: 0.5 ft), in any CRS
+    crs: str = "EPSG:32618"  # WGS 84 / UTM 18N (New York), metres; another (feet, degrees): city.in_crs
+    origin_x: float = 583000.0  # world x of the city's west edge, in the CRS's units
+    origin_y: float = 4507000.0  # world y of the city's south edge, in the CRS's units
     # street network
     avenue_spacing: tuple[float, float] = (130.0, 240.0)
     street_spacing: tuple[float, float] = (60.0, 110.0)
