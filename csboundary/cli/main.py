@@ -19,6 +19,7 @@ import warnings
 import typer
 
 from csboundary.cli import data_commands, evaluate_commands, predict_commands, training_commands
+from csboundary.data.atomic import is_disk_full
 from csboundary.errors import InputError, InputWarning
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="City-scale road-boundary graphs from aerial imagery.")
@@ -184,6 +185,10 @@ def main() -> None:
         if os.environ.get("CSBOUNDARY_DEBUG"):
             raise
         message = " ".join(str(exc).split())[:300]
+        if is_disk_full(exc):  # GDAL and SQLite say a full disk with their own exception types, naming no file
+            typer.echo(f"error: no space left on device ({type(exc).__name__}: {message}): free some space and run the same "
+                       "command again", err=True)
+            sys.exit(1)
         typer.echo(f"error: internal error ({type(exc).__name__}: {message}); please report it, with the traceback "
                    "that CSBOUNDARY_DEBUG=1 prints", err=True)
         sys.exit(1)

@@ -35,7 +35,9 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, final)
-    except OSError as exc:
+    except DiskFull:
+        raise  # already names its file
+    except Exception as exc:  # GDAL, pyogrio, lanelet2 and libpng fail on a full disk with their own types
         full = disk_full_error(exc, final)
         if full is not None:
             raise full from exc
@@ -46,6 +48,34 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
 
 
 FREE_BYTES_LOW = 2**20  # less than this free after a failed write: the disk is full
+FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+# how writers say it without an errno: the OS, SQLite (GeoPackage), GDAL's GTiff, numpy's short write
+FULL_WORDS = ("no space left on device", "disk is full", "disk quota exceeded", "free disk space available")
+
+
+class DiskFull(OSError):
+    """ENOSPC met while writing the output file ``filename`` (its name, not its folder's)."""
+
+
+def is_disk_full(exc: BaseException, folder: str | Path | None = None) -> bool:
+    """Whether a failed write met a full disk: said by an errno or in words by ``exc`` or an
+    error it came from (GDAL's own messages often say only "Write failed" or "Failed to commit
+    transaction"), or, when ``folder`` is given, less than :data:`FREE_BYTES_LOW` is free there."""
+    seen = exc
+    for _ in range(8):  # the error and the ones it was raised from, as far as it matters
+        if seen is None:
+            break
+        text = str(seen).lower()
+        if (isinstance(seen, OSError) and seen.errno in FULL_ERRNOS) or any(word in text for word in FULL_WORDS) or \
+                ("requested" in text and "written" in text):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    if folder is None:
+        return False
+    try:
+        return shutil.disk_usage(folder).free < FREE_BYTES_LOW
+    except OSError:
+        return False
 
 
 def disk_full_error(exc: BaseException, path: str | Path) -> OSError | None:
@@ -53,13 +83,32 @@ def disk_full_error(exc: BaseException, path: str | Path) -> OSError | None:
     (numpy, GDAL and others report a short write in their own words, naming no file); None when
     the failure was something else."""
     folder = Path(path).parent
-    full = isinstance(exc, OSError) and (exc.errno == errno.ENOSPC or ("requested" in str(exc) and "written" in str(exc)))
-    if not full:
-        try:
-            full = shutil.disk_usage(folder).free < FREE_BYTES_LOW
-        except OSError:
-            return None
-    return OSError(errno.ENOSPC, "no space left on device", str(folder)) if full else None
+    return OSError(errno.ENOSPC, "no space left on device", str(folder)) if is_disk_full(exc, folder) else None
+
+
+@contextlib.contextmanager
+def naming_full_disk(path: str | Path) -> Iterator[None]:
+    """Around the writes of one output file: a full disk met there becomes a :class:`DiskFull`
+    naming ``path``, so the user learns which file could not be written, whatever the writer
+    raised; other errors pass unchanged."""
+    try:
+        yield
+    except DiskFull:
+        raise
+    except Exception as exc:
+        if not is_disk_full(exc, Path(path).parent):
+            raise
+        raise DiskFull(errno.ENOSPC, "no space left on device", str(path)) from exc
+
+
+def disk_full_file(exc: BaseException | None) -> DiskFull | None:
+    """The :class:`DiskFull` that ``exc`` was raised from (or is), if any: which file a run that
+    ended on a full disk was writing."""
+    for _ in range(8):
+        if exc is None or isinstance(exc, DiskFull):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def check_output_dir(path: str | Path, create: bool = False, inputs: Sequence[str | Path] = ()) -> Path:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from csboundary.data.atomic import atomic_path
+from csboundary.data.atomic import atomic_path, naming_full_disk
 from csboundary.errors import InputError
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.pipeline.outputs.prediction_files import check_finite_geometry, graph_frames
@@ -105,10 +105,10 @@ def write_lanelet2(graph: BoundaryGraph, path: str | Path, origin: tuple[float, 
                 attributes["confidence" if name == "confidence_mean" else name] = f"{value:.4f}"
         lmap.add(LineString3d(next_id, points, AttributeMap(attributes)))
         next_id += 1
-    with atomic_path(path) as tmp:
+    with naming_full_disk(path), atomic_path(path) as tmp:  # lanelet2 says a full disk as "Pugixml failed to write the map"
         lanelet2.io.write(str(tmp), lmap, projector)
     info = path.with_name(PROJECTOR_INFO)
-    with atomic_path(info) as tmp:
+    with naming_full_disk(info), atomic_path(info) as tmp:
         tmp.write_text(f"projector_type: LocalCartesianUTM\nvertical_datum: WGS84\nmap_origin:\n  latitude: {origin[0]:.10f}\n"
                        f"  longitude: {origin[1]:.10f}\n  altitude: 0.0\n")
     return {"path": path, "projector_info": info, "origin": origin, "linestrings": len(frame)}

@@ -19,7 +19,7 @@ import rasterio
 import rasterio.shutil
 from rasterio.windows import Window
 
-from csboundary.data.atomic import atomic_path
+from csboundary.data.atomic import atomic_path, naming_full_disk
 from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.pipeline.prediction.run_store import RunStore
@@ -33,10 +33,10 @@ def write_maps_cog(path: str | Path, mosaic: Mosaic, grid: PatchGrid, store: Run
     path.parent.mkdir(parents=True, exist_ok=True)
     bands = BANDS[: min(len(BANDS), store.channels or 2)]
     scratch = path.with_name(f".{path.stem}.scratch-{os.getpid()}.tif")
-    try:
-        with rasterio.open(scratch, "w", driver="GTiff", width=mosaic.width, height=mosaic.height, count=len(bands), dtype="uint8",
-                           crs=mosaic.crs, transform=mosaic.transform, tiled=True, blockxsize=512, blockysize=512, compress="deflate",
-                           BIGTIFF="IF_SAFER") as dst:
+    try:  # GDAL says a full disk as "Write failed" or "Write error at scanline": named as such
+        with naming_full_disk(path), rasterio.open(
+                scratch, "w", driver="GTiff", width=mosaic.width, height=mosaic.height, count=len(bands), dtype="uint8", crs=mosaic.crs,
+                transform=mosaic.transform, tiled=True, blockxsize=512, blockysize=512, compress="deflate", BIGTIFF="IF_SAFER") as dst:
             for patch in grid:
                 core = patch.core
                 values = store.load_core(patch.index)
@@ -46,7 +46,7 @@ def write_maps_cog(path: str | Path, mosaic: Mosaic, grid: PatchGrid, store: Run
             for band, name in enumerate(bands, start=1):
                 dst.set_band_description(band, name)
             dst.update_tags(scale="probability = value / 255")
-        with atomic_path(path) as tmp:
+        with naming_full_disk(path), atomic_path(path) as tmp:
             rasterio.shutil.copy(scratch, tmp, driver="COG", compress="DEFLATE")
     finally:
         scratch.unlink(missing_ok=True)

@@ -18,7 +18,7 @@ import json
 import shutil
 import tempfile
 import warnings
-from contextlib import ExitStack
+from contextlib import ExitStack, suppress
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +28,7 @@ import pyogrio
 from affine import Affine
 from shapely.geometry import LineString
 
-from csboundary.data.atomic import atomic_path
+from csboundary.data.atomic import atomic_path, naming_full_disk
 from csboundary.data.ground_truth import LAYER as BOUNDARIES_LAYER
 from csboundary.data.units import GroundUnits, geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import pixel_to_world, world_to_pixel
@@ -58,7 +58,7 @@ def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "
     paths = {"gpkg": out_dir / f"{stem}.gpkg", "geojson": out_dir / f"{stem}.geojson", "graph_json": out_dir / "graph.json"}
     with ExitStack() as stack:
         tmp = {key: stack.enter_context(atomic_path(path)) for key, path in paths.items()}
-        writer = GraphWriter(tmp, graph.crs, graph.transform, units or graph_units(graph), stem)
+        writer = GraphWriter(tmp, graph.crs, graph.transform, units or graph_units(graph), stem, shown=paths)
         stack.callback(writer.abort)
         stream = GraphStream()
         writer.add(stream.add(graph), [])
@@ -85,29 +85,38 @@ class GraphWriter:
     vertices and edges go into graph.json as they come (the edges through a file beside it, as
     the vertices come first), each complete boundary and its edges are appended to the
     GeoPackage and the GeoJSON. Memory holds one piece. ``paths``: ``gpkg``, ``geojson``,
-    ``graph_json``."""
+    ``graph_json``; ``shown``: their names in messages (a full disk names the file it could not
+    write, by its final name rather than a temporary one; default ``paths``)."""
 
-    def __init__(self, paths: dict[str, Path], crs: str | None, transform, units: GroundUnits, stem: str = "boundaries"):
+    def __init__(self, paths: dict[str, Path], crs: str | None, transform, units: GroundUnits, stem: str = "boundaries",
+                 shown: dict[str, Path] | None = None):
         if transform is None:
             raise ValueError("graph has no transform: world coordinates are unknown")
         self.paths, self.crs, self.transform, self.units, self.stem = paths, crs, transform, units, stem
+        self.shown = shown or paths
         self.boundaries = 0
         self.counts = {"vertices": 0, "edges": 0, "kinds": {}, "boundary_m": 0.0}
         self._layers_started = False
         with ExitStack() as opened:  # a file that fails to open closes the ones opened before it
-            self._geojson = opened.enter_context(_GeoJSONWriter(paths["geojson"], stem, crs))
-            self._json = opened.enter_context(open(paths["graph_json"], "w"))
-            # gone however the run ends
-            self._edges_part = opened.enter_context(tempfile.TemporaryFile("w+", dir=paths["graph_json"].parent))
+            with self._writing("geojson"):
+                self._geojson = opened.enter_context(_GeoJSONWriter(paths["geojson"], stem, crs))
+            with self._writing("graph_json"):
+                self._json = opened.enter_context(open(paths["graph_json"], "w"))
+                # gone however the run ends
+                self._edges_part = opened.enter_context(tempfile.TemporaryFile("w+", dir=paths["graph_json"].parent))
+                header = json.dumps({**json_header(crs, transform), "vertices": []})
+                self._json.write(header[:-2])  # up to the open vertex list
             opened.pop_all()
-        header = json.dumps({**json_header(crs, transform), "vertices": []})
-        self._json.write(header[:-2])  # up to the open vertex list
         self._scored: bool | None = None
         self._first_vertex = self._first_edge = True
 
+    def _writing(self, key: str):
+        return naming_full_disk(self.shown[key])
+
     def add(self, piece: StreamPiece | None, boundaries: list[StreamBoundary]) -> None:
         if piece is not None:
-            self._add_piece(piece)
+            with self._writing("graph_json"):
+                self._add_piece(piece)
         if boundaries:
             frames = boundary_frames(boundaries, self.boundaries, self.crs, self.transform, self.units)
             self.boundaries += len(boundaries)
@@ -117,20 +126,25 @@ class GraphWriter:
         """Finish the files; returns the counts (edges, by kind, boundary metres, boundaries)."""
         if not self._layers_started:  # no boundary at all: the layers still exist, empty
             self._append(*boundary_frames([], 0, self.crs, self.transform, self.units))
-        self._edges_part.seek(0)
-        self._json.write("], \"edges\": [")
-        shutil.copyfileobj(self._edges_part, self._json)
-        self._json.write("]}")
-        self._geojson.finish()
+        with self._writing("graph_json"):
+            self._edges_part.seek(0)
+            self._json.write("], \"edges\": [")
+            shutil.copyfileobj(self._edges_part, self._json)
+            self._json.write("]}")
+            self._json.close()  # the buffer's last bytes reach the disk here: a full disk shows now
+        with self._writing("geojson"):
+            self._geojson.finish()
+            self._geojson.close()
         self.abort()
         self.counts["boundaries"] = self.boundaries
         return self.counts
 
     def abort(self) -> None:
-        """Close the files (the caller removes the unfinished ones)."""
-        self._geojson.close()
-        self._json.close()
-        self._edges_part.close()
+        """Close the files (the caller removes the unfinished ones); a buffer that cannot be
+        written out on a full disk is dropped with them, the run's error already says why."""
+        for file in (self._geojson, self._json, self._edges_part):
+            with suppress(OSError):
+                file.close()
 
     def _add_piece(self, piece: StreamPiece) -> None:
         world = np.stack(pixel_to_world(self.transform, piece.vertices[:, 0], piece.vertices[:, 1]),
@@ -152,10 +166,12 @@ class GraphWriter:
     def _append(self, boundaries: gpd.GeoDataFrame, edges: gpd.GeoDataFrame) -> None:
         self.counts["boundary_m"] += float(edges["length_m"].sum())
         append = self._layers_started
-        _write_layer(boundaries, self.paths["gpkg"], BOUNDARIES_LAYER, "GPKG", append)
-        _write_layer(edges, self.paths["gpkg"], EDGES_LAYER, "GPKG", append,
-                     None if append else {TRANSFORM_KEY: ",".join(repr(float(x)) for x in list(self.transform)[:6])})
-        self._geojson.add(boundaries)
+        with self._writing("gpkg"):
+            _write_layer(boundaries, self.paths["gpkg"], BOUNDARIES_LAYER, "GPKG", append)
+            _write_layer(edges, self.paths["gpkg"], EDGES_LAYER, "GPKG", append,
+                         None if append else {TRANSFORM_KEY: ",".join(repr(float(x)) for x in list(self.transform)[:6])})
+        with self._writing("geojson"):
+            self._geojson.add(boundaries)
         self._layers_started = True
 
 

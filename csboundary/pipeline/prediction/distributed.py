@@ -13,16 +13,22 @@ numbers on the workers' hardware and thread count as locally; see docs/scaling.m
 Graph tasks outrank FPN tasks and at most a few FPN batches per worker thread are queued ahead,
 so maps are consumed as they are produced and the store stays about two patch rows deep. The
 client tracks dependencies itself (no task depends on another task's result), so a lost worker
-costs only its in-flight tasks: Dask reruns those elsewhere; a task that raises is retried.
+costs only its in-flight tasks: Dask reruns those elsewhere; a task that raises is retried. A
+task that finds the disk full returns that instead (:class:`TaskFailure`): the store's disk is
+shared, so retrying cannot help, and the worker would log a traceback the user need not see; the
+client raises it, and the run ends on the same one line as a local run.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import uuid
+from dataclasses import dataclass
 from typing import Callable, Iterator
 
+from csboundary.data.atomic import is_disk_full
 from csboundary.errors import InputError
 from csboundary.pipeline.prediction.city_job import CityJob
 from csboundary.pipeline.prediction.city import CityRun
@@ -39,14 +45,35 @@ def _threads(job: CityJob) -> None:
             torch.set_num_threads(job.threads)
 
 
-def predict_maps_task(job: CityJob, batch: list[tuple[int, int]]):
+@dataclass
+class TaskFailure:
+    """A worker's write that met a full disk, sent back as a result: the error's fields, as plain
+    values travel between processes."""
+
+    code: int
+    strerror: str
+    filename: str
+
+    def error(self) -> OSError:
+        return OSError(self.code, self.strerror, self.filename)
+
+
+def _full_disk_returned(step, job: CityJob, item):
     _threads(job)
-    return job.predict_maps(batch)
+    try:
+        return step(item)
+    except OSError as exc:  # the run store's writers name the folder (run_store._atomic_save)
+        if not is_disk_full(exc, job.store.root):
+            raise
+        return TaskFailure(errno.ENOSPC, "no space left on device", exc.filename or str(job.store.root))
+
+
+def predict_maps_task(job: CityJob, batch: list[tuple[int, int]]):
+    return _full_disk_returned(job.predict_maps, job, batch)
 
 
 def connect_window_task(job: CityJob, index: tuple[int, int]):
-    _threads(job)
-    return job.connect_window(index)
+    return _full_disk_returned(job.connect_window, job, index)
 
 
 def dask_executor(client) -> Callable[[CityRun], None]:
@@ -89,6 +116,8 @@ def dask_executor(client) -> Callable[[CityRun], None]:
             kind, item = what.pop(future.key)
             result = future.result()  # a task that failed RETRIES + 1 times raises here and ends the run
             future.release()
+            if isinstance(result, TaskFailure):
+                raise result.error()
             if kind == "fpn":
                 queued -= 1
                 _, seconds = result

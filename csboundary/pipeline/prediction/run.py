@@ -17,12 +17,14 @@ means the run finished. The work itself is kept in ``OUT/.csboundary-run/`` as i
 SIGKILL continues where it stopped, and refuses a store left by other inputs, weights or
 settings (``restart`` discards it). The store is removed once the outputs are in place. One
 run at a time works in a folder, and a full disk keeps the finished work
-(:mod:`csboundary.pipeline.prediction.run_folder`).
+(:mod:`csboundary.pipeline.prediction.run_folder`); met while writing an output, the error names
+that file, of which nothing is left under its final name.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -32,7 +34,7 @@ from typing import Callable
 import numpy as np
 import rasterio
 
-from csboundary.data.atomic import staging_folder
+from csboundary.data.atomic import DiskFull, disk_full_file, naming_full_disk, staging_folder
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.windows import pixel_to_world
 from csboundary.data.raster import Mosaic
@@ -74,35 +76,53 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
     if units is None:
         units = mosaic_units(mosaic) or PIXEL_UNITS
     manifest = run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps)
-    with run_folder(out_dir, manifest, restart) as (out, store), staging_folder(out) as stage, contextlib.ExitStack() as stack:
-        (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
-        start = time.perf_counter()
-        stack.enter_context(rasterio.Env(**GDAL_ENV))  # overviews read every tile too
-        files = {"gpkg": stage / "boundaries.gpkg", "geojson": stage / "boundaries.geojson", "graph_json": stage / "graph.json"}
-        crs = mosaic.crs.to_string() if mosaic.crs is not None else None
-        writer = GraphWriter(files, crs, PatchGrid.for_mosaic(mosaic, grid_config).transform, units)
-        stack.callback(writer.abort)
-        result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
-                              store=store, write_cores=write_maps, executor=executor, threads=threads,
-                              overview_scale=overview_scale(mosaic.window, OVERVIEW_PX), writer=writer.add, keep_graphs=keep_graphs, **city)
-        written_at = time.perf_counter()
-        counts = writer.close()
-        rss_after_prediction = peak_rss_mb()
-        files.update(write_pictures(mosaic, result, stage, files["gpkg"], ground_truth, store))
-        if write_maps:
-            files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
-        if lanelet2:
-            from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, write_lanelet2
+    try:
+        with run_folder(out_dir, manifest, restart) as (out, store), staging_folder(out) as stage, contextlib.ExitStack() as stack:
+            (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
+            start = time.perf_counter()
+            stack.enter_context(rasterio.Env(**GDAL_ENV))  # overviews read every tile too
+            files = {"gpkg": stage / "boundaries.gpkg", "geojson": stage / "boundaries.geojson", "graph_json": stage / "graph.json"}
+            crs = mosaic.crs.to_string() if mosaic.crs is not None else None
+            writer = GraphWriter(files, crs, PatchGrid.for_mosaic(mosaic, grid_config).transform, units)
+            stack.callback(writer.abort)
+            result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
+                                  store=store, write_cores=write_maps, executor=executor, threads=threads,
+                                  overview_scale=overview_scale(mosaic.window, OVERVIEW_PX), writer=writer.add, keep_graphs=keep_graphs,
+                                  **city)
+            written_at = time.perf_counter()
+            counts = writer.close()
+            rss_after_prediction = peak_rss_mb()
+            files.update(write_pictures(mosaic, result, stage, files["gpkg"], ground_truth, store))
+            if write_maps:
+                files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
+            if lanelet2:
+                from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, write_lanelet2
 
-            graph = result.graph if keep_graphs else read_prediction_graph(files["graph_json"])
-            written = write_lanelet2(graph, stage / LANELET2_MAP)
-            files.update(lanelet2=written["path"], projector_info=written["projector_info"])
-        seconds = dict(result.seconds, outputs=result.outputs_seconds + time.perf_counter() - written_at)
-        seconds["total"] = time.perf_counter() - start
-        summary = summarize(mosaic, result, seconds, files, settings or {}, units, counts)
-        summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
-        (stage / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n")
+                graph = result.graph if keep_graphs else read_prediction_graph(files["graph_json"])
+                written = write_lanelet2(graph, stage / LANELET2_MAP)
+                files.update(lanelet2=written["path"], projector_info=written["projector_info"])
+            seconds = dict(result.seconds, outputs=result.outputs_seconds + time.perf_counter() - written_at)
+            seconds["total"] = time.perf_counter() - start
+            summary = summarize(mosaic, result, seconds, files, settings or {}, units, counts)
+            summary["peak_rss_mb"] = {"prediction": rss_after_prediction, "total": peak_rss_mb()}
+            with naming_full_disk(stage / SUMMARY):
+                (stage / SUMMARY).write_text(json.dumps(summary, indent=1) + "\n")
+    except OSError as exc:  # a full disk while writing an output: the line names it
+        named = full_output(exc, Path(out_dir))
+        if named is None:
+            raise
+        raise named from exc
     return result, summary
+
+
+def full_output(exc: OSError, out: Path) -> DiskFull | None:
+    """A run that ended on a full disk while writing one of its outputs: the run folder's line
+    (what of the run is kept, what to do) naming that output by its final name in ``out``
+    instead of the folder; None for any other failure."""
+    written = disk_full_file(exc)
+    if exc.errno != errno.ENOSPC or written is None:
+        return None
+    return DiskFull(errno.ENOSPC, exc.strerror, str(out / Path(written.filename).name))
 
 
 def run_manifest(mosaic: Mosaic, settings: dict, grid_config: GridConfig, batch_size: int, write_maps: bool) -> dict:
@@ -196,7 +216,11 @@ def write_pictures(mosaic: Mosaic, result: CityResult, out: Path, gpkg: Path, gr
         for lines in edge_lines_in_chunks(gpkg, bounds=window_bounds(mosaic, core)):
             draw_world_lines(detail, mosaic, core, lines, ORANGE)
         encoded["detail"] = encoder.submit(write_png, out / "detail.png", detail)
-        return {name: future.result() for name, future in encoded.items()}
+        written = {}
+        for name, future in encoded.items():
+            with naming_full_disk(out / f"{name}.png"):
+                written[name] = future.result()
+        return written
 
 
 def edge_lines_in_chunks(gpkg: Path, bounds=None, chunk: int = 50_000):
