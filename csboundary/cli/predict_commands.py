@@ -56,7 +56,9 @@ def predict(
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
 
     def announce(plan, view) -> None:
-        typer.echo(f"{out}: {counted(len(plan), 'patch')} ({plan.n_rows}x{plan.n_cols}) over {view.mosaic.width}x{view.mosaic.height} px "
+        where = (f"({plan.n_rows}x{plan.n_cols})" if plan.planned is None else
+                 f"under {counted(len(view.mosaic.footprint), 'scattered tile')} of a {plan.n_rows}x{plan.n_cols} grid")
+        typer.echo(f"{out}: {counted(len(plan), 'patch')} {where} over {view.mosaic.width}x{view.mosaic.height} px "
                    f"at {predictor.pixel_size_m:g} m; FPN in {predictor.precision_choice or predictor.precision}", err=True)
 
     summary = predict_to_folder(inputs, out, predictor, weights=weights, gsd=gsd, batch_size=batch_size, write_maps=write_maps,

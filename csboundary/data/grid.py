@@ -7,13 +7,19 @@ where keypoint maps are averaged and patch graphs are stitched (paper IV-E).
 
 Cores at the right and bottom edge are clipped to the mosaic so the cores cover every mosaic
 pixel exactly once; expanded windows always have the full size and are read padded.
+
+A grid given the mosaic's footprint (tiles scattered over a city: data/footprint.py) plans only
+the patches whose cores meet it: iterating, counting and neighbours skip the rest, so a tile on
+its own is predicted as a mosaic of that one tile would be (an unplanned neighbour is treated as
+the mosaic's edge), and the gaps between tiles cost nothing. Every patch of the rectangle can
+still be asked for by index.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Iterator, Sequence
 
 from affine import Affine
 
@@ -76,7 +82,8 @@ class Patch:
 class PatchGrid:
     """The global grid of patches over a ``width x height`` mosaic with affine ``transform``."""
 
-    def __init__(self, width: int, height: int, transform: Affine = Affine.identity(), config: GridConfig = GridConfig()):
+    def __init__(self, width: int, height: int, transform: Affine = Affine.identity(), config: GridConfig = GridConfig(),
+                 footprint: Sequence[PixelWindow] | None = None):
         if width <= 0 or height <= 0:
             raise ValueError(f"mosaic must have pixels, got {width}x{height}")
         self.width = width
@@ -86,6 +93,19 @@ class PatchGrid:
         self.n_rows = math.ceil(height / config.core)
         self.n_cols = math.ceil(width / config.core)
         self._patches: dict[tuple[int, int], Patch] = {}  # made once each: a run asks for every patch many times
+        whole = footprint is None or list(footprint) == [PixelWindow(0, 0, width, height)]
+        self.planned: list[tuple[int, int]] | None = None if whole else self._meeting(footprint)  # None: every patch
+        self._planned = None if self.planned is None else frozenset(self.planned)
+
+    def _meeting(self, parts: Sequence[PixelWindow]) -> list[tuple[int, int]]:
+        """The patches, row-major, whose cores share a pixel with one of ``parts``."""
+        c = self.config.core
+        found = set()
+        for w in parts:
+            rows = range(max(0, w.row_off // c), min(self.n_rows, -(-w.row_end // c)))
+            cols = range(max(0, w.col_off // c), min(self.n_cols, -(-w.col_end // c)))
+            found.update((r, k) for r in rows for k in cols)
+        return sorted(found)
 
     def __getstate__(self) -> dict:
         """Pickled without the patches made so far (a Dask worker makes its own)."""
@@ -93,20 +113,28 @@ class PatchGrid:
 
     @classmethod
     def for_mosaic(cls, mosaic, config: GridConfig = GridConfig()) -> "PatchGrid":
-        return cls(mosaic.width, mosaic.height, mosaic.transform, config)
+        """The grid of ``mosaic``, planned over its footprint."""
+        return cls(mosaic.width, mosaic.height, mosaic.transform, config, getattr(mosaic, "footprint", None))
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.n_rows, self.n_cols
 
     def __len__(self) -> int:
-        return self.n_rows * self.n_cols
+        """The planned patches."""
+        return self.n_rows * self.n_cols if self.planned is None else len(self.planned)
 
     def __iter__(self) -> Iterator[Patch]:
-        """Patches in row-major order (the order a streaming pass visits them)."""
+        """The planned patches in row-major order (the order a streaming pass visits them)."""
+        if self.planned is not None:
+            yield from (self.patch(row, col) for row, col in self.planned)
+            return
         for row in range(self.n_rows):
             for col in range(self.n_cols):
                 yield self.patch(row, col)
+
+    def is_planned(self, index: tuple[int, int]) -> bool:
+        return index in self if self._planned is None else index in self._planned
 
     def __contains__(self, index: tuple[int, int]) -> bool:
         row, col = index
@@ -126,14 +154,14 @@ class PatchGrid:
         return patch
 
     def neighbours(self, patch: Patch) -> list[Patch]:
-        """The patches whose expanded windows overlap ``patch``'s: the up to 8 adjacent ones, and
-        more when ``2 * margin > core`` makes patches further apart overlap too."""
+        """The planned patches whose expanded windows overlap ``patch``'s: the up to 8 adjacent
+        ones, and more when ``2 * margin > core`` makes patches further apart overlap too."""
         reach = max(1, math.ceil(2 * self.config.margin / self.config.core))
         out = []
         for dr in range(-reach, reach + 1):
             for dc in range(-reach, reach + 1):
                 index = (patch.row + dr, patch.col + dc)
-                if (dr or dc) and index in self:
+                if (dr or dc) and self.is_planned(index):
                     out.append(self.patch(*index))
         return out
 

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 from affine import Affine
 
+from csboundary.data.footprint import scaled
 from csboundary.data.raster import Mosaic, WindowRead
 from csboundary.data.units import MODEL_GSD, GroundUnits, geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import PixelWindow
@@ -71,7 +72,7 @@ class ResampledMosaic(Mosaic):
         width = max(1, int(math.floor(source.width * source.transform.a / unit_x + 1e-9)))
         height = max(1, int(math.floor(source.height * abs(source.transform.e) / unit_y + 1e-9)))
         t = source.transform
-        transform = Affine(unit_x, 0.0, t.c, 0.0, -unit_y, t.f)
+        transform = Affine(unit_x, 0.0, t.c, 0.0, math.copysign(unit_y, t.e), t.f)  # a CRS-less picture keeps its rows going down
         super().__init__(source.tiles, source.crs, transform, width, height)
         self.source = source
         self.factor = (unit_x / t.a, unit_y / abs(t.e))  # source pixels per view pixel
@@ -106,6 +107,12 @@ class ResampledMosaic(Mosaic):
             pixels = np.clip(np.rint(out), 0, 255).astype(np.uint8)
         pixels[:, ~mask] = 0
         return WindowRead(window, pixels, mask)
+
+    @property
+    def footprint(self) -> list[PixelWindow]:
+        """The source's footprint on this grid."""
+        parts = self.source.footprint
+        return [self.window] if parts == [self.source.window] else scaled(parts, *self.factor, self.window)
 
     def may_have_data(self, window: PixelWindow) -> bool:
         fx, fy = self.factor

@@ -30,6 +30,7 @@ from rasterio.enums import ColorInterp, MaskFlags
 from rasterio.errors import NodataShadowWarning, NotGeoreferencedWarning, RasterBlockError, RasterioIOError
 from rasterio.windows import Window
 
+from csboundary.data.footprint import footprint
 from csboundary.data.windows import PixelWindow, pixel_to_world, window_from_bounds, world_to_pixel
 from csboundary.errors import InputError, InputWarning
 
@@ -262,6 +263,15 @@ class Mosaic:
     def window(self) -> PixelWindow:
         """The whole mosaic as a window."""
         return PixelWindow(0, 0, self.width, self.height)
+
+    @property
+    def footprint(self) -> list[PixelWindow]:
+        """Where the imagery lies, in mosaic pixels: ``[self.window]`` when the files fill the
+        mosaic, else each file's window (tiles scattered over a city: data/footprint.py)."""
+        found = getattr(self, "_footprint", None)
+        if found is None:
+            found = self._footprint = footprint([t.window for t in self.tiles], self.window)
+        return found
 
     @property
     def gsd(self) -> float:

@@ -39,35 +39,51 @@ def pyramid_levels(width: int, height: int, tile: int = TILE) -> int:
     return 1 + max(0, math.ceil(math.log2(max(width, height) / tile))) if max(width, height) > tile else 1
 
 
+def pyramid_tiles(mosaic: Mosaic) -> list[tuple[int, int]]:
+    """The (row, col) of every level-0 tile under the mosaic's footprint, row-major: tiles
+    scattered over a city get the tiles over them, not over the gaps between them."""
+    rows, cols = math.ceil(mosaic.height / TILE), math.ceil(mosaic.width / TILE)
+    found = set()
+    for w in mosaic.footprint:
+        found.update((r, c) for r in range(w.row_off // TILE, min(rows, -(-w.row_end // TILE)))
+                     for c in range(w.col_off // TILE, min(cols, -(-w.col_end // TILE))))
+    return sorted(found)
+
+
 def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
     """``folder/L/R_C.jpg`` tiles of every level; level 0 read from the mosaic one tile at a time,
-    each higher level from the four tiles below it. Returns the number of levels."""
+    each higher level from the four tiles below it. Tiles with no imagery under them are not
+    written (the page draws nothing there). Returns the number of levels."""
     levels = pyramid_levels(mosaic.width, mosaic.height)
     width, height = mosaic.width, mosaic.height
-    rows, cols = math.ceil(height / TILE), math.ceil(width / TILE)
-    bar = tqdm(total=rows * cols, desc="review tiles", unit="tile", disable=not progress)
+    made = pyramid_tiles(mosaic)
+    bar = tqdm(total=len(made), desc="review tiles", unit="tile", disable=not progress)
     (folder / "0").mkdir(parents=True, exist_ok=True)
-    for r in range(rows):
-        for c in range(cols):
-            win = PixelWindow(c * TILE, r * TILE, min(TILE, width - c * TILE), min(TILE, height - r * TILE))
-            read = mosaic.read(win)
-            cv2.imwrite(str(folder / "0" / f"{r}_{c}.jpg"), to_display(read.data, read.valid)[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY,
-                                                                                                            JPEG_QUALITY])
-            bar.update(1)
+    for r, c in made:
+        win = PixelWindow(c * TILE, r * TILE, min(TILE, width - c * TILE), min(TILE, height - r * TILE))
+        read = mosaic.read(win)
+        cv2.imwrite(str(folder / "0" / f"{r}_{c}.jpg"), to_display(read.data, read.valid)[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY,
+                                                                                                        JPEG_QUALITY])
+        bar.update(1)
     bar.close()
+    heights = [min(TILE, height - r * TILE) for r in range(math.ceil(height / TILE))]  # px of each tile row and column
+    widths = [min(TILE, width - c * TILE) for c in range(math.ceil(width / TILE))]
     for level in range(1, levels):
         (folder / str(level)).mkdir(exist_ok=True)
-        below_rows, below_cols = rows, cols
-        rows, cols = math.ceil(below_rows / 2), math.ceil(below_cols / 2)
-        for r in range(rows):
-            for c in range(cols):
-                parts = [[cv2.imread(str(folder / str(level - 1) / f"{2 * r + dr}_{2 * c + dc}.jpg"))
-                          if 2 * r + dr < below_rows and 2 * c + dc < below_cols else None for dc in (0, 1)] for dr in (0, 1)]
-                top = np.hstack([p for p in parts[0] if p is not None])
-                bottom = np.hstack([p for p in parts[1] if p is not None]) if any(p is not None for p in parts[1]) else None
-                image = np.vstack([top, bottom]) if bottom is not None else top
-                small = cv2.resize(image, (max(1, image.shape[1] // 2), max(1, image.shape[0] // 2)), interpolation=cv2.INTER_AREA)
-                cv2.imwrite(str(folder / str(level) / f"{r}_{c}.jpg"), small, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        below, made = set(made), sorted({(r // 2, c // 2) for r, c in made})
+        for r, c in made:
+            rows = heights[2 * r : 2 * r + 2]
+            cols = widths[2 * c : 2 * c + 2]
+            image = np.zeros((sum(rows), sum(cols), 3), np.uint8)  # a child without imagery stays black, as no-data does
+            for dr in range(len(rows)):
+                for dc in range(len(cols)):
+                    if (2 * r + dr, 2 * c + dc) in below:
+                        child = cv2.imread(str(folder / str(level - 1) / f"{2 * r + dr}_{2 * c + dc}.jpg"))
+                        image[dr * rows[0] : dr * rows[0] + rows[dr], dc * cols[0] : dc * cols[0] + cols[dc]] = child
+            small = cv2.resize(image, (max(1, image.shape[1] // 2), max(1, image.shape[0] // 2)), interpolation=cv2.INTER_AREA)
+            cv2.imwrite(str(folder / str(level) / f"{r}_{c}.jpg"), small, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        heights = [max(1, sum(heights[k : k + 2]) // 2) for k in range(0, len(heights), 2)]
+        widths = [max(1, sum(widths[k : k + 2]) // 2) for k in range(0, len(widths), 2)]
     return levels
 
 

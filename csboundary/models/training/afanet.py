@@ -15,7 +15,7 @@ from csboundary.models.afanet import AfANet, AfANetConfig, edges_from_adjacency
 from csboundary.models.augmentation import AugmentConfig, photometric
 from csboundary.models.checkpoint import file_sha256, load_afanet, load_fpn
 from csboundary.models.maps import predict_mosaic_maps
-from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
+from csboundary.models.training.config import TrainConfig, extra_parts, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.loop import RunLog, optimize, resume_run, run_code_version, seed_everything
 
@@ -109,7 +109,7 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
               parameters=sum(p.numel() for p in model.parameters()),
               config=config.to_dict(), **init)
 
-    probabilities = city_probabilities(train_cities, len(config.extra_train_cities), config.extra_share, by_area=False)
+    probabilities = city_probabilities(train_cities, extra_parts(train_cities, config), config.extra_share, by_area=False)
 
     def loss_at(step: int):
         stage = "gt" if step < config.gt_steps else "pred"

@@ -116,7 +116,13 @@ def training_cities(config: TrainConfig, progress: bool = True) -> list[Training
     for path in config.extra_train_cities:
         if not layout.is_city_dir(path):
             raise InputError(path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)")
-    return [TrainingCity(p) for p in paths]
+    return [city for p in paths for city in TrainingCity.parts(p)]
+
+
+def extra_parts(cities: list[TrainingCity], config: TrainConfig) -> int:
+    """How many of ``cities`` (the last ones) are parts of ``extra_train_cities``."""
+    extra = {Path(p) for p in config.extra_train_cities}
+    return sum(Path(c.path) in extra for c in cities)
 
 
 def model_config_with(cls, overrides: dict):

@@ -13,6 +13,7 @@ import numpy as np
 
 from csboundary.config import Config
 from csboundary.data import city as layout
+from csboundary.data.footprint import draw_window, groups, union_area
 from csboundary.data.ground_truth import read_complete_area, read_ground_truth, read_road_surface
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
@@ -109,8 +110,11 @@ def covers_imagery(polygons: list, mosaic: Mosaic) -> bool:
 def city_probabilities(cities: list, extra: int, extra_share: float, by_area: bool) -> np.ndarray:
     """The probability of drawing each of ``cities`` for a sample, the last ``extra`` of them the
     extra (user) cities: within each group in proportion to area (``by_area``) or alike, the
-    extra group as a whole ``extra_share`` of the draws (when both groups exist and it is > 0)."""
-    weights = np.array([c.mosaic.width * c.mosaic.height for c in cities], float) if by_area else np.ones(len(cities))
+    extra group as a whole ``extra_share`` of the draws (when both groups exist and it is > 0).
+    The parts of one city (:meth:`TrainingCity.parts`) count as one city, and ``extra`` counts
+    the extra cities' parts."""
+    shared = {c.path: sum(d.path == c.path for d in cities) for c in cities}
+    weights = np.array([union_area(c.mosaic.footprint) if by_area else 1 / shared[c.path] for c in cities], float)
     if extra_share <= 0 or not 0 < extra < len(cities):
         return weights / weights.sum()
     base, user = weights[:-extra], weights[-extra:]
@@ -125,9 +129,11 @@ class TrainingCity:
     the area, and AfANet learns only from vertices inside it.
     """
 
-    def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig()):
+    def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig(), window: PixelWindow | None = None):
         self.path = Path(city_dir)
         self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
+        if window is not None:  # one group of a city's scattered tiles (:meth:`parts`)
+            self.mosaic = self.mosaic.crop(window)
         gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
         self.surface = _polygon_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
@@ -136,6 +142,26 @@ class TrainingCity:
             raise InputError(city_dir, "its complete area does not cover any of its imagery")
         self.config = config
         self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
+
+    @classmethod
+    def parts(cls, city_dir: str | Path, config: LabelConfig = LabelConfig()) -> list["TrainingCity"]:
+        """The city as training sees it: one TrainingCity, or, when its tiles lie apart (tiles
+        scattered over a city, data/footprint.py), one per group of touching tiles, so that no
+        raster of the city (complete area, road surface, AfANet's maps) spans the gaps. A group
+        that the complete area misses is left out; the city is refused when all are."""
+        with Mosaic.open(layout.tiles_dir(city_dir)) as mosaic:
+            boxes = groups(mosaic.footprint)
+        if len(boxes) == 1:
+            return [cls(city_dir, config)]
+        found, refused = [], None
+        for box in boxes:
+            try:
+                found.append(cls(city_dir, config, box))
+            except InputError as exc:  # this group has no complete area: nothing known to learn there
+                refused = exc
+        if not found:
+            raise refused
+        return found
 
     def close(self) -> None:
         """Close the imagery's files (a training run closes its cities when it ends)."""
@@ -148,14 +174,13 @@ class TrainingCity:
         self.close()
 
     def random_window(self, rng: np.random.Generator, size: int) -> PixelWindow:
-        """A ``size`` square anywhere in the city, all places alike; in a partly labelled city, one
+        """A ``size`` square anywhere the city's imagery lies, all places alike; in a partly labelled city, one
         whose centre lies in its complete area (drawn the same way and kept when it does, so a city
         complete everywhere samples as a fully labelled one)."""
         for _ in range(1 if self.complete is None else 100):
-            col = int(rng.integers(0, max(1, self.mosaic.width - size + 1)))
-            row = int(rng.integers(0, max(1, self.mosaic.height - size + 1)))
-            if self.complete is None or self._complete_at(col + size // 2, row + size // 2):
-                return PixelWindow(col, row, size, size)
+            window = draw_window(rng, self.mosaic.footprint, size)
+            if self.complete is None or self._complete_at(window.col_off + size // 2, window.row_off + size // 2):
+                return window
         rows, cols = np.nonzero(self.complete[::8, ::8])  # a small area: centre the window on one of its pixels
         k = int(rng.integers(len(rows)))
         col = int(np.clip(int(cols[k]) * 8 - size // 2, min(0, self.mosaic.width - size), max(0, self.mosaic.width - size)))

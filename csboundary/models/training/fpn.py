@@ -13,7 +13,7 @@ from csboundary.models.augmentation import AugmentConfig
 from csboundary.models.checkpoint import file_sha256, load_checkpoint, load_fpn
 from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.style_mixing import add_style_mixing
-from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
+from csboundary.models.training.config import TrainConfig, extra_parts, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
 
@@ -108,7 +108,7 @@ def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: Tra
     """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
     (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
     otherwise (validation)."""
-    probabilities = city_probabilities(cities, len(config.extra_train_cities), config.extra_share, by_area=True)
+    probabilities = city_probabilities(cities, extra_parts(cities, config), config.extra_share, by_area=True)
     images, targets, valids = [], [], []
     for _ in range(config.batch):
         city = cities[int(rng.choice(len(cities), p=probabilities))] if len(cities) > 1 else cities[0]

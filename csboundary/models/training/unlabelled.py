@@ -2,8 +2,9 @@
 
 Self-training (``csboundary adapt``) learns from the imagery a user will map. Its cost must not
 grow with the city, so nothing is read ahead: each sample reads one window from the mosaics
-(as the model sees them, :func:`csboundary.data.model_view.model_view`), drawn in proportion to
-each mosaic's area, and a window mostly of no-data is drawn again.
+(as the model sees them, :func:`csboundary.data.model_view.model_view`), drawn where the imagery
+lies (the files' footprint: tiles scattered over a city are not a mostly empty box) in proportion
+to each mosaic's imagery, and a window mostly of no-data is drawn again.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from csboundary.data.windows import PixelWindow
+from csboundary.data.footprint import draw_window, union_area
 from csboundary.models.maps import unit_bands
 
 MIN_VALID_SHARE = 0.5  # a window with less imagery than this is drawn again
@@ -25,13 +26,13 @@ class UnlabelledImagery:
 
     def __init__(self, views: Sequence, names: Sequence[str]):
         self.views, self.names = list(views), list(names)
-        areas = np.array([v.width * v.height for v in self.views], float)
-        self.probabilities = areas / areas.sum()
+        self.areas = np.array([union_area(v.footprint) for v in self.views], float)
+        self.probabilities = self.areas / self.areas.sum()
 
     @property
     def pixels(self) -> int:
-        """Pixels of all the mosaics at the model's pixel size, no-data included."""
-        return int(sum(v.width * v.height for v in self.views))
+        """Pixels under the mosaics' files at the model's pixel size, no-data included."""
+        return int(self.areas.sum())
 
     def sample(self, rng: np.random.Generator, side: int) -> tuple[np.ndarray, np.ndarray]:
         """A ``side`` square window: image (4, side, side) float32 in [0, 1] and valid (side, side)
@@ -40,9 +41,7 @@ class UnlabelledImagery:
         best = None
         for _ in range(DRAWS):
             view = self.views[int(rng.choice(len(self.views), p=self.probabilities))]
-            col = int(rng.integers(0, max(1, view.width - side + 1)))
-            row = int(rng.integers(0, max(1, view.height - side + 1)))
-            read = view.read(PixelWindow(col, row, side, side))
+            read = view.read(draw_window(rng, view.footprint, side))
             share = float(read.valid.mean())
             if best is None or share > best[0]:
                 best = (share, read)

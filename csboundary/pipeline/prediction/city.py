@@ -153,11 +153,12 @@ class CityRun:
         settings = model.settings
         recipe = CityGraphRecipe(stitch, crs, settings.min_fragment_px, settings.attach_px, model.confidence, settings.min_confidence,
                                  reads_evidence(model), block=block)
-        sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS) if recipe.evidence else None
+        load_core = lambda index: store.load_core(index) if grid.is_planned(index) else None  # noqa: E731 (unplanned: no imagery, all zero)
+        sample = core_sampler(grid, load_core, store.channels or DEFAULT_CHANNELS) if recipe.evidence else None
         counted: dict[Index, int] = {}
 
         def load(index: Index) -> BoundaryGraph:
-            if index in self.quiet:
+            if index in self.quiet or not grid.is_planned(index):  # no imagery around it: no boundary
                 graph = empty_graph(grid.patch(*index))
             else:
                 graph = self.patch_graphs[index] if index in self.patch_graphs else store.load_graph(index)

@@ -103,9 +103,12 @@ def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, recipe
 
 
 def block_ranges(grid: PatchGrid, block: int) -> list[tuple[range, range]]:
-    """(patch rows, patch cols) of every block, in row-major order."""
-    return [(range(r, min(r + block, grid.n_rows)), range(c, min(c + block, grid.n_cols)))
-            for r in range(0, grid.n_rows, block) for c in range(0, grid.n_cols, block)]
+    """(patch rows, patch cols) of every block holding a planned patch, in row-major order."""
+    if grid.planned is None:
+        return [(range(r, min(r + block, grid.n_rows)), range(c, min(c + block, grid.n_cols)))
+                for r in range(0, grid.n_rows, block) for c in range(0, grid.n_cols, block)]
+    corners = sorted({(r - r % block, c - c % block) for r, c in grid.planned})
+    return [(range(r, min(r + block, grid.n_rows)), range(c, min(c + block, grid.n_cols))) for r, c in corners]
 
 
 def city_blocks(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, recipe: CityGraphRecipe,
@@ -209,7 +212,7 @@ def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchG
             writer(piece, boundaries)
         seconds["outputs"] += time.perf_counter() - start
 
-    n_blocks = n_block_rows * n_block_cols
+    n_blocks = len(block_ranges(grid, recipe.block))
     with tqdm(total=n_blocks, desc="stitch graphs", unit="block", disable=not progress or n_blocks < 2) as bar, _young_collections_only():
         for block in city_blocks(load_graph, grid, recipe, sample, one_pass):
             for stage, value in block.seconds.items():

@@ -34,6 +34,7 @@ from typing import Callable
 import numpy as np
 import rasterio
 
+from csboundary.data.footprint import union_area
 from csboundary.data.atomic import DiskFull, disk_full_file, naming_full_disk, staging_folder
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.windows import pixel_to_world
@@ -148,7 +149,7 @@ def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, se
     units = units or mosaic_units(mosaic) or PIXEL_UNITS
     if counts is None:
         counts = graph_counts(result.graph, units)
-    area_km2 = units.area_km2(mosaic.bounds)
+    area_km2 = units.area_km2(mosaic.bounds) * union_area(mosaic.footprint) / mosaic.window.area  # the imagery's, not its bounding box's
     n = result.n_patches
     kinds = counts["kinds"]
     return {

@@ -109,8 +109,11 @@ def test_predictions_that_are_not_labels_are_refused(city, tmp_path):
 
 
 class _City:
-    def __init__(self, side: int):
-        self.mosaic = type("M", (), {"width": side, "height": side})
+    def __init__(self, side: int, path: str | None = None):
+        from csboundary.data.windows import PixelWindow
+
+        self.mosaic = type("M", (), {"width": side, "height": side, "footprint": [PixelWindow(0, 0, side, side)]})
+        self.path = Path(path or f"city-{id(self)}")
 
 
 def test_user_cities_get_their_share_of_samples():
@@ -120,6 +123,8 @@ def test_user_cities_get_their_share_of_samples():
     assert np.allclose(city_probabilities(cities, extra=2, extra_share=0.25, by_area=False), [0.375, 0.375, 0.125, 0.125])
     assert np.allclose(city_probabilities(cities, extra=2, extra_share=0.0, by_area=True), np.array([100, 400, 100, 900]) / 1500)
     assert np.allclose(city_probabilities(cities[2:], extra=2, extra_share=0.25, by_area=False), [0.5, 0.5])  # only user cities
+    parts = [_City(10), _City(10, "user"), _City(20, "user"), _City(30, "other")]  # the user city's scattered tiles: two parts
+    assert np.allclose(city_probabilities(parts, extra=3, extra_share=0.5, by_area=False), [0.5, 0.125, 0.125, 0.25])  # 2 cities, alike
 
 
 def test_folds_deal_cities_in_turn_and_the_bootstrap_of_a_constant_gain_is_that_gain():
