@@ -60,7 +60,10 @@ def evaluate(
         result = run_metrics(pred_graph, gt_graph, scale=scale, grid=grid, apls=apls, seed=seed, config=config, extent=extent,
                              metres_per_px=frame_metres_per_px(frame))
     except RasterTooLarge as exc:
-        raise InputError(f"{pred} / {gt}", f"{exc}; give --raster to clip to the imagery") from exc
+        if extent is None:  # nothing says where the imagery is: a raster would cut the lines to it
+            raise InputError(f"{pred} / {gt}", f"{exc}; give --raster to clip to the imagery") from exc
+        raise InputError(f"{pred} / {gt}", f"{exc.size} within the imagery {frame.source}: more than the metrics take at once; "
+                                           "evaluate a smaller part of it") from exc
     result["inputs"] = {"pred": str(pred), "gt": str(gt), "frame": frame.source, "crs": frame.crs}
     typer.echo(format_table(result))
     if json_out is not None:

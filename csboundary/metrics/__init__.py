@@ -25,6 +25,7 @@ from csboundary.metrics.apls import (
 )
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.confidence import confidence_report, edge_truth
+from csboundary.metrics.graph_clip import clip_graph, grown
 from csboundary.metrics.pixel import rasterize, relaxed_scores
 from csboundary.metrics.review_time import ReviewCosts, review_report
 from csboundary.metrics.sampled_graph import resample
@@ -102,13 +103,18 @@ def tlts(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricCo
 def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", grid=None, apls: str = "paper", seed: int = 0,
              config: MetricConfig = MetricConfig(), extent: tuple[float, float, float, float] | None = None,
              review: ReviewCosts | None = ReviewCosts(), metres_per_px: float | None = None) -> dict:
-    """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``);
-    at city scale, ``extent`` (the imagery's pixel rectangle) clips both graphs first. When the
-    prediction's edges carry scores, ``confidence`` says how well they tell true edges from
-    false ones (:func:`csboundary.metrics.confidence.confidence_report`, whole graphs). At city
-    scale, ``review_effort`` is the simulated review at ``review`` costs
+    """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``).
+    ``extent`` (the imagery's pixel rectangle) first cuts both graphs to it grown by
+    :data:`~csboundary.metrics.graph_clip.MARGIN_PX` (so a line far outside the imagery costs
+    no more than its part inside); at city scale the pixel metrics, APLS and TLTS then clip to
+    ``extent`` itself. When the prediction's edges carry scores, ``confidence`` says how well
+    they tell true edges from false ones (:func:`csboundary.metrics.confidence.confidence_report`,
+    whole graphs). At city scale, ``review_effort`` is the simulated review at ``review`` costs
     (:func:`csboundary.metrics.review_time.review_report`, whole graphs; per km of true boundary
     when ``metres_per_px`` is known); ``review=None`` skips it."""
+    if extent is not None:
+        window = grown(extent)
+        pred, gt = clip_graph(pred, window), clip_graph(gt, window)
     if scale == "city":
         result = evaluate_city(pred, gt, apls=apls, seed=seed, config=config, extent=extent)
     elif scale == "patch":

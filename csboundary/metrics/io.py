@@ -3,7 +3,8 @@
 Inputs are the project's graph JSON (``csboundary-graph``), any OGR vector file of LineStrings
 (GeoPackage, GeoJSON, ...), a prediction folder (its ``graph.json``) or a city directory (its
 ``ground_truth.gpkg``). The common frame is,
-in this order: ``--pixels`` (coordinates already are pixels), the raster given with ``--raster``
+in this order: ``--pixels`` (coordinates already are pixels; of the ``--raster`` when one is
+given, which then gives the extent), the raster given with ``--raster``
 (a city directory, GeoTIFF(s) or a directory of tiles), the city directory given as an input,
 the transform stored in a graph JSON input, or ``--gsd`` (a north-up grid of that pixel size at
 the inputs' top-left corner). World coordinates are reprojected to the frame's CRS when both are
@@ -122,6 +123,9 @@ def frame_from_raster(path: str | Path) -> Frame:
 def resolve_frame(pred: Source, gt: Source, raster: str | Path | None = None, gsd: float | None = None, pixels: bool = False) -> Frame:
     """Pick the common pixel frame (order: module doc)."""
     if pixels:
+        if raster is not None:  # the coordinates are the raster's pixels: it still gives the imagery's extent
+            size = frame_from_raster(raster)
+            return Frame(None, None, size.width, size.height, source=f"pixels of {raster} (--pixels)")
         return Frame(None, None, source="pixels (--pixels)")
     if raster is not None:
         return frame_from_raster(raster)

@@ -13,4 +13,13 @@ MAX_RASTER_PIXELS = 100_000_000  # ~3 GB of int64 work arrays; a 40 km city's bo
 
 class RasterTooLarge(ValueError):
     """A graph would need more pixels or samples than the metrics' limits: a coordinate far
-    outside the imagery (e.g. a label point at 2e9), not a real road network."""
+    outside the imagery (e.g. a label point at 2e9), not a real road network. ``size`` says how
+    much was asked for, without the likely cause, for callers who know the cause is another
+    (graphs already cut to the imagery)."""
+
+    def __init__(self, size: str):
+        super().__init__(size)
+        self.size = size
+
+    def __str__(self) -> str:
+        return f"{self.size}: a coordinate lies far outside the imagery"

@@ -38,8 +38,7 @@ def rasterize(seg: Segments, within: tuple[float, float, float, float] | None = 
     counts = steps + 1
     total = int(counts.sum())
     if total > MAX_RASTER_PIXELS:
-        raise RasterTooLarge(f"the boundaries would cover {total:.3g} pixels (limit {MAX_RASTER_PIXELS:.0e}): "
-                             "a coordinate lies far outside the imagery")
+        raise RasterTooLarge(f"the boundaries would cover {total:.3g} pixels (limit {MAX_RASTER_PIXELS:.0e})")
     which = np.repeat(np.arange(len(steps)), counts)
     j = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
     t = j / np.maximum(steps, 1)[which]

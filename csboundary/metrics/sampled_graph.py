@@ -162,8 +162,7 @@ def resample(seg: Segments, spacing: float) -> SampledGraph:
         chain_length = np.bincount(seg_chain, weights=seg_len, minlength=n_chains)
         pieces = np.maximum(1, np.ceil(chain_length / spacing - 1e-9)).astype(np.int64)
         if pieces.sum() > MAX_SAMPLES:
-            raise RasterTooLarge(f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points): "
-                                 "a coordinate lies far outside the imagery")
+            raise RasterTooLarge(f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points)")
         step = chain_length / pieces
         # interior samples j * step, j = 1 .. pieces - 1, located on their segment
         n_inner = pieces - 1

@@ -79,6 +79,23 @@ def common_origin(*parts: Segments) -> np.ndarray:
     return np.floor(np.concatenate(points).min(axis=0))
 
 
+def clip_parameters(a: np.ndarray, d: np.ndarray, x0: float, y0: float, x1: float, y1: float) -> tuple[np.ndarray, np.ndarray,
+                                                                                                       np.ndarray]:
+    """Liang-Barsky for the (S, 2) segments ``a -> a + d``: the parameters ``t0 < t1`` in [0, 1]
+    of the part of each inside [x0, x1] x [y0, y1], and which segments have such a part."""
+    t0 = np.zeros(len(a))
+    t1 = np.ones(len(a))
+    keep = np.ones(len(a), dtype=bool)
+    for p, q in ((-d[:, 0], a[:, 0] - x0), (d[:, 0], x1 - a[:, 0]), (-d[:, 1], a[:, 1] - y0), (d[:, 1], y1 - a[:, 1])):
+        parallel = p == 0
+        keep &= ~(parallel & (q < 0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(parallel, 0.0, q / np.where(parallel, 1.0, p))
+        t0 = np.where(~parallel & (p < 0), np.maximum(t0, t), t0)
+        t1 = np.where(~parallel & (p > 0), np.minimum(t1, t), t1)
+    return t0, t1, keep & (t0 < t1)
+
+
 def clip(seg: Segments, x0: float, y0: float, x1: float, y1: float) -> Segments:
     """The part of the graph inside the rectangle [x0, x1] x [y0, y1] (Liang-Barsky, vectorised).
 
@@ -90,17 +107,7 @@ def clip(seg: Segments, x0: float, y0: float, x1: float, y1: float) -> Segments:
     pts, edges = seg.points, seg.edges
     a, b = pts[edges[:, 0]], pts[edges[:, 1]]
     d = b - a
-    t0 = np.zeros(len(edges))
-    t1 = np.ones(len(edges))
-    keep = np.ones(len(edges), dtype=bool)
-    for p, q in ((-d[:, 0], a[:, 0] - x0), (d[:, 0], x1 - a[:, 0]), (-d[:, 1], a[:, 1] - y0), (d[:, 1], y1 - a[:, 1])):
-        parallel = p == 0
-        keep &= ~(parallel & (q < 0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(parallel, 0.0, q / np.where(parallel, 1.0, p))
-        t0 = np.where(~parallel & (p < 0), np.maximum(t0, t), t0)
-        t1 = np.where(~parallel & (p > 0), np.minimum(t1, t), t1)
-    keep &= t0 < t1
+    t0, t1, keep = clip_parameters(a, d, x0, y0, x1, y1)
     a, d, t0, t1, edges = a[keep], d[keep], t0[keep], t1[keep], edges[keep]
     n = len(pts)
     cut0, cut1 = t0 > 0, t1 < 1
