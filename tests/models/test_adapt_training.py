@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from csboundary.data.raster import WindowRead
+from csboundary.data.windows import PixelWindow
 from csboundary.models.training.adapt import AdaptConfig, MeanTeacher, paste_roadway, posterior, pseudo_labels, roadway_edge_near
 from csboundary.models.training.unlabelled import MIN_VALID_SHARE, UnlabelledImagery
 
@@ -107,6 +108,7 @@ class _View:
     def __init__(self, size: int, valid_cols: int):
         self.width = self.height = size
         self.valid_cols = valid_cols
+        self.footprint = [PixelWindow(0, 0, size, size)]  # one file: no-data inside it is found by reading
 
     def read(self, window) -> WindowRead:
         cols = np.arange(window.col_off, window.col_off + window.width)
