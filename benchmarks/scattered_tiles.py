@@ -90,7 +90,7 @@ def main() -> None:
         row["adapt_last"] = last
         if not args.skip_predict:
             seconds, peak2, last = timed(cli + ["predict", str(folder), "--out", str(args.work / f"pred-{name}"), "--quiet", "--restart"])
-            row.update(predict_s=round(seconds, 1), predict_last=last)
+            row.update(predict_s=round(seconds, 1), predict_peak_mb=round(peak2))
             summary = args.work / f"pred-{name}" / "summary.json"
             if summary.exists():
                 row["patches"] = json.loads(summary.read_text()).get("patches")
