@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import socket
 import time
 from pathlib import Path
@@ -51,6 +52,29 @@ def folder_lock(folder: str | Path) -> Iterator[None]:
         with contextlib.suppress(OSError):
             (folder / LOCK_FILE).unlink()  # still locked: a run that opened the file meanwhile sees it gone
         os.close(fd)
+
+
+@contextlib.contextmanager
+def locked_folder(folder: str | Path, option: str = "--out") -> Iterator[None]:
+    """``folder`` made if missing and held under its lock for the block: a second run writing
+    into it is refused in one line (``option`` names the setting that gives another folder). A
+    folder this call made is removed again when the block is refused (InputError) before
+    anything but the lock file is in it."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(folder, f"is a file: it must be a folder (give {option} another path)")
+    made = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(folder, f"cannot make the folder ({exc.strerror or exc})") from exc
+    try:
+        with folder_lock(folder):
+            yield
+    except InputError:
+        if made and folder.is_dir() and not any(p.name != LOCK_FILE for p in folder.iterdir()):  # refused before anything was made
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
 
 
 def _lock(path: Path, folder: Path) -> int | None:

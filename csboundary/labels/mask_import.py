@@ -42,6 +42,7 @@ from shapely.geometry import LineString
 from tqdm import tqdm
 
 from csboundary.data.atomic import atomic_path
+from csboundary.data.folder_lock import locked_folder
 from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, tile_name, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
@@ -260,16 +261,16 @@ def import_masks(source: str | Path, out_dir: str | Path, *, gsd: float | None, 
         raise InputError(source, f"no image matching {image_pattern!r} with a mask {mask_pattern!r}")
     for _, image, _ in pairs:  # a pixel size unknown or contradicted stops the import before any city is written
         check_pixel_size(image, gsd)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    cities = []
-    for ident, image, mask in tqdm(pairs, desc="import masks", unit="image", disable=not progress):
-        cities.append(import_pair(image, mask, out_dir / ident, gsd=gsd, rule=rule, target_gsd=target_gsd, name=ident))
-    listing = out_dir / SET_FILE
-    earlier = json.loads(listing.read_text()).get("cities", []) if listing.exists() else []
-    new = [{"name": c.name, "dir": c.city_dir.name, "boundaries": c.boundaries, "size": list(c.size), "source": str(source),
-            "source_gsd": c.source_m, "mask_rule": asdict(rule)} for c in cities]
-    names = {c["dir"] for c in new}
-    report = {"target_gsd": target_gsd, "cities": [c for c in earlier if c.get("dir") not in names] + new}
-    with atomic_path(listing) as tmp:
-        tmp.write_text(json.dumps(report, indent=1) + "\n")
+    with locked_folder(out_dir):  # two imports into one set at once would each list only their own cities
+        cities = []
+        for ident, image, mask in tqdm(pairs, desc="import masks", unit="image", disable=not progress):
+            cities.append(import_pair(image, mask, out_dir / ident, gsd=gsd, rule=rule, target_gsd=target_gsd, name=ident))
+        listing = out_dir / SET_FILE
+        earlier = json.loads(listing.read_text()).get("cities", []) if listing.exists() else []
+        new = [{"name": c.name, "dir": c.city_dir.name, "boundaries": c.boundaries, "size": list(c.size), "source": str(source),
+                "source_gsd": c.source_m, "mask_rule": asdict(rule)} for c in cities]
+        names = {c["dir"] for c in new}
+        report = {"target_gsd": target_gsd, "cities": [c for c in earlier if c.get("dir") not in names] + new}
+        with atomic_path(listing) as tmp:
+            tmp.write_text(json.dumps(report, indent=1) + "\n")
     return report

@@ -18,12 +18,14 @@ bytes and opens its sessions there on first use.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
 import sys
 import warnings
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import torch
@@ -51,6 +53,26 @@ def cache_dir() -> Path:
     except InputError as exc:
         raise InputError(folder, f"cannot hold the cached ONNX exports ({exc.problem}); set {CACHE_ENV} to a writable folder "
                                  "or use --engine torch") from exc
+
+
+@contextlib.contextmanager
+def exporting(path: Path) -> Iterator[None]:
+    """Hold the export lock of ``path`` (an OS lock on ``path.lock``, released however the
+    process ends): the Dask workers or runs that start at once on a new machine export and
+    quantize a network once (a minute and 3 GB each), not once each. Unlocked without ``fcntl``."""
+    try:
+        import fcntl
+    except ImportError:  # Windows: each exports, the renames keep the files whole
+        yield
+        return
+    lock = path.with_name(path.name + ".lock")
+    with open(lock, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:  # gone before it is let go: a waiter holds it open, and whoever comes later finds the file made
+            lock.unlink(missing_ok=True)
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def network_key(fpn, afanet) -> str:
@@ -156,7 +178,8 @@ class OnnxNetworks:
         made first if missing (and the FPN quantized to int8 when ``int8``), with each network's
         graph optimisation level timed on this machine (once, cached beside them). Each file is
         written under a temporary name and renamed into place (data/atomic.py), so processes
-        sharing the cache never read half a file (two that export at once each rename a whole one)."""
+        sharing the cache never read half a file, and made by one process while the others
+        wait (:func:`exporting`)."""
         from csboundary.data.atomic import atomic_path
         from csboundary.models.onnx_quantization import QUANTIZATION_VERSION, quantize_fpn
         from csboundary.models.onnx_tuning import machine_key, tuned_levels
@@ -166,11 +189,13 @@ class OnnxNetworks:
         def cached(name: str, make, version: str = f"v{EXPORT_VERSION}") -> bytes:
             path = folder / f"{key}-{name}-{version}.onnx"
             if not path.exists():
-                print(f"csboundary: preparing the {name} network for ONNX Runtime (once per network, cached in {folder})",
-                      file=sys.stderr, flush=True)
-                data = make()
-                with atomic_path(path) as tmp:
-                    tmp.write_bytes(data)
+                with exporting(path):  # another process making this file: wait for it, then read it
+                    if not path.exists():
+                        print(f"csboundary: preparing the {name} network for ONNX Runtime (once per network, cached in {folder})",
+                              file=sys.stderr, flush=True)
+                        data = make()
+                        with atomic_path(path) as tmp:
+                            tmp.write_bytes(data)
             return path.read_bytes()
 
         fpn_model = cached("fpn", lambda: export_fpn(fpn))

@@ -131,7 +131,7 @@ def test_a_work_folder_that_is_a_file_or_in_use_is_one_line(tmp_path):
     image = _geotiff(tmp_path / "a.tif", 700)
     (tmp_path / "notes.txt").write_text("x")
     one_error(run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--work", str(tmp_path / "notes.txt")),
-              "notes.txt", "is a file: the work folder must be a folder")
+              "notes.txt", "is a file: it must be a folder (give --work another path)")
     work = tmp_path / "work"
     work.mkdir()
     with folder_lock(work):  # another adapt or finetune working there

@@ -116,3 +116,32 @@ def test_a_damaged_export_names_the_cache_folder(tmp_path, monkeypatch):
     monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
     with pytest.raises(InputError, match=f"delete the cached exports in {tmp_path / 'cache'}"):
         open_session(b"not a model", 1, "all", "fpn")
+
+
+def test_a_second_exporter_waits_for_the_first(tmp_path):
+    """Two processes (or Dask workers) that start at once on a new machine export a network once:
+    the second waits on the export lock, then finds the file made."""
+    import threading
+    import time
+
+    from csboundary.models.onnx_engine import exporting
+
+    path = tmp_path / "k-fpn-v3.onnx"
+    order = []
+
+    def first():
+        with exporting(path):
+            order.append("first in")
+            time.sleep(0.5)
+            path.write_bytes(b"made")
+            order.append("first out")
+
+    worker = threading.Thread(target=first)
+    worker.start()
+    while not order:
+        time.sleep(0.01)
+    with exporting(path):  # flock: each open of the lock file is its own lock, threads of one process included
+        order.append("second in")
+        assert path.read_bytes() == b"made"
+    worker.join()
+    assert order == ["first in", "first out", "second in"]

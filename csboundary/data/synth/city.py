@@ -20,6 +20,7 @@ from affine import Affine
 from tqdm import tqdm
 
 from csboundary import __version__
+from csboundary.data.folder_lock import locked_folder
 from csboundary.data import city as layout
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
@@ -168,7 +169,14 @@ def synthesize_city(
     """Write a city directory (tiles, ground truth, city.json) and return its metadata.
 
     ``city.json`` is written last: a directory without it is an interrupted run, not a city.
+    Two runs writing one city at once (two trainings building the same cache city) are one run
+    and a one-line refusal (data/folder_lock.py).
     """
+    with locked_folder(out_dir, "OUT"):
+        return _synthesize_city(out_dir, seed, split, tiles, config, progress)
+
+
+def _synthesize_city(out_dir: str | Path, seed: int, split: str, tiles: tuple[int, int], config: SynthConfig, progress: bool) -> dict:
     out_dir = layout.begin_city(out_dir)
     start = time.perf_counter()
     city = plan_city(config, split, seed, tiles)

@@ -13,7 +13,7 @@ import numpy as np
 
 from csboundary.data import city as layout
 from csboundary.data.atomic import atomic_path, check_output_dir
-from csboundary.data.folder_lock import folder_lock
+from csboundary.data.folder_lock import folder_lock, locked_folder
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.errors import InputError
@@ -78,7 +78,9 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
     vertices, and ``apply-review`` merges them into the whole city."""
     inputs = prediction_inputs(prediction)
     ground_truth = ground_truth or city_ground_truth(inputs)
+    out = Path(out) if out else prediction / "review"
     with contextlib.ExitStack() as stack:
+        stack.enter_context(locked_folder(out))  # two pages written into one folder at once would mix their tiles
         mosaic = stack.enter_context(Mosaic.open(inputs))
         ids = None
         if bounds is None:
@@ -94,7 +96,7 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
         boundaries, draft, metres_per_px = review_boundaries(graph)
         rows = [{"edges": b.edges.tolist(), "score": b.confidence if np.isfinite(b.confidence) else None, "draft": bool(keep),
                  "length_m": b.length_px * metres_per_px} for b, keep in zip(boundaries, draft)]
-        page = write_review_page(graph, mosaic, out or prediction / "review", lines, progress=progress,
+        page = write_review_page(graph, mosaic, out, lines, progress=progress,
                                  fingerprint=graph_fingerprint(prediction), ids=ids, review_costs=ReviewCosts().to_dict(),
                                  boundaries=rows, metres_per_px=metres_per_px)
     return {"page": page, "edges": graph.n_edges, "boundaries": len(boundaries), "draft": int(draft.sum()),

@@ -14,19 +14,17 @@ cities), so a run stopped at any point continues where it stopped when given aga
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 from csboundary.config import Config
 from csboundary.data import city as layout
 from csboundary.data.atomic import atomic_path
-from csboundary.data.folder_lock import LOCK_FILE, folder_lock
+from csboundary.data.folder_lock import LOCK_FILE, locked_folder
 from csboundary.errors import InputError
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
@@ -164,25 +162,10 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
                          progress=progress)
 
 
-@contextlib.contextmanager
-def locked_work(work: Path) -> Iterator[None]:
+def locked_work(work: Path):
     """The training work folder ``work``, made if missing and held under its lock for the block
-    (a second run into it is refused in one line); a folder this call made is removed again when
-    the block is refused (InputError) before anything but the lock file is in it."""
-    if work.exists() and not work.is_dir():
-        raise InputError(work, "is a file: the work folder must be a folder (give --work another path)")
-    made = not work.exists()
-    try:
-        work.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(work, f"cannot make the work folder ({exc.strerror or exc})") from exc
-    try:
-        with folder_lock(work):
-            yield
-    except InputError:
-        if made and work.is_dir() and not any(p.name != LOCK_FILE for p in work.iterdir()):  # refused before anything was made
-            shutil.rmtree(work, ignore_errors=True)
-        raise
+    (:func:`~csboundary.data.folder_lock.locked_folder`)."""
+    return locked_folder(work, "--work")
 
 
 def _finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None,

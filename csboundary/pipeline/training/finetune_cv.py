@@ -13,6 +13,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from csboundary.data.folder_lock import locked_folder
 from csboundary.data.atomic import atomic_path
 from csboundary.errors import InputError
 from csboundary.metrics.compare import paired_bootstrap
@@ -123,7 +124,14 @@ def evaluate_finetune(set_dir: Path, out: Path, *, folds: int = 2, weights: Path
                       seed: int = 0, cache: Path | None = None, device: str = "auto", engine: str = "auto", progress: bool = True) -> dict:
     """Cross-validated scores of fine-tuning ``weights`` on the set ``set_dir``; each fold's run,
     bundle and scores live in ``out/fold-<i>/`` (a stopped evaluation continues), the summary
-    in ``out/evaluate-finetune.json``."""
+    in ``out/evaluate-finetune.json``. A second evaluation into ``out`` is refused in one line."""
+    with locked_folder(out):
+        return _evaluate_finetune(set_dir, Path(out), folds=folds, weights=weights, budget=budget, seed=seed, cache=cache, device=device,
+                                  engine=engine, progress=progress)
+
+
+def _evaluate_finetune(set_dir: Path, out: Path, *, folds: int, weights: Path | None, budget: FinetuneBudget, seed: int,
+                       cache: Path | None, device: str, engine: str, progress: bool) -> dict:
     cities = set_cities(set_dir)
     try:
         split = folds_of(cities, folds)
