@@ -57,7 +57,7 @@ def predict(
 
     def announce(plan, view) -> None:
         where = (f"({plan.n_rows}x{plan.n_cols})" if plan.planned is None else
-                 f"under {counted(len(view.mosaic.footprint), 'scattered tile')} of a {plan.n_rows}x{plan.n_cols} grid")
+                 f"under {counted(len(view.mosaic.footprint), 'group')} of tiles kilometres apart, of a {plan.n_rows}x{plan.n_cols} grid")
         typer.echo(f"{out}: {counted(len(plan), 'patch')} {where} over {view.mosaic.width}x{view.mosaic.height} px "
                    f"at {predictor.pixel_size_m:g} m; FPN in {predictor.precision_choice or predictor.precision}", err=True)
 

@@ -48,6 +48,7 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
 
 
 FREE_BYTES_LOW = 2**20  # less than this free after a failed write: the disk is full
+NEVER_DISK = (InputError, TypeError, ValueError, KeyError, IndexError, AttributeError, NameError, AssertionError)
 FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 # how writers say it without an errno: the OS, SQLite (GeoPackage), GDAL's GTiff, numpy's short write
 FULL_WORDS = ("no space left on device", "disk is full", "disk quota exceeded", "free disk space available")
@@ -70,7 +71,7 @@ def is_disk_full(exc: BaseException, folder: str | Path | None = None) -> bool:
                 ("requested" in text and "written" in text):
             return True
         seen = seen.__cause__ or seen.__context__
-    if folder is None:
+    if folder is None or isinstance(exc, NEVER_DISK):  # a bad input or a bug is not a full disk, however little is free
         return False
     try:
         return shutil.disk_usage(folder).free < FREE_BYTES_LOW

@@ -32,12 +32,13 @@ _held: set[str] = set()  # folders this process holds: locking one again is a no
 
 
 @contextlib.contextmanager
-def folder_lock(folder: str | Path) -> Iterator[None]:
+def folder_lock(folder: str | Path, wait: bool = False) -> Iterator[None]:
     """Hold ``folder``'s lock for the block (the folder must exist); InputError naming the run
-    that holds it. A process that holds it already may take it again (nested blocks)."""
+    that holds it, or with ``wait`` the wait until it ends (a cache both runs need). A process
+    that holds it already may take it again (nested blocks)."""
     folder = Path(folder)
     key = str(folder.resolve())
-    fd = None if fcntl is None or key in _held else _lock(folder / LOCK_FILE, folder)
+    fd = None if fcntl is None or key in _held else _lock(folder / LOCK_FILE, folder, wait)
     if fd is None:
         yield
         return
@@ -63,9 +64,11 @@ def locked_folder(folder: str | Path, option: str = "--out") -> Iterator[None]:
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError(folder, f"is a file: it must be a folder (give {option} another path)")
-    made = not folder.exists()
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(parents=True)
+        made = True  # this call made it: only then may a refusal remove it
+    except FileExistsError:
+        made = False
     except OSError as exc:
         raise InputError(folder, f"cannot make the folder ({exc.strerror or exc})") from exc
     try:
@@ -77,7 +80,7 @@ def locked_folder(folder: str | Path, option: str = "--out") -> Iterator[None]:
         raise
 
 
-def _lock(path: Path, folder: Path) -> int | None:
+def _lock(path: Path, folder: Path, wait: bool = False) -> int | None:
     """A descriptor of ``path`` locked by this process (None: the filesystem has no locks)."""
     while True:
         try:
@@ -88,7 +91,7 @@ def _lock(path: Path, folder: Path) -> int | None:
                 raise full from exc
             raise InputError(folder, f"cannot create its lock file {LOCK_FILE} ({exc.strerror or exc})") from exc
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = _holder(fd)
             os.close(fd)

@@ -1,10 +1,10 @@
-"""Where a mosaic's imagery lies: the windows of its files, not their bounding box.
+"""Where a mosaic's imagery lies: the boxes of its groups of touching files, not their bounding box.
 
 Eight 1000 px tiles kilometres apart make one mosaic whose bounding box is 146 G pixels for 8 M
 pixels of imagery. What samples windows (adapt, finetune), plans patches (predict) or draws
 review tiles works from the footprint instead, so its cost follows the imagery, not the box. A
-mosaic whose files fill their bounding box has that box as its one-window footprint, and draws
-from it exactly as it always did.
+mosaic whose files touch one another (a city of 2,049 tiles, a ragged outline, a missing tile)
+is one group: its footprint is its own box, and everything works on it exactly as it always did.
 
 Pure functions of :class:`~csboundary.data.windows.PixelWindow` lists.
 """
@@ -46,10 +46,21 @@ def union_area(windows: Sequence[PixelWindow]) -> int:
 
 
 def footprint(windows: Sequence[PixelWindow], bounds: PixelWindow) -> list[PixelWindow]:
-    """``[bounds]`` when ``windows`` cover all of it, else their parts inside it: where windows
-    may be drawn and patches planned."""
-    parts = clipped(windows, bounds)
-    return [bounds] if union_area(parts) == bounds.area else parts
+    """``[bounds]`` when ``windows`` lie together (one group, :func:`groups`), else the box of
+    each group inside ``bounds``: where windows may be drawn and patches planned."""
+    boxes = groups(clipped(windows, bounds))
+    return [bounds] if len(boxes) <= 1 else boxes
+
+
+def cells_meeting(parts: Sequence[PixelWindow], cell: int, n_rows: int, n_cols: int) -> list[tuple[int, int]]:
+    """The (row, col) of the ``cell`` px squares of an ``n_rows`` x ``n_cols`` grid from (0, 0)
+    that share a pixel with one of ``parts``, row-major (patch cores, review tiles)."""
+    found = set()
+    for w in parts:
+        rows = range(max(0, w.row_off // cell), min(n_rows, -(-w.row_end // cell)))
+        cols = range(max(0, w.col_off // cell), min(n_cols, -(-w.col_end // cell)))
+        found.update((r, c) for r in rows for c in cols)
+    return sorted(found)
 
 
 def meets(parts: Sequence[PixelWindow], window: PixelWindow) -> bool:
@@ -82,27 +93,25 @@ def scaled(parts: Sequence[PixelWindow], fx: float, fy: float, bounds: PixelWind
     return clipped(out, bounds)
 
 
-def groups(parts: Sequence[PixelWindow]) -> list[PixelWindow]:
-    """The bounding windows of the groups of ``parts`` that touch or overlap (side by side tiles
-    are one group, tiles kilometres apart one group each), row-major by their corners."""
-    parent = list(range(len(parts)))
+JOIN_PX = 1024  # parts closer than this are one group: planning the gap between them costs at most a patch
 
-    def root(k: int) -> int:
-        while parent[k] != k:
-            parent[k] = parent[parent[k]]
-            k = parent[k]
-        return k
 
-    for i, a in enumerate(parts):  # touching: the windows grown by one pixel share one
-        grown = PixelWindow(a.col_off - 1, a.row_off - 1, a.width + 2, a.height + 2)
-        for j in range(i):
-            if grown.intersection(parts[j]) is not None:
-                parent[root(i)] = root(j)
-    members: dict[int, list[PixelWindow]] = {}
-    for k, part in enumerate(parts):
-        members.setdefault(root(k), []).append(part)
-    boxes = []
-    for group in members.values():
-        c0, r0 = min(p.col_off for p in group), min(p.row_off for p in group)
-        boxes.append(PixelWindow(c0, r0, max(p.col_end for p in group) - c0, max(p.row_end for p in group) - r0))
-    return sorted(boxes, key=lambda w: (w.row_off, w.col_off))
+def groups(parts: Sequence[PixelWindow], gap: int = JOIN_PX) -> list[PixelWindow]:
+    """The bounding windows of the groups of ``parts`` less than ``gap`` px apart (side by side
+    tiles, a ragged outline or a missing tile are one group; tiles kilometres apart one group
+    each), row-major by their corners. Each part is tested against all others at once: 2,116
+    tiles take 0.15 s."""
+    if not parts:
+        return []
+    box = np.array([[p.col_off, p.row_off, p.col_end, p.row_end] for p in parts], np.int64)
+    label = np.arange(len(parts))
+    for i in range(len(parts)):  # near: the part grown by ``gap`` px meets the other
+        near = np.flatnonzero((box[:, 0] < box[i, 2] + gap) & (box[:, 2] + gap > box[i, 0]) & (box[:, 1] < box[i, 3] + gap)
+                              & (box[:, 3] + gap > box[i, 1]))
+        joined = np.unique(label[near])
+        label[np.isin(label, joined)] = joined.min()
+    out = []
+    for value in np.unique(label):
+        c0, r0, c1, r1 = *box[label == value, :2].min(axis=0).tolist(), *box[label == value, 2:].max(axis=0).tolist()
+        out.append(PixelWindow(c0, r0, c1 - c0, r1 - r0))
+    return sorted(out, key=lambda w: (w.row_off, w.col_off))

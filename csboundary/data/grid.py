@@ -8,10 +8,10 @@ where keypoint maps are averaged and patch graphs are stitched (paper IV-E).
 Cores at the right and bottom edge are clipped to the mosaic so the cores cover every mosaic
 pixel exactly once; expanded windows always have the full size and are read padded.
 
-A grid given the mosaic's footprint (tiles scattered over a city: data/footprint.py) plans only
-the patches whose cores meet it: iterating, counting and neighbours skip the rest, so a tile on
-its own is predicted as a mosaic of that one tile would be (an unplanned neighbour is treated as
-the mosaic's edge), and the gaps between tiles cost nothing. Every patch of the rectangle can
+A grid given the mosaic's footprint (groups of tiles kilometres apart: data/footprint.py) plans
+only the patches whose cores meet it (``planned``; None when the footprint is the whole mosaic):
+iterating, counting and neighbours skip the rest, an unplanned neighbour is treated as the
+mosaic's edge, and the gaps between the groups cost nothing. Every patch of the rectangle can
 still be asked for by index.
 """
 
@@ -23,6 +23,7 @@ from typing import Iterator, Sequence
 
 from affine import Affine
 
+from csboundary.data.footprint import cells_meeting
 from csboundary.data.windows import PixelWindow, pixel_to_world, window_transform, world_to_pixel
 
 
@@ -94,18 +95,8 @@ class PatchGrid:
         self.n_cols = math.ceil(width / config.core)
         self._patches: dict[tuple[int, int], Patch] = {}  # made once each: a run asks for every patch many times
         whole = footprint is None or list(footprint) == [PixelWindow(0, 0, width, height)]
-        self.planned: list[tuple[int, int]] | None = None if whole else self._meeting(footprint)  # None: every patch
+        self.planned: list[tuple[int, int]] | None = None if whole else cells_meeting(footprint, config.core, self.n_rows, self.n_cols)
         self._planned = None if self.planned is None else frozenset(self.planned)
-
-    def _meeting(self, parts: Sequence[PixelWindow]) -> list[tuple[int, int]]:
-        """The patches, row-major, whose cores share a pixel with one of ``parts``."""
-        c = self.config.core
-        found = set()
-        for w in parts:
-            rows = range(max(0, w.row_off // c), min(self.n_rows, -(-w.row_end // c)))
-            cols = range(max(0, w.col_off // c), min(self.n_cols, -(-w.col_end // c)))
-            found.update((r, k) for r in rows for k in cols)
-        return sorted(found)
 
     def __getstate__(self) -> dict:
         """Pickled without the patches made so far (a Dask worker makes its own)."""

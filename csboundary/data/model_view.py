@@ -53,10 +53,16 @@ class BandStretch:
 
 
 def fit_stretch(mosaic: Mosaic, percentiles: tuple[float, float] = STRETCH_PERCENTILES, side: int = 1024) -> BandStretch:
-    """The stretch of ``mosaic``'s valid pixels, from an overview at most ``side`` px wide."""
-    scale = min(1.0, side / max(mosaic.width, mosaic.height))
-    overview = mosaic.read(mosaic.window, scale=scale) if scale < 1 else mosaic.read(mosaic.window)
-    pixels = overview.data[:, overview.valid].astype(np.float64)
+    """The stretch of ``mosaic``'s valid pixels, from an overview at most ``side`` px wide; for
+    groups of tiles kilometres apart, from an overview of each group, all of them holding
+    about ``side`` squared pixels (an overview of their box would shrink each to a few pixels)."""
+    parts = mosaic.footprint
+    if parts == [mosaic.window]:
+        scale = min(1.0, side / max(mosaic.width, mosaic.height))
+    else:
+        scale = min(1.0, side / math.sqrt(sum(p.area for p in parts)))
+    reads = [mosaic.read(p, scale=scale) if scale < 1 else mosaic.read(p) for p in parts]
+    pixels = np.concatenate([r.data[:, r.valid] for r in reads], axis=1).astype(np.float64)
     pixels = pixels[:, np.isfinite(pixels).all(axis=0)]
     if pixels.shape[1] == 0:
         raise InputError(mosaic.tiles[0].path, "no valid pixel (all nodata, masked or NaN)")
@@ -110,9 +116,12 @@ class ResampledMosaic(Mosaic):
 
     @property
     def footprint(self) -> list[PixelWindow]:
-        """The source's footprint on this grid."""
-        parts = self.source.footprint
-        return [self.window] if parts == [self.source.window] else scaled(parts, *self.factor, self.window)
+        """The source's footprint on this grid (found once: samplers ask at every draw)."""
+        found = getattr(self, "_view_footprint", None)
+        if found is None:
+            parts = self.source.footprint
+            found = self._view_footprint = [self.window] if parts == [self.source.window] else scaled(parts, *self.factor, self.window)
+        return found
 
     def may_have_data(self, window: PixelWindow) -> bool:
         fx, fy = self.factor

@@ -339,7 +339,10 @@ class Mosaic:
             r0, r1 = round(top * scale), round(min(top + strip_rows, window.height) * scale)
             if r1 <= r0:
                 continue
-            strip = self.read(PixelWindow(window.col_off, window.row_off + top, window.width, min(strip_rows, window.height - top)))
+            part = PixelWindow(window.col_off, window.row_off + top, window.width, min(strip_rows, window.height - top))
+            if next(iter(self._tiles_in(part)), None) is None:  # between tiles kilometres apart: nothing to read
+                continue
+            strip = self.read(part)
             data[:, r0:r1], valid[r0:r1] = area_reduced(strip.data, strip.valid, width, r1 - r0)
         return WindowRead(window, data, valid)
 

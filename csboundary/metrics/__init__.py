@@ -109,8 +109,9 @@ def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", gri
     no more than its part inside); at city scale the pixel metrics, APLS and TLTS then clip to
     ``extent`` itself. When the prediction's edges carry scores, ``confidence`` says how well
     they tell true edges from false ones (:func:`csboundary.metrics.confidence.confidence_report`,
-    whole graphs). At city scale, ``review_effort`` is the simulated review at ``review`` costs
-    (:func:`csboundary.metrics.review_time.review_report`, whole graphs; per km of true boundary
+    on the graphs cut to the grown ``extent``). At city scale, ``review_effort`` is the simulated
+    review at ``review`` costs (:func:`csboundary.metrics.review_time.review_report`, the same
+    cut graphs, so its km of true boundary are the imagery's; per km of true boundary
     when ``metres_per_px`` is known); ``review=None`` skips it."""
     if extent is not None:
         window = grown(extent)

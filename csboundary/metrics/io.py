@@ -44,6 +44,7 @@ class Frame:
     width: int | None = None  # raster size when a raster defines the frame
     height: int | None = None
     source: str = "pixels"
+    footprint: tuple = ()  # the raster's groups of tiles kilometres apart (data/footprint.py); () when it is one
 
 
 def frame_metres_per_px(frame: Frame) -> float | None:
@@ -117,7 +118,8 @@ def frame_from_raster(path: str | Path) -> Frame:
     with Mosaic.open(source) as mosaic:
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         transform = mosaic.transform if mosaic.crs is not None else None
-        return Frame(transform, crs, mosaic.width, mosaic.height, str(path))
+        parts = tuple(mosaic.footprint) if mosaic.footprint != [mosaic.window] else ()
+        return Frame(transform, crs, mosaic.width, mosaic.height, str(path), parts)
 
 
 def resolve_frame(pred: Source, gt: Source, raster: str | Path | None = None, gsd: float | None = None, pixels: bool = False) -> Frame:
@@ -287,7 +289,7 @@ def graph_bounds(graph: BoundaryGraph) -> np.ndarray | None:
 def grid_for(frame: Frame, pred: BoundaryGraph, gt: BoundaryGraph) -> PatchGrid:
     """The patch grid of the frame: the raster's, or one from pixel (0, 0) covering both graphs."""
     if frame.width is not None:
-        return PatchGrid(frame.width, frame.height, frame.transform or Affine.identity())
+        return PatchGrid(frame.width, frame.height, frame.transform or Affine.identity(), footprint=list(frame.footprint) or None)
     boxes = [b for b in (graph_bounds(pred), graph_bounds(gt)) if b is not None]
     width = math.ceil(max([b[2] for b in boxes], default=0))
     height = math.ceil(max([b[3] for b in boxes], default=0))

@@ -208,12 +208,6 @@ class OnnxNetworks:
         networks.tuned_for = machine_key(networks.thread_count)
         return networks
 
-    @classmethod
-    def for_weights(cls, weights: Path, digest: str, fpn, afanet, int8: bool = False) -> "OnnxNetworks":
-        """:meth:`for_networks`, for callers that name the weights file the networks came from
-        and its SHA-256 ``digest``: neither decides the cache, the networks do."""
-        return cls.for_networks(fpn, afanet, int8)
-
     def fpn_seconds(self) -> dict[str, float]:
         """The fastest timed run of each network at its chosen level on this machine, from the
         tuning record (``fpn``, ``fpn-int8`` when made, ``afanet``)."""
@@ -251,9 +245,9 @@ class OnnxNetworks:
 
     def fpn_logits(self, images: np.ndarray, int8: bool = False) -> np.ndarray:
         """(B, 4, 1100, 1100) float32 in [0, 1] -> (B, C, 1100, 1100) logits; ``int8``: from the
-        quantized FPN (made by ``for_weights(int8=True)``)."""
+        quantized FPN (made by ``for_networks(int8=True)``)."""
         if int8 and self.fpn_int8_model is None:
-            raise ValueError("no int8 FPN: it is made by for_weights(int8=True) (PatchPredictor.use_precision('int8') before use_engine)")
+            raise ValueError("no int8 FPN: it is made by for_networks(int8=True) (PatchPredictor.use_precision('int8') before use_engine)")
         return self._session("fpn-int8" if int8 else "fpn").run(None, {"image": np.ascontiguousarray(images, np.float32)})[0]
 
     def afanet_logits(self, small: np.ndarray, rois: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from csboundary.data.atomic import atomic_path
+from csboundary.data.footprint import cells_meeting
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow, pixel_to_world, world_to_pixel
 from csboundary.graph.boundaries import graph_boundaries
@@ -40,14 +41,9 @@ def pyramid_levels(width: int, height: int, tile: int = TILE) -> int:
 
 
 def pyramid_tiles(mosaic: Mosaic) -> list[tuple[int, int]]:
-    """The (row, col) of every level-0 tile under the mosaic's footprint, row-major: tiles
-    scattered over a city get the tiles over them, not over the gaps between them."""
-    rows, cols = math.ceil(mosaic.height / TILE), math.ceil(mosaic.width / TILE)
-    found = set()
-    for w in mosaic.footprint:
-        found.update((r, c) for r in range(w.row_off // TILE, min(rows, -(-w.row_end // TILE)))
-                     for c in range(w.col_off // TILE, min(cols, -(-w.col_end // TILE))))
-    return sorted(found)
+    """The (row, col) of every level-0 tile under the mosaic's footprint, row-major: groups of
+    tiles kilometres apart get the tiles over them, not over the gaps between them."""
+    return cells_meeting(mosaic.footprint, TILE, math.ceil(mosaic.height / TILE), math.ceil(mosaic.width / TILE))
 
 
 def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:

@@ -27,7 +27,7 @@ def test_scattered_tiles_plan_only_their_patches_and_write_sparse_maps(tmp_path)
     out = tmp_path / "out"
     done = run_cli("predict", str(folder), "--out", str(out), "--weights", str(bundle), "--device", "cpu", "--quiet", "--write-maps")
     assert done.returncode == 0, done.stderr
-    assert "3 patches under 3 scattered tiles of a 41x41 grid" in done.stderr  # 1,681 patches in the box
+    assert "3 patches under 3 groups of tiles kilometres apart, of a 41x41 grid" in done.stderr  # 1,681 patches in the box
     summary = json.loads((out / "summary.json").read_text())
     assert summary["patches"] == 3 and summary["patches_without_imagery"] == 0
     assert summary["area_km2"] == round(3 * (250 * GSD) ** 2 / 1e6, 6)  # the imagery's area, not the box's

@@ -43,11 +43,12 @@ def test_union_area_counts_overlaps_once():
     assert union_area([]) == 0 and union_area([W(3, 3, 0, 5)]) == 0
 
 
-def test_a_filled_box_is_its_own_footprint_and_gaps_leave_the_parts():
-    box = W(0, 0, 20, 10)
-    assert footprint([W(0, 0, 10, 10), W(10, 0, 10, 10)], box) == [box]
-    assert footprint([W(0, 0, 10, 10), W(12, 0, 8, 10)], box) == [W(0, 0, 10, 10), W(12, 0, 8, 10)]
-    assert footprint([W(-5, 0, 10, 10), W(15, 0, 10, 10)], box) == [W(0, 0, 5, 10), W(15, 0, 5, 10)]  # clipped
+def test_tiles_together_are_their_box_and_groups_far_apart_are_their_own():
+    box = W(0, 0, 5000, 3000)
+    assert footprint([W(0, 0, 1000, 1000), W(1000, 0, 1000, 1000)], box) == [box]
+    assert footprint([W(0, 0, 1000, 1000), W(1500, 1500, 1000, 1000)], box) == [box]  # a missing tile: 500 px apart, one group
+    assert footprint([W(-5, 0, 1000, 1000), W(100, 500, 1000, 1000), W(4000, 2000, 1000, 1000)], box) == [
+        W(0, 0, 1100, 1500), W(4000, 2000, 1000, 1000)]  # 2,900 px apart: two groups, each its box, clipped
 
 
 def test_one_part_draws_what_two_integers_over_it_always_drew():
@@ -152,10 +153,12 @@ def test_a_picture_without_crs_keeps_its_rows_going_down_when_resampled(tmp_path
         assert xs.tolist() == pytest.approx([0, 300]) and ys.tolist() == pytest.approx([0, 200])  # the picture's own pixels
 
 
-def test_groups_join_touching_tiles_and_part_scattered_ones():
+def test_groups_join_tiles_less_than_the_gap_apart_and_part_the_others():
     side_by_side = [W(0, 0, 10, 10), W(10, 0, 10, 10), W(0, 10, 10, 10)]
     assert groups(side_by_side) == [W(0, 0, 20, 20)]
     assert groups([W(5000, 0, 10, 10), W(0, 0, 10, 10), W(10, 10, 5, 5)]) == [W(0, 0, 15, 15), W(5000, 0, 10, 10)]
+    chain = [W(0, 0, 10, 10), W(1030, 0, 10, 10), W(2060, 0, 10, 10)]  # each 1,020 px from the next: one group through the middle
+    assert groups(chain) == [W(0, 0, 2070, 10)] and len(groups(chain, gap=1000)) == 3
 
 
 def test_a_labelled_city_of_scattered_tiles_trains_as_one_city_per_group(tmp_path):
@@ -185,3 +188,24 @@ def test_a_labelled_city_of_scattered_tiles_trains_as_one_city_per_group(tmp_pat
     finally:
         for part in parts:
             part.close()
+
+
+def test_a_16_bit_stretch_and_the_evaluation_grid_follow_the_groups(tmp_path):
+    """A stretch from an overview of each group (the box's overview shrinks each tile to a few
+    pixels), and evaluate's patch grid planned over the raster's groups, not its box."""
+    from csboundary.data.model_view import fit_stretch
+    from csboundary.graph import BoundaryGraph
+    from csboundary.metrics.io import frame_from_raster, grid_for
+
+    folder = tmp_path / "t"
+    folder.mkdir()
+    for k, (east, value) in enumerate([(0, 1000), (60_000, 3000)]):
+        write_geotiff(folder / f"t{k}.tif", np.full((4, 200, 200), value, np.uint16), Affine(0.152, 0, 500000.0 + east * 0.152, 0, -0.152,
+                                                                                            4400000.0), "EPSG:32618")
+    with Mosaic.open(folder) as mosaic:
+        stretch = fit_stretch(mosaic)
+    assert stretch.low == pytest.approx((1000,) * 4) and stretch.high == pytest.approx((3000,) * 4)
+    frame = frame_from_raster(folder)
+    assert len(frame.footprint) == 2
+    empty = BoundaryGraph(np.zeros((0, 2)), np.zeros((0, 2), np.int64))
+    assert len(grid_for(frame, empty, empty)) == 2  # of a 1 x 61 grid

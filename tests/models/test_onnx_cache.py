@@ -145,3 +145,34 @@ def test_a_second_exporter_waits_for_the_first(tmp_path):
         assert path.read_bytes() == b"made"
     worker.join()
     assert order == ["first in", "first out", "second in"]
+
+
+def test_an_unwritable_cache_runs_auto_in_torch_with_a_warning(tmp_path, monkeypatch):
+    """A read-only home (the cache cannot be made) is no reason to stop a prediction that
+    --engine auto can run in torch; --engine onnx stops with the cache's one line."""
+    from csboundary.errors import InputError, InputWarning
+    from csboundary.models.onnx_session import CACHE_ENV
+    from csboundary.pipeline.prediction.patch import load_predictor
+
+    (tmp_path / "file").write_text("not a folder")
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "file"))
+    with pytest.warns(InputWarning, match="running the networks in torch"):
+        predictor = load_predictor(None, "cpu", engine="auto")
+    assert predictor.engine == "torch"
+    with pytest.raises(InputError, match="cannot hold the cached ONNX exports"):
+        load_predictor(None, "cpu", engine="onnx")
+
+
+def test_a_bad_input_is_never_taken_for_a_full_disk(tmp_path, monkeypatch):
+    """With almost no space free, a write that failed on a bug or a bad input keeps its own error."""
+    import shutil
+    from collections import namedtuple
+
+    from csboundary.data.atomic import is_disk_full
+    from csboundary.errors import InputError
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: usage(10**9, 10**9 - 10, 10))
+    assert not is_disk_full(InputError("x.gpkg", "not a GeoPackage"), tmp_path)
+    assert not is_disk_full(TypeError("bad argument"), tmp_path)
+    assert is_disk_full(RuntimeError("Failed to commit transaction"), tmp_path)  # GDAL's words for a full disk

@@ -13,7 +13,8 @@ import numpy as np
 
 from csboundary.config import Config
 from csboundary.data import city as layout
-from csboundary.data.footprint import draw_window, groups, union_area
+from csboundary.data.folder_lock import folder_lock
+from csboundary.data.footprint import draw_window, union_area
 from csboundary.data.ground_truth import read_complete_area, read_ground_truth, read_road_surface
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow
@@ -25,6 +26,8 @@ from csboundary.labels.writer import CityLabels
 from csboundary.models.augmentation import AugmentConfig, draw_geometry, photometric, source_side, warp
 from csboundary.models.augmentation import flip_rotate90 as augment  # also the baselines' flips
 from csboundary.models.maps import unit_bands
+
+NO_COMPLETE_AREA = "its complete area does not cover any of its imagery"
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,11 @@ class CitySpec:
 
         path = self.path(cache)
         if not layout.is_city_dir(path):
-            synthesize_city(path, self.seed, self.split, tuple(self.tiles), style_config(self.style, tile_size=self.tile_size), progress)
+            path.mkdir(parents=True, exist_ok=True)
+            with folder_lock(path, wait=True):  # a training building this city now: wait for it, then use its city
+                if not layout.is_city_dir(path):
+                    synthesize_city(path, self.seed, self.split, tuple(self.tiles), style_config(self.style, tile_size=self.tile_size),
+                                    progress)
         return path
 
 
@@ -133,13 +140,15 @@ class TrainingCity:
         self.path = Path(city_dir)
         self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
         if window is not None:  # one group of a city's scattered tiles (:meth:`parts`)
-            self.mosaic = self.mosaic.crop(window)
+            whole, self.mosaic = self.mosaic, self.mosaic.crop(window)
+            whole.close()
         gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
         self.surface = _polygon_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
         self.complete = _polygon_raster(read_complete_area(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
         if self.complete is not None and not self.complete.any():
-            raise InputError(city_dir, "its complete area does not cover any of its imagery")
+            self.close()
+            raise InputError(city_dir, NO_COMPLETE_AREA)
         self.config = config
         self.maps: np.ndarray | None = None  # (2, H, W) FPN probabilities, set before AfANet training
 
@@ -150,15 +159,19 @@ class TrainingCity:
         raster of the city (complete area, road surface, AfANet's maps) spans the gaps. A group
         that the complete area misses is left out; the city is refused when all are."""
         with Mosaic.open(layout.tiles_dir(city_dir)) as mosaic:
-            boxes = groups(mosaic.footprint)
+            boxes = mosaic.footprint
         if len(boxes) == 1:
             return [cls(city_dir, config)]
         found, refused = [], None
         for box in boxes:
             try:
                 found.append(cls(city_dir, config, box))
-            except InputError as exc:  # this group has no complete area: nothing known to learn there
-                refused = exc
+            except InputError as exc:
+                if not exc.problem.startswith(NO_COMPLETE_AREA):
+                    for part in found:
+                        part.close()
+                    raise
+                refused = exc  # the reviewer marked nothing complete in this group: nothing known to learn there
         if not found:
             raise refused
         return found

@@ -43,6 +43,19 @@ from csboundary.models.onnx_engine import OnnxNetworks
 from csboundary.models.onnx_session import WINDOW, onnxruntime_available
 
 
+def export_cache_usable() -> bool:
+    """Whether the ONNX export cache can be made and written; when not, ``--engine auto`` runs
+    torch and says why in a warning (``--engine onnx`` stops with the cache's one line)."""
+    from csboundary.models.onnx_engine import cache_dir
+
+    try:
+        cache_dir()
+    except InputError as exc:
+        warnings.warn(f"{exc}; running the networks in torch", InputWarning, stacklevel=3)
+        return False
+    return True
+
+
 @dataclass
 class PatchPredictor:
     """The trained networks as the city pipeline's :class:`~csboundary.pipeline.prediction.city.PatchModel`,
@@ -78,9 +91,10 @@ class PatchPredictor:
 
     def use_engine(self, engine: str, weights: str | Path | None = None, fpn_weights: str | Path | None = None) -> str:
         """``torch``, ``onnx`` (ONNX Runtime, CPU only) or ``auto`` (onnx on a CPU when
-        onnxruntime is installed); returns the engine chosen. ``weights`` (and ``fpn_weights``)
-        are the files the networks came from (default: the shipped bundle): the export is cached
-        under their hash."""
+        onnxruntime is installed, and its export cache can be written: else torch, with a
+        warning); returns the engine chosen. The export is cached by the networks' content
+        (models/onnx_engine.py); ``weights`` and ``fpn_weights``, the files they came from, are
+        kept for callers and decide nothing."""
         if engine not in ("auto", "torch", "onnx"):
             raise InputError("--engine", f"unknown engine {engine!r} (auto, torch or onnx)")
         on_cpu = self.device.type == "cpu"
@@ -88,6 +102,8 @@ class PatchPredictor:
             raise InputError("--engine", f"the onnx engine runs on the CPU, not {self.device}; use --device cpu or --engine torch")
         if engine == "onnx" and not onnxruntime_available():
             raise InputError("--engine", "onnxruntime is not installed (pip install 'csboundary[onnx]')")
+        if engine == "auto" and on_cpu and onnxruntime_available() and not export_cache_usable():
+            engine = "torch"
         if engine == "torch" or (engine == "auto" and not (on_cpu and onnxruntime_available())):
             if self.precision == "int8":
                 raise InputError("--precision", "int8 runs the FPN on ONNX Runtime: use --engine onnx or auto "
@@ -96,15 +112,7 @@ class PatchPredictor:
                 self.precision, self.precision_choice = "float32", "float32: the torch engine runs the FPN in float32"
             self.onnx = None
             return "torch"
-        from csboundary.models.checkpoint import file_sha256
-
-        path = Path(weights) if weights else shipped_weights()
-        digest = file_sha256(path)
-        if fpn_weights:  # both files decide the networks
-            import hashlib
-
-            digest = hashlib.sha256((digest + file_sha256(fpn_weights)).encode()).hexdigest()
-        self.onnx = OnnxNetworks.for_weights(path, digest, self.fpn, self.afanet, int8=self.precision in ("int8", "auto"))
+        self.onnx = OnnxNetworks.for_networks(self.fpn, self.afanet, int8=self.precision in ("int8", "auto"))
         if self.precision == "auto":
             self.precision, self.precision_choice = faster_fpn(self.onnx.fpn_seconds())
         if self.precision == "int8":
