@@ -154,8 +154,8 @@ def listing(folder: Path) -> list[str]:
 
 
 @pytest.mark.parametrize("name, kind, arg, extra", [
-    ("boundaries.gpkg", "gpkg", "1", ()),  # GDAL's own error, the edges layer half-way through the GeoPackage
-    ("graph.json", "file", "graph.json", ()),  # the GeoJSON and summary.json are written the same way (atomic_path)
+    ("boundaries.gpkg", "gpkg", "1", ()),  # GDAL's own error, the edges layer half-way through the GeoPackage (the JSON files:
+    # atomic_path, tests/data/test_atomic.py and the previous-prediction test below)
     ("map.osm", "lanelet2", "-", ("--lanelet2",)),
 ])
 def test_a_full_disk_while_writing_an_output_names_it_and_keeps_the_work(world, tmp_path, name, kind, arg, extra):

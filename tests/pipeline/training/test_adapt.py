@@ -29,6 +29,12 @@ def city(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory) -> Path:
+    """One cache of synthetic cities for the module's runs: each builds the same cities."""
+    return tmp_path_factory.mktemp("adapt-synthetic")
+
+
 def _geotiff(path: Path, size: int) -> Path:
     data = np.random.default_rng(0).integers(0, 255, (3, size, size), dtype=np.uint8)
     with rasterio.open(path, "w", driver="GTiff", width=size, height=size, count=3, dtype="uint8", crs="EPSG:32618",
@@ -75,12 +81,12 @@ def test_the_command_refuses_bad_input_in_one_line(tmp_path):
                                                   "a set or a prediction folder"]
 
 
-def test_a_tiny_adapt_writes_a_bundle_with_provenance_and_resumes_without_training_again(city, tmp_path):
+def test_a_tiny_adapt_writes_a_bundle_with_provenance_and_resumes_without_training_again(city, synthetic, tmp_path):
     from csboundary.models.checkpoint import file_sha256, load_checkpoint, shipped_weights
     from csboundary.pipeline.prediction.patch import load_predictor
 
     budget = AdaptBudget(fpn_steps=2, afanet_steps=2, synthetic_cities=1, crop=128)
-    kwargs = dict(work=tmp_path / "work", budget=budget, cache=tmp_path / "synthetic", device="cpu", progress=False)
+    kwargs = dict(work=tmp_path / "work", budget=budget, cache=synthetic, device="cpu", progress=False)
     done = adapt([city], tmp_path / "adapted.pt", **kwargs)
     bundle = load_checkpoint(tmp_path / "adapted.pt", ("bundle",))
     record = bundle["provenance"]["adapt"]
@@ -103,13 +109,13 @@ def test_a_tiny_adapt_writes_a_bundle_with_provenance_and_resumes_without_traini
         adapt([city], tmp_path / "other.pt", method=AdaptConfig(mix=False), **kwargs)
 
 
-def test_adapt_and_finetune_take_each_others_bundles(city, tmp_path):
+def test_adapt_and_finetune_take_each_others_bundles(city, synthetic, tmp_path):
     """Either order works: finetune starts from an adapted bundle, adapt from a fine-tuned one,
     and each provenance names the bundle it started from."""
     from csboundary.models.checkpoint import file_sha256, load_checkpoint
     from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
 
-    cache = tmp_path / "synthetic"
+    cache = synthetic
     adapt([city], tmp_path / "adapted.pt", work=tmp_path / "a", budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1,
                                                                                    crop=128),
           cache=cache, device="cpu", progress=False)
