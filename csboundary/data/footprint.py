@@ -63,11 +63,6 @@ def cells_meeting(parts: Sequence[PixelWindow], cell: int, n_rows: int, n_cols: 
     return sorted(found)
 
 
-def meets(parts: Sequence[PixelWindow], window: PixelWindow) -> bool:
-    """Whether ``window`` shares a pixel with any of ``parts``."""
-    return any(window.intersection(p) is not None for p in parts)
-
-
 def draw_window(rng: np.random.Generator, parts: Sequence[PixelWindow], size: int) -> PixelWindow:
     """A ``size`` square drawn where the imagery is: a part chosen in proportion to its area, then
     every window inside it alike (a part smaller than ``size`` is covered from its top-left).

@@ -6,6 +6,7 @@ windows anywhere in a city, not fixed grid patches: more variety for the same im
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -120,7 +121,7 @@ def city_probabilities(cities: list, extra: int, extra_share: float, by_area: bo
     extra group as a whole ``extra_share`` of the draws (when both groups exist and it is > 0).
     The parts of one city (:meth:`TrainingCity.parts`) count as one city, and ``extra`` counts
     the extra cities' parts."""
-    shared = {c.path: sum(d.path == c.path for d in cities) for c in cities}
+    shared = Counter(c.path for c in cities)
     weights = np.array([union_area(c.mosaic.footprint) if by_area else 1 / shared[c.path] for c in cities], float)
     if extra_share <= 0 or not 0 < extra < len(cities):
         return weights / weights.sum()
@@ -136,12 +137,10 @@ class TrainingCity:
     the area, and AfANet learns only from vertices inside it.
     """
 
-    def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig(), window: PixelWindow | None = None):
+    def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig(), mosaic: Mosaic | None = None):
         self.path = Path(city_dir)
-        self.mosaic = Mosaic.open(layout.tiles_dir(city_dir))
-        if window is not None:  # one group of a city's scattered tiles (:meth:`parts`)
-            whole, self.mosaic = self.mosaic, self.mosaic.crop(window)
-            whole.close()
+        # ``mosaic``: the city's imagery already open, or one group of its scattered tiles (:meth:`parts`)
+        self.mosaic = mosaic if mosaic is not None else Mosaic.open(layout.tiles_dir(city_dir))
         gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
         self.surface = _polygon_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
@@ -158,20 +157,22 @@ class TrainingCity:
         scattered over a city, data/footprint.py), one per group of touching tiles, so that no
         raster of the city (complete area, road surface, AfANet's maps) spans the gaps. A group
         that the complete area misses is left out; the city is refused when all are."""
-        with Mosaic.open(layout.tiles_dir(city_dir)) as mosaic:
-            boxes = mosaic.footprint
-        if len(boxes) == 1:
-            return [cls(city_dir, config)]
+        whole = Mosaic.open(layout.tiles_dir(city_dir))  # opened once: each group is a crop of it
+        if len(whole.footprint) == 1:
+            return [cls(city_dir, config, whole)]
         found, refused = [], None
-        for box in boxes:
-            try:
-                found.append(cls(city_dir, config, box))
-            except InputError as exc:
-                if not exc.problem.startswith(NO_COMPLETE_AREA):
-                    for part in found:
-                        part.close()
-                    raise
-                refused = exc  # the reviewer marked nothing complete in this group: nothing known to learn there
+        try:
+            for box in whole.footprint:
+                try:
+                    found.append(cls(city_dir, config, whole.crop(box)))
+                except InputError as exc:
+                    if not exc.problem.startswith(NO_COMPLETE_AREA):
+                        for part in found:
+                            part.close()
+                        raise
+                    refused = exc  # the reviewer marked nothing complete in this group: nothing known to learn there
+        finally:
+            whole.close()  # the crops open their own files
         if not found:
             raise refused
         return found
