@@ -56,6 +56,8 @@ class TrainConfig(Config):
     # extra loss weight on keypoint/boundary negatives where the image has an edge (roofs, cars, lots); 0 = off
     hard_negative_weight: float = 0.0
     hard_negative_margin_px: int = 6  # pixels this close to a true boundary are never hard negatives
+    # pretrained FPN encoder: weight of the distance of its bottleneck features to the frozen ImageNet encoder's (DAFormer); 0 = off
+    feature_distance_weight: float = 0.0
     # afanet
     afanet: dict = field(default_factory=dict)  # AfANetConfig overrides
     fpn_weights: str = ""  # the trained FPN whose maps and vertices AfANet learns from

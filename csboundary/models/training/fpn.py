@@ -15,6 +15,7 @@ from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.style_mixing import add_style_mixing
 from csboundary.models.training.config import TrainConfig, extra_parts, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity, city_probabilities
+from csboundary.models.training.feature_distance import FeatureAnchor
 from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
 
 
@@ -155,6 +156,7 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     valid_city = TrainingCity(config.valid_city.ensure(config.cache, progress))
     model, model_config = starting_fpn(config, device)
     add_style_mixing(model, config.style_mix, config.style_mix_alpha)
+    anchor = FeatureAnchor(model) if config.feature_distance_weight > 0 else None
     groups = [{"params": [p for p in model.parameters() if p.requires_grad],
                "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
     optimizer = torch.optim.Adam(groups, lr=config.lr, weight_decay=config.weight_decay)
@@ -178,11 +180,17 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
         image, target, valid = _fpn_batch(train_cities, rng, config, augmentation, with_surface)
         with autocast(config, device):
             logits = model(image.to(device))
-        return fpn_loss(logits.float(), target.to(device), valid.to(device), config, image.to(device)), {}
+        loss = fpn_loss(logits.float(), target.to(device), valid.to(device), config, image.to(device))
+        if anchor is None:
+            return loss, {}
+        distance = anchor.take()
+        return loss + config.feature_distance_weight * distance, {"feature_distance": float(distance)}
 
     try:
         return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
                         lambda step: validate_fpn(model, valid_batches, device, config), progress)
     finally:
+        if anchor is not None:
+            anchor.close()
         for city in (*train_cities, valid_city):
             city.close()
