@@ -64,6 +64,9 @@ SURFACE_HELP = ("Road-surface check: an edge needs this mean road-surface probab
                 "(0 = off; the FPN needs a surface head).")
 GATE_HELP = ("Surface gate: keypoint and boundary maps are kept only within this many pixels of a change of the road surface "
              "(roofs, lots and rows of parked cars lose their outlines; 0 = off; the FPN needs a surface head).")
+OUTLINE_HELP = ("Roadway outline: where the road-surface map is at least this sure on one side and at most 1 minus it on the "
+                "other, and the boundary map backs it, the roadway's outline replaces the edges along it (0 = off; the FPN needs a "
+                "surface head).")
 CONFIDENCE_HELP = ("Drop the city graph's edges whose confidence (the calibrated probability that an edge is a true boundary) is "
                    "below this (0 = keep all; docs/confidence.md shows precision and recall against it).")
 DEGREE_HELP = "Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."
@@ -80,7 +83,8 @@ def _graph_option(flag: str, metavar: str, help: str, low: float = 0.0, high: fl
 GRAPH_HELP = {"edge_threshold": ("P", THRESHOLD_HELP), "min_edge_support": ("P", SUPPORT_HELP), "max_edge_length": ("PX", LENGTH_HELP),
               "max_edge_gap": ("PX", GAP_HELP), "fill_min_length": ("PX", FILL_HELP), "join_ends": ("PX", JOIN_HELP),
               "attach_ends": ("PX", ATTACH_HELP), "attach_backed": ("PX", ATTACH_BACKED_HELP), "surface_check": ("P", SURFACE_HELP),
-              "surface_gate": ("PX", GATE_HELP), "max_degree": ("N", DEGREE_HELP), "min_fragment_length": ("PX", FRAGMENT_HELP),
+              "surface_gate": ("PX", GATE_HELP), "roadway_outline": ("P", OUTLINE_HELP), "max_degree": ("N", DEGREE_HELP),
+              "min_fragment_length": ("PX", FRAGMENT_HELP),
               "min_confidence": ("P", CONFIDENCE_HELP)}
 GRAPH_OPTIONS = {name: _graph_option("--" + name.replace("_", "-"), metavar, help, low=GRAPH_OVERRIDE_RANGES[name][0],
                                      high=GRAPH_OVERRIDE_RANGES[name][1], kind=int if name == "max_degree" else float)

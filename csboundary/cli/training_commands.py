@@ -67,7 +67,8 @@ def bundle_weights(
         ("edge_threshold", graph.edge_threshold), ("max_degree", graph.max_degree), ("min_support", graph.min_edge_support),
         ("max_length_px", graph.max_edge_length), ("min_fragment_px", graph.min_fragment_length), ("max_gap_px", graph.max_edge_gap),
         ("fill_min_length_px", graph.fill_min_length), ("surface_strong", graph.surface_check), ("join_max_px", graph.join_ends),
-        ("attach_max_px", graph.attach_ends), ("join_attach_px", graph.attach_backed), ("surface_gate_px", graph.surface_gate))
+        ("attach_max_px", graph.attach_ends), ("join_attach_px", graph.attach_backed), ("surface_gate_px", graph.surface_gate),
+        ("outline_sure", graph.roadway_outline))
         if value is not None}
     if given.get("max_degree") == 0:
         given["max_degree"] = None  # 0 = no cap, as when predicting

@@ -20,6 +20,7 @@ from csboundary.errors import InputError
 from csboundary.graph.crossings import CrossingConfig
 from csboundary.graph.edge_support import EdgeSupportConfig
 from csboundary.graph.end_joining import EndJoinConfig
+from csboundary.graph.outline_fusion import OutlineConfig
 from csboundary.graph.skeleton_fill import FillConfig
 from csboundary.graph.surface_check import SurfaceCheckConfig
 from csboundary.graph.surface_gate import SurfaceGateConfig
@@ -33,12 +34,14 @@ INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64,
                       "join_attach_px": (0.0, 1e6, False), "attach_max_px": (0.0, 1e6, False),
                       "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False),
                       "surface_both_sides": (0.0, 1.0, False), "surface_gate_px": (0.0, 200.0, False),
-                      "surface_gate_full": (0.01, 1.0, False), "surface_gate_min_piece_px": (0, 10**8, True)}
+                      "surface_gate_full": (0.01, 1.0, False), "surface_gate_min_piece_px": (0, 10**8, True),
+                      "outline_sure": (0.0, 1.0, False), "outline_support": (0.0, 1.0, False), "outline_min_length_px": (0.0, 1e6, False)}
 SUPPORT_SETTINGS = ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level")  # bundle key = EdgeSupportConfig field
 SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px",
                     "surface_both_sides": "both_sides"}  # bundle key -> SurfaceCheckConfig field
 GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": ("full_change", float),
                  "surface_gate_min_piece_px": ("min_piece_px", int)}  # bundle key -> SurfaceGateConfig field and type
+OUTLINE_SETTINGS = {"outline_sure": "sure", "outline_support": "support", "outline_min_length_px": "min_length_px"}  # -> OutlineConfig
 
 
 # each graph option's range (low, high; None: no upper bound), checked by GraphOverrides for the
@@ -46,8 +49,8 @@ GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": (
 GRAPH_OVERRIDE_RANGES = {"edge_threshold": (0.0, 1.0), "min_edge_support": (0.0, 1.0), "max_edge_length": (0.0, None),
                          "max_edge_gap": (0.0, None), "fill_min_length": (0.0, None), "join_ends": (0.0, None),
                          "attach_ends": (0.0, None), "attach_backed": (0.0, None), "surface_check": (0.0, 1.0),
-                         "surface_gate": (0.0, 200.0), "max_degree": (0, None), "min_fragment_length": (0.0, None),
-                         "min_confidence": (0.0, 1.0)}
+                         "surface_gate": (0.0, 200.0), "roadway_outline": (0.0, 1.0), "max_degree": (0, None),
+                         "min_fragment_length": (0.0, None), "min_confidence": (0.0, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,7 @@ class GraphOverrides:
     attach_backed: float | None = None
     surface_check: float | None = None
     surface_gate: float | None = None
+    roadway_outline: float | None = None
     max_degree: int | None = None
     min_fragment_length: float | None = None
     min_confidence: float | None = None
@@ -95,7 +99,8 @@ class GraphSettings:
     edges the boundary map must back), ``crossings`` (extra vertices on the grid lines), ``fill``
     (boundary the graph missed, from the segmentation skeleton), ``surface`` (edges need roadway
     beside them), ``join`` (dangling ends joined across supported gaps), ``gate`` (keypoint and
-    boundary maps only where the surface changes). The city graph: ``min_fragment_px``
+    boundary maps only where the surface changes), ``outline`` (the roadway's sure outline in place
+    of the edges along it, :mod:`csboundary.graph.outline_fusion`). The city graph: ``min_fragment_px``
     (connected pieces shorter than this are dropped), ``attach_px`` (dangling ends joined to the
     line ahead within this), ``min_confidence`` (edges less sure than this are dropped). The
     defaults leave every optional step off."""
@@ -109,14 +114,15 @@ class GraphSettings:
     surface: SurfaceCheckConfig = field(default_factory=SurfaceCheckConfig)
     join: EndJoinConfig = field(default_factory=EndJoinConfig)
     gate: SurfaceGateConfig = field(default_factory=SurfaceGateConfig)
+    outline: OutlineConfig = field(default_factory=OutlineConfig)
     min_fragment_px: float = 0.0
     attach_px: float = 0.0
     min_confidence: float = 0.0
 
     @property
     def reads_surface(self) -> bool:
-        """Whether a step reads the FPN's road-surface map (the check or the gate)."""
-        return self.surface.active or self.gate.active
+        """Whether a step reads the FPN's road-surface map (the check, the gate or the outline)."""
+        return self.surface.active or self.gate.active or self.outline.active
 
     @classmethod
     def from_bundle(cls, settings, path: str | Path) -> "GraphSettings":
@@ -132,6 +138,7 @@ class GraphSettings:
             surface=SurfaceCheckConfig(**{name: float(settings[key]) for key, name in SURFACE_SETTINGS.items() if key in settings}),
             join=EndJoinConfig(max_px=float(settings.get("join_max_px", 0.0)), attach_px=float(settings.get("join_attach_px", 0.0))),
             gate=SurfaceGateConfig(**{name: kind(settings[key]) for key, (name, kind) in GATE_SETTINGS.items() if key in settings}),
+            outline=OutlineConfig(**{name: float(settings[key]) for key, name in OUTLINE_SETTINGS.items() if key in settings}),
             min_fragment_px=float(settings.get("min_fragment_px", 0.0)), attach_px=float(settings.get("attach_max_px", 0.0)),
         )
 
@@ -158,6 +165,8 @@ class GraphSettings:
             settings = replace(settings, surface=replace(settings.surface, strong=options.surface_check))
         if options.surface_gate is not None:
             settings = replace(settings, gate=replace(settings.gate, radius_px=options.surface_gate))
+        if options.roadway_outline is not None:
+            settings = replace(settings, outline=replace(settings.outline, sure=options.roadway_outline))
         if options.max_degree is not None:
             settings = replace(settings, max_degree=options.max_degree or None)
         if options.min_fragment_length is not None:

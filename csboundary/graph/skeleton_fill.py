@@ -94,14 +94,14 @@ def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillC
         mask &= inside
     if not mask.any():
         return graph
-    found = _stretch_graph(mask, config.simplify_px)
+    found = stretch_graph(mask, config.simplify_px)
     if found.n_edges == 0:
         return graph
-    target = _snap_targets(found, graph, config.snap_px)
-    return _merged(graph, found, target, boundary, config.split_px)
+    target = snap_targets(found, graph, config.snap_px)
+    return merged_stretches(graph, found, target, boundary, config.split_px)
 
 
-def _stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
+def stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
     """The graph of the stretches (:func:`skeleton_graph`, nothing pruned), worked out on the
     stretches' bounding box, not the whole window."""
     rows, cols = nonzero_pixels(mask)
@@ -114,7 +114,7 @@ def _stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
                          edge_polylines=[line + shift for line in found.edge_polylines], edge_scores=found.edge_scores)
 
 
-def _snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) -> np.ndarray:
+def snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) -> np.ndarray:
     """(n,) for each vertex of the filled graph: the graph vertex its free end joins, or -1."""
     target = np.full(found.n_vertices, -1)
     degree = np.bincount(found.edges.ravel(), minlength=found.n_vertices)
@@ -127,15 +127,17 @@ def _snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) ->
     return target
 
 
-def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boundary: np.ndarray, split_px: float) -> BoundaryGraph:
-    """One graph: ``graph``'s vertices and edges, then the filled ones (free ends joined to their
-    targets, the polyline extended to the target vertex), each cut into pieces (see :func:`pieces`)."""
+def merged_stretches(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boundary: np.ndarray, split_px: float,
+                     kind: str = SKELETON) -> BoundaryGraph:
+    """One graph: ``graph``'s vertices and edges, then the filled ones of kind ``kind`` (free ends
+    joined to their targets, the polyline extended to the target vertex), each cut into pieces
+    (see :func:`pieces`) and scored by the mean of ``boundary`` along it."""
     n = graph.n_vertices
     new = np.flatnonzero(target < 0)
     index = np.where(target >= 0, target, 0)
     index[new] = n + np.arange(len(new))
     vertices = list(graph.vertices) + list(found.vertices[new])
-    kinds = list(graph.vertex_kinds or ["isolated"] * n) + [SKELETON] * len(new)
+    kinds = list(graph.vertex_kinds or ["isolated"] * n) + [kind] * len(new)
     edges, lines, scores = [], [], []
     for k, (a, b) in enumerate(found.edges):
         u, v = int(index[a]), int(index[b])
@@ -147,7 +149,7 @@ def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boun
         ids = [u] + list(range(len(vertices), len(vertices) + len(parts) - 1)) + [v]
         for part in parts[:-1]:
             vertices.append(part[-1])
-            kinds.append(SKELETON)
+            kinds.append(kind)
         for i, j, part in zip(ids[:-1], ids[1:], parts):
             edges.append((i, j))
             lines.append(part)
@@ -159,7 +161,7 @@ def _merged(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boun
         np.array(vertices, float).reshape(-1, 2),
         np.concatenate([graph.edges, np.array(edges, np.int64)]),
         vertex_kinds=kinds,
-        edge_kinds=list(graph.edge_kinds or ["normal"] * n_old) + [SKELETON] * len(edges),
+        edge_kinds=list(graph.edge_kinds or ["normal"] * n_old) + [kind] * len(edges),
         edge_polylines=list(graph.edge_polylines or [None] * n_old) + lines,
         edge_scores=np.concatenate([graph.edge_scores if graph.edge_scores is not None else np.ones(n_old), scores]),
         transform=graph.transform, crs=graph.crs,

@@ -20,13 +20,15 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
                 vertex_threshold: float | None = None, max_gap_px: float = 0.0, gap_level: float = 0.3,
                 fill_min_length_px: float = 0.0, surface_strong: float = 0.0, surface_weak: float = 0.2,
                 surface_offset_px: float = 8.0, join_max_px: float = 0.0, attach_max_px: float = 0.0,
-                join_attach_px: float = 0.0, surface_both_sides: float = 0.0, surface_gate_px: float = 0.0) -> Path:
+                join_attach_px: float = 0.0, surface_both_sides: float = 0.0, surface_gate_px: float = 0.0,
+                outline_sure: float = 0.0) -> Path:
     """One weights file: both models, their provenance and the inference settings (vertex
     threshold: by default the one AfANet's training extracted its vertices at; edge threshold,
     degree cap, edge-support check (mean, length, longest gap), grid-crossing vertices, shortest fragment of the city graph,
     shortest skeleton stretch filled in, longest join between dangling ends, farthest line a dangling end of a window's
     graph is attached to over boundary, farthest line a dangling end of the city graph is attached to, road-surface check and its
-    both-sides rule, surface gate of the maps (both: an FPN with a surface head; :mod:`csboundary.graph.surface_gate`);
+    both-sides rule, surface gate of the maps, roadway outline (all three: an FPN with a surface head;
+    :mod:`csboundary.graph.surface_gate`, :mod:`csboundary.graph.outline_fusion`);
     see :mod:`csboundary.graph.edge_support`, :mod:`csboundary.graph.crossings` and
     :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`, :mod:`csboundary.graph.end_joining`), and the pixel size the
     FPN was trained at (imagery is
@@ -42,8 +44,8 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
         start = load_checkpoint(init, ("fpn", "bundle"))
         provenance["fpn_init"] = {"file": str(init),
                                   **(start["provenance"]["fpn"] if start["kind"] == "bundle" else {k: start.get(k) for k in keys})}
-    if (surface_strong > 0 or surface_gate_px > 0) and not (fpn["fpn_config"] or {}).get("surface"):
-        raise InputError(fpn_path, "a surface check or gate needs an FPN with a road-surface head")
+    if (surface_strong > 0 or surface_gate_px > 0 or outline_sure > 0) and not (fpn["fpn_config"] or {}).get("surface"):
+        raise InputError(fpn_path, "a surface check, gate or roadway outline needs an FPN with a road-surface head")
     pixel_size = training_pixel_size(fpn.get("train_config") or {}) or MODEL_GSD
     if vertex_threshold is None:
         vertex_threshold = float((afanet.get("train_config") or {}).get("vertex_threshold", 0.5))
@@ -64,6 +66,7 @@ def make_bundle(fpn_path: str | Path, afanet_path: str | Path, out: str | Path, 
                    **({"surface_strong": surface_strong, "surface_weak": surface_weak, "surface_offset_px": surface_offset_px}
                       if surface_strong > 0 else {}),
                    **({"surface_both_sides": surface_both_sides} if surface_strong > 0 and surface_both_sides > 0 else {}),
-                   **({"surface_gate_px": surface_gate_px} if surface_gate_px > 0 else {})},
+                   **({"surface_gate_px": surface_gate_px} if surface_gate_px > 0 else {}),
+                   **({"outline_sure": outline_sure} if outline_sure > 0 else {})},
         provenance=provenance,
     )

@@ -25,13 +25,15 @@ def test_a_bundle_table_lands_in_its_fields():
     table = {"edge_threshold": 0.4, "max_degree": None, "min_support": 0.2, "max_length_px": 300, "max_gap_px": 40, "gap_level": 0.25,
              "crossing_spacing_px": 250, "min_fragment_px": 240, "vertex_threshold": 0.25, "fill_min_length_px": 40, "join_max_px": 30,
              "join_attach_px": 60, "attach_max_px": 50, "surface_strong": 0.5, "surface_weak": 0.2, "surface_offset_px": 8,
-             "surface_both_sides": 0.7, "surface_gate_px": 8, "surface_gate_full": 0.5, "surface_gate_min_piece_px": 100}
+             "surface_both_sides": 0.7, "surface_gate_px": 8, "surface_gate_full": 0.5, "surface_gate_min_piece_px": 100,
+             "outline_sure": 0.7, "outline_support": 0.4, "outline_min_length_px": 60}
     s = GraphSettings.from_bundle(table, "b.pt")
     assert (s.edge_threshold, s.max_degree, s.vertices.threshold, s.crossings.spacing_px) == (0.4, None, 0.25, 250)
     assert (s.support.min_support, s.support.max_length_px, s.support.max_gap_px, s.support.gap_level) == (0.2, 300, 40, 0.25)
     assert (s.fill.min_length_px, s.join.max_px, s.join.attach_px, s.attach_px, s.min_fragment_px) == (40, 30, 60, 50, 240)
     assert (s.surface.strong, s.surface.weak, s.surface.offset_px, s.surface.both_sides) == (0.5, 0.2, 8, 0.7)
     assert (s.gate.radius_px, s.gate.full_change, s.gate.min_piece_px) == (8, 0.5, 100) and s.reads_surface
+    assert (s.outline.sure, s.outline.support, s.outline.min_length_px) == (0.7, 0.4, 60)
 
 
 @pytest.mark.parametrize("table, needle", [({"edge_threshold": 7}, "edge_threshold = 7"), ({"max_degree": -1}, "max_degree = -1"),
@@ -51,7 +53,7 @@ def test_each_override_replaces_its_field_and_nothing_else():
              "fill_min_length": (20, lambda s: s.fill.min_length_px), "join_ends": (0, lambda s: s.join.max_px),
              "attach_ends": (25, lambda s: s.attach_px), "attach_backed": (60, lambda s: s.join.attach_px),
              "surface_check": (0, lambda s: s.surface.strong), "surface_gate": (8, lambda s: s.gate.radius_px),
-             "max_degree": (3, lambda s: s.max_degree), "min_fragment_length": (120, lambda s: s.min_fragment_px),
+             "roadway_outline": (0.7, lambda s: s.outline.sure), "max_degree": (3, lambda s: s.max_degree), "min_fragment_length": (120, lambda s: s.min_fragment_px),
              "min_confidence": (0.6, lambda s: s.min_confidence)}
     assert set(cases) == {f.name for f in dataclasses.fields(GraphOverrides)}
     for name, (value, read) in cases.items():

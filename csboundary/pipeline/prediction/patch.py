@@ -27,6 +27,7 @@ from csboundary.graph.crossings import added_crossings
 from csboundary.graph.edge_support import unsupported_pairs
 from csboundary.graph.end_joining import join_ends
 from csboundary.graph.settings import GraphOverrides, GraphSettings
+from csboundary.graph.outline_fusion import fused_with_outline
 from csboundary.graph.skeleton_fill import fill_from_skeleton
 from csboundary.graph.surface_check import surface_checked
 from csboundary.graph.surface_gate import gated_maps
@@ -78,7 +79,8 @@ class PatchPredictor:
         """The command line's graph options in place of the bundle's settings; a check that
         reads the road surface needs an FPN with a surface head, a confidence threshold a bundle
         with a confidence."""
-        for name, value in (("--surface-check", options.surface_check), ("--surface-gate", options.surface_gate)):
+        for name, value in (("--surface-check", options.surface_check), ("--surface-gate", options.surface_gate),
+                            ("--roadway-outline", options.roadway_outline)):
             if value is not None and value > 0 and not self.fpn.config.surface:
                 raise InputError(name, "the FPN of these weights has no road-surface head")
         if options.min_confidence and self.confidence is None:
@@ -231,10 +233,13 @@ class PatchPredictor:
 
     def finished(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
         """``graph`` filled in from the skeleton (``fill``), then without the edges no roadway
-        borders (``surface``, when the maps carry the FPN's surface channel)."""
+        borders (``surface``), then with the roadway's sure outline in place of the edges along
+        it (``outline``); the last two when the maps carry the FPN's surface channel."""
         graph = join_ends(self.filled(patch, maps, graph), maps[1], self.settings.join)
         if self.settings.surface.active and maps.shape[0] > SURFACE:
             graph = surface_checked(graph, maps[SURFACE], self.settings.surface)
+        if self.settings.outline.active and maps.shape[0] > SURFACE:
+            graph = fused_with_outline(graph, maps[SURFACE], maps[1], self.settings.outline, core_region(patch))
         return graph
 
     def filled(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
@@ -243,17 +248,22 @@ class PatchPredictor:
         where the neighbouring window cuts the same skeleton (graph/skeleton_fill.py)."""
         if not self.settings.fill.active:
             return graph
-        region = None
-        if patch is not None:
-            core = patch.core_local
-            region = (core.row_off, core.row_end + 1, core.col_off, core.col_end + 1)
-        return fill_from_skeleton(graph, maps[1], self.settings.fill, region)
+        return fill_from_skeleton(graph, maps[1], self.settings.fill, core_region(patch))
 
     def graph(self, image: np.ndarray, maps: np.ndarray | None = None) -> BoundaryGraph:
         """Graph of one patch (pixel coordinates of ``image``); ``maps`` when already stitched."""
         if maps is None:
             maps = self.maps(image)
         return self.connect(None, image, maps, self.extract(maps))
+
+
+def core_region(patch: Patch | None) -> tuple[int, int, int, int] | None:
+    """(row0, row1, col0, col1) of a window's core and one pixel beyond, in the window's pixels,
+    where steps that add edges from the maps may add them (None: a lone patch, everywhere)."""
+    if patch is None:
+        return None
+    core = patch.core_local
+    return core.row_off, core.row_end + 1, core.col_off, core.col_end + 1
 
 
 def faster_fpn(seconds: dict[str, float]) -> tuple[str, str]:

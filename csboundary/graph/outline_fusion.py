@@ -1,0 +1,213 @@
+"""The roadway frames the graph: where the road-surface map is sure, its outline, placed on the
+boundary map, replaces the AfANet edges along it (an inference option).
+
+On dense-urban photographs the surface map is often cleaner than the boundary map: the boundary
+map fires on roofs, parapets and rows of parked cars, while the roadway's outline runs along the
+curb and stays connected through intersections. Where the surface head is unsure (lawns and
+roofs it half calls roadway, on suburban imagery) the outline is wrong, so it is only used where
+the surface map is sure and the boundary map agrees:
+
+1. the surface map is smoothed (a Gaussian of ``sigma_px``) and thresholded at ``level``; roadway
+   pieces and holes under ``min_piece_px`` pixels that do not reach the window's border are
+   dropped and filled (a lot mistaken for roadway, a car on it);
+2. the roadway's 1 px inner outline is kept where the smoothed surface is sure on both sides
+   (at least ``sure`` within ``side_px`` on one side, at most ``1 - sure`` on the other) and
+   the boundary map reaches ``support`` within ``support_px`` of it; unsure stretches shorter
+   than ``bridge_px`` between kept ones are kept too, and kept stretches shorter than
+   ``min_length_px`` are dropped;
+3. the parts of the graph's edges within ``cover_px`` of a kept stretch are cut away (pieces
+   left shorter than ``keep_px`` go too), and the stretches become edges of kind ``outline``: their
+   points moved along the normal onto the boundary map's ridge (at most ``place_px``, the moves
+   median-smoothed so the line does not zigzag, the ends fixed), simplified by ``simplify_px``,
+   free ends joined to graph vertices within ``snap_px``.
+
+In a city the added stretches are cut to the window's core and one pixel beyond, as the skeleton
+fill's are (graph/skeleton_fill.py): the neighbouring window, which sees the same stitched maps,
+cuts the same outline at the same pixel. Coordinates are continuous (x, y) pixels, pixel [r, c]
+centred at (c + 0.5, r + 0.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from shapely.geometry import LineString
+
+from csboundary.graph.boundary_graph import BoundaryGraph
+from csboundary.graph.disc_filter import disc_max, disc_min
+from csboundary.graph.polyline import dense_samples, polyline_length
+from csboundary.graph.skeleton_fill import long_stretches, merged_stretches, snap_targets, stretch_graph
+from csboundary.graph.surface_gate import roadway_pieces_kept
+
+OUTLINE = "outline"  # the kind of an edge traced from the roadway's outline
+
+
+@dataclass(frozen=True)
+class OutlineConfig:
+    sure: float = 0.0  # surface probability the roadway side must reach (and 1 - sure the other); 0 = off
+    sigma_px: float = 4.0  # Gaussian smoothing of the surface map before it is thresholded
+    level: float = 0.5  # smoothed surface probability that counts as roadway
+    min_piece_px: int = 1500  # roadway pieces and holes smaller than this, away from the window's border, are dropped
+    side_px: float = 8.0  # how far to each side of the outline the surface is read
+    support: float = 0.3  # boundary probability that must be reached within support_px of a kept outline pixel
+    support_px: float = 4.0
+    bridge_px: float = 60.0  # unsure stretches of the outline shorter than this between kept ones are kept too
+    min_length_px: float = 40.0  # kept outline stretches shorter than this are dropped
+    cover_px: float = 8.0  # the parts of graph edges this close to a kept stretch are replaced by it ...
+    keep_px: float = 20.0  # ... and what is left of an edge shorter than this goes too
+    place_px: float = 4.0  # how far an outline point may move along its normal onto the boundary map's ridge
+    place_level: float = 0.3  # the ridge must reach this boundary probability for a point to move
+    simplify_px: float = 3.0  # Douglas-Peucker tolerance of the outline edges
+    snap_px: float = 12.0  # a free end this close to a graph vertex is joined to it
+    split_px: float = 200.0  # outline stretches are cut into edges about this long
+
+    @property
+    def active(self) -> bool:
+        return self.sure > 0
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.sure <= 1 and 0 < self.level < 1 and self.sigma_px >= 0 and self.min_piece_px >= 0 and self.side_px >= 1
+                and 0 <= self.support <= 1 and self.support_px >= 0 and self.bridge_px >= 0 and self.min_length_px >= 0 and self.cover_px >= 0
+                and self.keep_px >= 0 and self.place_px >= 0 and self.simplify_px >= 0 and self.snap_px >= 0):
+            raise ValueError(f"outline settings out of range: {self}")
+
+
+def smoothed_roadway(surface: np.ndarray, config: OutlineConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The smoothed surface map (float32) and the roadway mask (bool) of step 1."""
+    smooth = np.asarray(surface, np.float32)
+    if config.sigma_px > 0:
+        smooth = cv2.GaussianBlur(smooth, (0, 0), config.sigma_px, borderType=cv2.BORDER_REPLICATE)
+    road = roadway_pieces_kept(smooth, config.level, config.min_piece_px)
+    holes = ~roadway_pieces_kept((~road).astype(np.float32), 0.5, config.min_piece_px)
+    return smooth, road | holes
+
+
+def kept_outline(surface: np.ndarray, boundary: np.ndarray, config: OutlineConfig) -> np.ndarray:
+    """(H, W) bool: the outline pixels of step 2, before the length filter."""
+    smooth, road = smoothed_roadway(surface, config)
+    road8 = road.astype(np.uint8)
+    outline = road & (cv2.erode(road8, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE) == 0)
+    side = max(int(round(config.side_px)), 1)
+    sure = (disc_max(smooth, side) >= config.sure) & (disc_min(smooth, side) <= 1.0 - config.sure)
+    supported = disc_max(np.asarray(boundary, np.float32), max(int(round(config.support_px)), 0)) >= config.support \
+        if config.support_px >= 1 else np.asarray(boundary) >= config.support
+    return bridged(outline, outline & sure & supported, config.bridge_px)
+
+
+def bridged(outline: np.ndarray, kept: np.ndarray, bridge_px: float) -> np.ndarray:
+    """``kept`` plus the stretches of ``outline`` between kept pixels that are shorter than
+    ``bridge_px`` (a parked car or a tree that makes the surface unsure for a few metres should
+    not break a curb into pieces that connect to nothing)."""
+    if bridge_px <= 0 or not kept.any():
+        return kept
+    n, labels, stats, _ = cv2.connectedComponentsWithStats((outline & ~kept).astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return kept
+    near_kept = cv2.dilate(kept.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    touching = np.zeros(n, np.int64)
+    np.add.at(touching, labels[near_kept & (labels > 0)], 1)
+    short = (stats[:, cv2.CC_STAT_AREA] < bridge_px) & (touching >= 2)
+    short[0] = False
+    return kept | short[labels]
+
+
+def cut_along(graph: BoundaryGraph, mask: np.ndarray, config: OutlineConfig) -> BoundaryGraph:
+    """``graph`` without the parts of its edges within ``cover_px`` of a pixel of ``mask`` (points
+    every 2 px): an edge that runs along the outline for a stretch is cut there, its pieces of at
+    least ``keep_px`` kept (new ends are vertices of kind ``cut``), so the graph stays connected up
+    to where the outline takes over."""
+    if graph.n_edges == 0 or not mask.any():
+        return graph
+    distance = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 5)
+    h, w = mask.shape
+    n = graph.n_vertices
+    vertices, vertex_kinds = list(graph.vertices), list(graph.vertex_kinds or ["isolated"] * n)
+    kinds = graph.edge_kinds or ["normal"] * graph.n_edges
+    scores = graph.edge_scores if graph.edge_scores is not None else np.ones(graph.n_edges)
+    edges, edge_kinds, lines, edge_scores, changed = [], [], [], [], False
+    for k, (u, v) in enumerate(graph.edges):
+        line = graph.edge_polyline(k)
+        points, _ = dense_samples(line, 2.0)
+        cols = np.clip(np.floor(points[:, 0]).astype(int), 0, w - 1)
+        rows = np.clip(np.floor(points[:, 1]).astype(int), 0, h - 1)
+        free = distance[rows, cols] > config.cover_px
+        if free.all():
+            edges.append((u, v)), edge_kinds.append(kinds[k]), lines.append(line), edge_scores.append(scores[k])
+            continue
+        changed = True
+        bounds = np.flatnonzero(np.diff(np.r_[0, free.astype(np.int8), 0]))
+        for i0, i1 in zip(bounds[::2], bounds[1::2] - 1):
+            piece = points[i0:i1 + 1]
+            if len(piece) < 2 or polyline_length(piece) < config.keep_px:
+                continue
+            ends = []
+            for at, end in ((i0, u), (i1, v)):
+                if at in (0, len(points) - 1):
+                    ends.append(int(end))
+                else:
+                    ends.append(len(vertices))
+                    vertices.append(points[at])
+                    vertex_kinds.append("cut")
+            simple = np.asarray(LineString(piece).simplify(0.5).coords) if len(piece) > 2 else piece
+            edges.append(tuple(ends)), edge_kinds.append(kinds[k]), lines.append(simple), edge_scores.append(scores[k])
+    if not changed:
+        return graph
+    return BoundaryGraph(np.array(vertices, float).reshape(-1, 2), np.array(edges, np.int64).reshape(-1, 2), vertex_kinds=vertex_kinds,
+                         edge_kinds=edge_kinds, edge_polylines=lines, edge_scores=np.array(edge_scores, float),
+                         transform=graph.transform, crs=graph.crs)
+
+
+def placed_on_ridge(line: np.ndarray, boundary: np.ndarray, config: OutlineConfig) -> np.ndarray:
+    """``line`` resampled every 2 px, each inner point moved along the line's normal to the
+    boundary map's largest value within ``place_px`` (when it reaches ``place_level``), the moves
+    median-smoothed over 7 points; the ends stay where they are; then simplified."""
+    line = np.asarray(line, float)
+    points, _ = dense_samples(line, 2.0)
+    if config.place_px >= 1 and len(points) >= 5:
+        tangent = np.gradient(points, axis=0)
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+        normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+        offsets = np.arange(-int(config.place_px), int(config.place_px) + 1, dtype=float)
+        probe = points[:, None, :] + offsets[None, :, None] * normal[:, None, :]
+        h, w = boundary.shape
+        cols = np.clip(np.floor(probe[..., 0]).astype(int), 0, w - 1)
+        rows = np.clip(np.floor(probe[..., 1]).astype(int), 0, h - 1)
+        values = np.asarray(boundary)[rows, cols]
+        best = values.argmax(axis=1)
+        shift = np.where(values.max(axis=1) >= config.place_level, offsets[best], 0.0)
+        padded = np.pad(shift, 3, mode="edge")
+        shift = np.median(np.lib.stride_tricks.sliding_window_view(padded, 7), axis=1)
+        shift[0] = shift[-1] = 0.0
+        points = points + shift[:, None] * normal
+    if len(points) > 2 and config.simplify_px > 0:
+        points = np.asarray(LineString(points).simplify(config.simplify_px).coords)
+    return points
+
+
+def fused_with_outline(graph: BoundaryGraph, maps_surface: np.ndarray, boundary: np.ndarray, config: OutlineConfig,
+                       region: tuple[int, int, int, int] | None = None) -> BoundaryGraph:
+    """``graph`` with the roadway's sure outline in place of the edges along it (see the module
+    docstring). ``region`` (row0, row1, col0, col1) limits the added pixels to that block; edges
+    are removed wherever the window's outline covers them. Returns ``graph`` itself when nothing
+    is kept."""
+    if not config.active:
+        return graph
+    kept = long_stretches(kept_outline(maps_surface, boundary, config), config.min_length_px)
+    if not kept.any():
+        return graph
+    base = cut_along(graph, kept, config)
+    if region is not None:
+        r0, r1, c0, c1 = region
+        inside = np.zeros_like(kept)
+        inside[max(r0, 0):r1, max(c0, 0):c1] = True
+        kept &= inside
+    if not kept.any():
+        return base
+    found = stretch_graph(kept, 0.0)
+    if found.n_edges == 0:
+        return base
+    found.edge_polylines = [placed_on_ridge(found.edge_polyline(k), boundary, config) for k in range(found.n_edges)]
+    target = snap_targets(found, base, config.snap_px)
+    return merged_stretches(base, found, target, boundary, config.split_px, kind=OUTLINE)
