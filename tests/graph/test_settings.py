@@ -53,7 +53,8 @@ def test_each_override_replaces_its_field_and_nothing_else():
              "fill_min_length": (20, lambda s: s.fill.min_length_px), "join_ends": (0, lambda s: s.join.max_px),
              "attach_ends": (25, lambda s: s.attach_px), "attach_backed": (60, lambda s: s.join.attach_px),
              "surface_check": (0, lambda s: s.surface.strong), "surface_gate": (8, lambda s: s.gate.radius_px),
-             "roadway_outline": (0.7, lambda s: s.outline.sure), "max_degree": (3, lambda s: s.max_degree), "min_fragment_length": (120, lambda s: s.min_fragment_px),
+             "roadway_outline": (0.7, lambda s: s.outline.sure), "max_degree": (3, lambda s: s.max_degree),
+             "min_fragment_length": (120, lambda s: s.min_fragment_px),
              "min_confidence": (0.6, lambda s: s.min_confidence)}
     assert set(cases) == {f.name for f in dataclasses.fields(GraphOverrides)}
     for name, (value, read) in cases.items():

@@ -24,7 +24,7 @@ from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.writer import CityLabels
-from csboundary.models.augmentation import AugmentConfig, draw_geometry, photometric, source_side, warp
+from csboundary.models.augmentation import AugmentConfig, draw_geometry, paint_surface_negatives, photometric, source_side, warp
 from csboundary.models.augmentation import flip_rotate90 as augment  # also the baselines' flips
 from csboundary.models.maps import unit_bands
 
@@ -240,7 +240,9 @@ class TrainingCity:
                              surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``fpn_sample`` of a random ``crop`` window, rotated by any angle, scaled, flipped and
         re-lit (see :mod:`csboundary.models.augmentation`): the source window is read large
-        enough that the rotated crop holds imagery wherever the city does."""
+        enough that the rotated crop holds imagery wherever the city does. With a road surface and
+        ``config.surface_negatives``, foreign clutter is painted over part of its non-road area
+        before the re-lighting (:func:`~csboundary.models.augmentation.paint_surface_negatives`)."""
         angle, scale = draw_geometry(rng, config)
         side = source_side(crop, angle, scale) if (angle or scale != 1) else crop
         image, target, valid = self.fpn_sample(self.random_window(rng, side), surface)
@@ -251,6 +253,7 @@ class TrainingCity:
                 target[2] = road
             valid = warp(valid.astype(np.uint8), angle, scale, crop, nearest=True).astype(bool)
         image, target, valid = augment(rng, image, target, valid)
+        image = paint_surface_negatives(rng, image, target, valid, config)  # off by default: no random draw
         return photometric(rng, image, config), target, valid
 
     def gt_vertices(self, window: PixelWindow) -> np.ndarray:
