@@ -35,13 +35,15 @@ INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64,
                       "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False),
                       "surface_both_sides": (0.0, 1.0, False), "surface_gate_px": (0.0, 200.0, False),
                       "surface_gate_full": (0.01, 1.0, False), "surface_gate_min_piece_px": (0, 10**8, True),
-                      "outline_sure": (0.0, 1.0, False), "outline_support": (0.0, 1.0, False), "outline_min_length_px": (0.0, 1e6, False)}
+                      "outline_sure": (0.0, 1.0, False), "outline_support": (0.0, 1.0, False), "outline_min_length_px": (0.0, 1e6, False),
+                      "outline_max_unsure": (0.0, 1.0, False)}
 SUPPORT_SETTINGS = ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level")  # bundle key = EdgeSupportConfig field
 SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px",
                     "surface_both_sides": "both_sides"}  # bundle key -> SurfaceCheckConfig field
 GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": ("full_change", float),
                  "surface_gate_min_piece_px": ("min_piece_px", int)}  # bundle key -> SurfaceGateConfig field and type
-OUTLINE_SETTINGS = {"outline_sure": "sure", "outline_support": "support", "outline_min_length_px": "min_length_px"}  # -> OutlineConfig
+OUTLINE_SETTINGS = {"outline_sure": "sure", "outline_support": "support", "outline_min_length_px": "min_length_px",
+                    "outline_max_unsure": "max_unsure"}  # bundle key -> OutlineConfig field
 
 
 # each graph option's range (low, high; None: no upper bound), checked by GraphOverrides for the

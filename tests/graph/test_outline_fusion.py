@@ -107,3 +107,10 @@ def test_points_move_onto_the_ridge_and_the_ends_stay():
     assert np.allclose(np.interp([20.5, 50.5, 80.5], placed[:, 0], placed[:, 1]), 23.5)  # the median keeps the moves whole
     far = placed_on_ridge(line, boundary, OutlineConfig(sure=0.5, place_px=2.0, simplify_px=0.5))
     assert np.allclose(far[:, 1], 20.5)  # the ridge is 3 px away: out of reach
+
+
+def test_a_surface_map_unsure_around_the_street_frames_nothing():
+    surface, boundary = street(surface_outside=0.35)  # lawns and roofs half called roadway: about half of every square unsure
+    graph = afanet_graph()
+    assert fused_with_outline(graph, surface, boundary, OutlineConfig(sure=0.3, max_unsure=0.3)) is graph
+    assert fused_with_outline(graph, surface, boundary, OutlineConfig(sure=0.3, max_unsure=1.0)) is not graph

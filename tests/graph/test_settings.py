@@ -26,14 +26,14 @@ def test_a_bundle_table_lands_in_its_fields():
              "crossing_spacing_px": 250, "min_fragment_px": 240, "vertex_threshold": 0.25, "fill_min_length_px": 40, "join_max_px": 30,
              "join_attach_px": 60, "attach_max_px": 50, "surface_strong": 0.5, "surface_weak": 0.2, "surface_offset_px": 8,
              "surface_both_sides": 0.7, "surface_gate_px": 8, "surface_gate_full": 0.5, "surface_gate_min_piece_px": 100,
-             "outline_sure": 0.7, "outline_support": 0.4, "outline_min_length_px": 60}
+             "outline_sure": 0.7, "outline_support": 0.4, "outline_min_length_px": 60, "outline_max_unsure": 0.2}
     s = GraphSettings.from_bundle(table, "b.pt")
     assert (s.edge_threshold, s.max_degree, s.vertices.threshold, s.crossings.spacing_px) == (0.4, None, 0.25, 250)
     assert (s.support.min_support, s.support.max_length_px, s.support.max_gap_px, s.support.gap_level) == (0.2, 300, 40, 0.25)
     assert (s.fill.min_length_px, s.join.max_px, s.join.attach_px, s.attach_px, s.min_fragment_px) == (40, 30, 60, 50, 240)
     assert (s.surface.strong, s.surface.weak, s.surface.offset_px, s.surface.both_sides) == (0.5, 0.2, 8, 0.7)
     assert (s.gate.radius_px, s.gate.full_change, s.gate.min_piece_px) == (8, 0.5, 100) and s.reads_surface
-    assert (s.outline.sure, s.outline.support, s.outline.min_length_px) == (0.7, 0.4, 60)
+    assert (s.outline.sure, s.outline.support, s.outline.min_length_px, s.outline.max_unsure) == (0.7, 0.4, 60, 0.2)
 
 
 @pytest.mark.parametrize("table, needle", [({"edge_threshold": 7}, "edge_threshold = 7"), ({"max_degree": -1}, "max_degree = -1"),

@@ -108,7 +108,7 @@ def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Pat
     if graph.gate.active:  # likewise
         settings["surface_gate"] = [graph.gate.radius_px, graph.gate.full_change, graph.gate.min_piece_px]
     if graph.outline.active:  # likewise
-        settings["roadway_outline"] = [graph.outline.sure, graph.outline.support, graph.outline.min_length_px]
+        settings["roadway_outline"] = [graph.outline.sure, graph.outline.support, graph.outline.min_length_px, graph.outline.max_unsure]
     if predictor.confidence is None:  # likewise; said so that --min-confidence later never filters raw network scores
         settings["edge_confidence"] = False
     return settings
