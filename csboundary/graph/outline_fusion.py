@@ -23,9 +23,9 @@ the surface map is sure and the boundary map agrees:
    median-smoothed so the line does not zigzag, the ends fixed), simplified by ``simplify_px``,
    free ends joined to graph vertices within ``snap_px``.
 
-In a city the added stretches are cut to the window's core and one pixel beyond, as the skeleton
-fill's are (graph/skeleton_fill.py): the neighbouring window, which sees the same stitched maps,
-cuts the same outline at the same pixel. Coordinates are continuous (x, y) pixels, pixel [r, c]
+In a city the outline is traced on the whole window and its lines are cut where they cross the
+sides of the window's core: the neighbouring window, which sees the same stitched maps, traces
+the same pixels there and cuts them at the same point, where the two halves meet. Coordinates are continuous (x, y) pixels, pixel [r, c]
 centred at (c + 0.5, r + 0.5).
 """
 
@@ -36,6 +36,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from shapely.geometry import LineString
+from shapely.geometry import box as shapely_box
+from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.disc_filter import disc_max, disc_min
@@ -204,28 +206,61 @@ def placed_on_ridge(line: np.ndarray, boundary: np.ndarray, config: OutlineConfi
     return points
 
 
+def clipped_to_box(found: BoundaryGraph, box: tuple[float, float, float, float]) -> tuple[BoundaryGraph, np.ndarray]:
+    """``found``'s polylines cut to ``box`` (x0, y0, x1, y1, continuous pixels): the pieces inside,
+    their ends the lines' own ends or the points where they cross the box's sides (exact, so two
+    windows that trace the same pixels across a seam cut them at the same point), and (V,) bool
+    for the vertices made by a cut."""
+    x0, y0, x1, y1 = box
+    frame = shapely_box(x0, y0, x1, y1)
+    index: dict[tuple[float, float], int] = {}
+    points, cut, edges, lines = [], [], [], []
+
+    def vertex(p: np.ndarray, made_by_cut: bool) -> int:
+        key = (round(float(p[0]), 6), round(float(p[1]), 6))
+        if key not in index:
+            index[key] = len(points)
+            points.append(np.asarray(p, float))
+            cut.append(made_by_cut)
+        return index[key]
+
+    for k in range(found.n_edges):
+        line = found.edge_polyline(k)
+        inside = LineString(line).intersection(frame)
+        parts = [g for g in getattr(inside, "geoms", [inside]) if g.geom_type == "LineString" and not g.is_empty and g.length > 0]
+        for part in parts:
+            piece = np.asarray(part.coords, float)
+            ends = []
+            for p in (piece[0], piece[-1]):
+                own = np.any(np.all(np.isclose(line[[0, -1]], p, atol=1e-9), axis=1))
+                ends.append(vertex(p, not own))
+            edges.append(ends)
+            lines.append(piece)
+    graph = BoundaryGraph(np.array(points, float).reshape(-1, 2), np.array(edges, np.int64).reshape(-1, 2),
+                          edge_kinds=[OUTLINE] * len(edges), edge_polylines=lines, edge_scores=np.ones(len(edges)))
+    return graph, np.array(cut, bool)
+
+
 def fused_with_outline(graph: BoundaryGraph, maps_surface: np.ndarray, boundary: np.ndarray, config: OutlineConfig,
                        region: tuple[int, int, int, int] | None = None) -> BoundaryGraph:
     """``graph`` with the roadway's sure outline in place of the edges along it (see the module
-    docstring). ``region`` (row0, row1, col0, col1) limits the added pixels to that block; edges
-    are removed wherever the window's outline covers them. Returns ``graph`` itself when nothing
-    is kept."""
+    docstring). ``region`` (row0, row1, col0, col1: a window's core and one pixel beyond) limits
+    the added lines to the core, cut exactly where they cross its sides; edges are cut wherever
+    the window's outline covers them. Returns ``graph`` itself when nothing is kept."""
     if not config.active:
         return graph
-    kept = long_stretches(kept_outline(maps_surface, boundary, config), config.min_length_px)
+    kept = long_stretches(skeletonize(kept_outline(maps_surface, boundary, config)), config.min_length_px)
     if not kept.any():
         return graph
     base = cut_along(graph, kept, config)
+    found = stretch_graph(kept, 0.0)  # traced on the whole window, so two windows trace the same pixels across their seam
+    made_by_cut = np.zeros(found.n_vertices, bool)
     if region is not None:
         r0, r1, c0, c1 = region
-        inside = np.zeros_like(kept)
-        inside[max(r0, 0):r1, max(c0, 0):c1] = True
-        kept &= inside
-    if not kept.any():
-        return base
-    found = stretch_graph(kept, 0.0)
+        found, made_by_cut = clipped_to_box(found, (c0, r0, c1 - 1, r1 - 1))
     if found.n_edges == 0:
         return base
     found.edge_polylines = [placed_on_ridge(found.edge_polyline(k), boundary, config) for k in range(found.n_edges)]
     target = snap_targets(found, base, config.snap_px)
+    target[made_by_cut] = -1  # the neighbouring window ends its piece at the same point
     return merged_stretches(base, found, target, boundary, config.split_px, kind=OUTLINE)

@@ -114,3 +114,24 @@ def test_a_surface_map_unsure_around_the_street_frames_nothing():
     graph = afanet_graph()
     assert fused_with_outline(graph, surface, boundary, OutlineConfig(sure=0.3, max_unsure=0.3)) is graph
     assert fused_with_outline(graph, surface, boundary, OutlineConfig(sure=0.3, max_unsure=1.0)) is not graph
+
+
+def test_two_windows_cut_the_outline_at_the_same_point_of_their_seam():
+    """A diagonal street across a mosaic seen by two overlapping windows (columns 0-199 and
+    100-299, cores meeting at x = 150): both trace the same outline pixels there, so the ends
+    they leave on the seam coincide."""
+    h, w = 160, 300
+    rows, cols = np.mgrid[0:h, 0:w]
+    road = np.abs(rows - (30 + 0.3 * cols)) < 20  # a street rising 0.3 px per px
+    surface = road.astype(np.float32)
+    inner = road & ~(np.roll(road, 1, 0) & np.roll(road, -1, 0))
+    boundary = np.where(inner, 0.9, 0.0).astype(np.float32)
+    config = OutlineConfig(sure=0.8)
+    empty = BoundaryGraph(edge_kinds=[], edge_polylines=[], edge_scores=np.zeros(0))
+    left = fused_with_outline(empty, surface[:, :200], boundary[:, :200], config, region=(0, h, 0, 151))
+    right = fused_with_outline(empty, surface[:, 100:], boundary[:, 100:], config, region=(0, h, 50, 101))
+    on_seam_left = left.vertices[np.isclose(left.vertices[:, 0], 150.0)]
+    on_seam_right = right.vertices[np.isclose(right.vertices[:, 0], 50.0)] + [100.0, 0.0]
+    assert len(on_seam_left) == 2  # both curbs cross the seam
+    assert np.allclose(np.sort(on_seam_left[:, 1]), np.sort(on_seam_right[:, 1]), atol=1e-6)
+    assert left.vertices[:, 0].max() <= 150.0 + 1e-9 and right.vertices[:, 0].min() >= 50.0 - 1e-9
