@@ -3,7 +3,8 @@
     python experiments/scripts/sweep_outline.py WEIGHTS SET_OR_CITY... --grid "sure=0.65,level=0.5" "sure=0.8" ...
 
 Each grid entry sets fields of :class:`csboundary.graph.outline_fusion.OutlineConfig` (``sure=0``
-turns the outline off: the bundle's graph); every other setting is the bundle's. Each SET is a
+turns the outline off: the bundle's graph) and, as ``surface.strong=0.3``, of the surface check;
+every other setting is the bundle's. Each SET is a
 folder of cities (``csboundary import-masks``) scored by ``evaluate-set``'s mean, or one city
 directory scored at city scale. Prints F1@5 / P@5 / APLS / TLTS per set: the measurement behind
 the shipped outline setting (docs/real-imagery.md).
@@ -26,6 +27,16 @@ def parsed(entry: str) -> dict:
     return {key: float(value) for key, value in (item.split("=") for item in entry.split(",") if item)}
 
 
+def with_entry(settings, entry: str):
+    """``settings`` with an entry's fields: bare names are OutlineConfig's, ``surface.NAME`` the
+    surface check's (SurfaceCheckConfig)."""
+    fields = parsed(entry)
+    outline = {k: v for k, v in fields.items() if "." not in k}
+    check = {k.split(".", 1)[1]: v for k, v in fields.items() if k.startswith("surface.")}
+    return dataclasses.replace(settings, outline=dataclasses.replace(settings.outline, **outline),
+                               surface=dataclasses.replace(settings.surface, **check))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights")
@@ -37,7 +48,7 @@ def main() -> None:
     print("setting", *args.sets, sep=" | ")
     for entry in args.grid:
         start = time.perf_counter()
-        predictor.settings = dataclasses.replace(base, outline=dataclasses.replace(base.outline, **parsed(entry)))
+        predictor.settings = with_entry(base, entry)
         row = []
         for s in args.sets:
             m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else \
