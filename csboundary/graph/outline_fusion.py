@@ -21,7 +21,8 @@ the surface map is sure and the boundary map agrees:
    left shorter than ``keep_px`` go too), and the stretches become edges of kind ``outline``: their
    points moved along the normal onto the boundary map's ridge (at most ``place_px``, the moves
    median-smoothed so the line does not zigzag, the ends fixed), simplified by ``simplify_px``,
-   free ends joined to graph vertices within ``snap_px``.
+   free ends joined to graph vertices within ``snap_px``, and the ends the cuts left joined to
+   the nearest outline within ``cover_px + 4``.
 
 In a city the outline is traced on the whole window and its lines are cut where they cross the
 sides of the window's core: the neighbouring window, which sees the same stitched maps, traces
@@ -41,6 +42,7 @@ from skimage.morphology import skeletonize
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.disc_filter import disc_max, disc_min
+from csboundary.graph.end_attachment import attach_ends
 from csboundary.graph.polyline import dense_samples, polyline_length
 from csboundary.graph.skeleton_fill import long_stretches, merged_stretches, snap_targets, stretch_graph
 from csboundary.graph.surface_gate import roadway_pieces_kept
@@ -57,7 +59,7 @@ class OutlineConfig:
     side_px: float = 8.0  # how far to each side of the outline the surface is read
     support: float = 0.3  # boundary probability that must be reached within support_px of a kept outline pixel
     support_px: float = 4.0
-    clear_px: float = 50.0  # the surface map's sureness is judged over a square this far to each side ...
+    clear_px: float = 100.0  # the surface map's sureness is judged over a square this far to each side ...
     max_unsure: float = 0.3  # ... which may hold at most this share of unsure pixels (0.25-0.75); 1 = not judged
     bridge_px: float = 60.0  # unsure stretches of the outline shorter than this between kept ones are kept too
     min_length_px: float = 40.0  # kept outline stretches shorter than this are dropped
@@ -263,4 +265,16 @@ def fused_with_outline(graph: BoundaryGraph, maps_surface: np.ndarray, boundary:
     found.edge_polylines = [placed_on_ridge(found.edge_polyline(k), boundary, config) for k in range(found.n_edges)]
     target = snap_targets(found, base, config.snap_px)
     target[made_by_cut] = -1  # the neighbouring window ends its piece at the same point
-    return merged_stretches(base, found, target, boundary, config.split_px, kind=OUTLINE)
+    fused = merged_stretches(base, found, target, boundary, config.split_px, kind=OUTLINE)
+    return with_cut_ends_attached(fused, config)
+
+
+def with_cut_ends_attached(graph: BoundaryGraph, config: OutlineConfig) -> BoundaryGraph:
+    """``graph`` with every dangling end that :func:`cut_along` made joined to the nearest line of
+    another piece within ``cover_px + 4`` (the outline that took over from it). Why: left
+    dangling, the city graph's end attachment joins it to whatever lies ahead, often a chord
+    across the road."""
+    kinds = graph.vertex_kinds or []
+    degree = np.bincount(graph.edges.ravel(), minlength=graph.n_vertices)
+    ends = np.array([v for v, kind in enumerate(kinds) if kind == "cut" and degree[v] == 1], np.int64)
+    return attach_ends(graph, ends, config.cover_px + 4.0, OUTLINE) if len(ends) else graph

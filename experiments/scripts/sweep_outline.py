@@ -43,7 +43,7 @@ def main() -> None:
     parser.add_argument("sets", nargs="+")
     parser.add_argument("--grid", nargs="+", required=True, help="OutlineConfig fields per row, e.g. sure=0.65,level=0.5")
     args = parser.parse_args()
-    predictor = load_predictor(args.weights, "cpu")  # the command line's engine (int8 ONNX on a CPU)
+    predictor = load_predictor(args.weights, "cpu", precision="auto")  # the command line's engine and precision (int8 on a CPU)
     base = predictor.settings
     print("setting", *args.sets, sep=" | ")
     for entry in args.grid:
