@@ -60,7 +60,7 @@ class OutlineConfig:
     support: float = 0.3  # boundary probability that must be reached within support_px of a kept outline pixel
     support_px: float = 4.0
     clear_px: float = 100.0  # the surface map's sureness is judged over a square this far to each side ...
-    max_unsure: float = 0.3  # ... which may hold at most this share of unsure pixels (0.25-0.75); 1 = not judged
+    max_unsure: float = 0.15  # ... which may hold at most this share of unsure pixels (0.25-0.75); 1 = not judged
     bridge_px: float = 60.0  # unsure stretches of the outline shorter than this between kept ones are kept too
     min_length_px: float = 40.0  # kept outline stretches shorter than this are dropped
     cover_px: float = 8.0  # the parts of graph edges this close to a kept stretch are replaced by it ...
