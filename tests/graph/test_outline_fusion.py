@@ -135,3 +135,30 @@ def test_two_windows_cut_the_outline_at_the_same_point_of_their_seam():
     assert len(on_seam_left) == 2  # both curbs cross the seam
     assert np.allclose(np.sort(on_seam_left[:, 1]), np.sort(on_seam_right[:, 1]), atol=1e-6)
     assert left.vertices[:, 0].max() <= 150.0 + 1e-9 and right.vertices[:, 0].min() >= 50.0 - 1e-9
+
+
+def test_a_bundle_carries_the_outline_and_the_command_line_turns_it_off(tmp_path):
+    import torch
+
+    from csboundary.errors import InputError
+    from csboundary.graph.settings import GraphOverrides
+    from csboundary.models.bundle import make_bundle
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+    from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
+    from helpers import shipped_parts
+
+    fpn_path, afanet_path = shipped_parts(tmp_path)
+    make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", outline_sure=0.65)
+    predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
+    assert predictor.settings.outline.sure == 0.65 and predictor.reads_surface  # the maps carry the surface for it
+    assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["inference"]["outline_sure"] == 0.65
+    off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(roadway_outline=0), engine="torch")
+    assert not off.settings.outline.active
+    shipped = load_checkpoint(fpn_path, ("fpn",))
+    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}
+    save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
+    with pytest.raises(InputError, match="surface head"):
+        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", outline_sure=0.65)
+    make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "plain-bundle.pt")
+    with pytest.raises(InputError, match="surface head"):
+        load_predictor(tmp_path / "plain-bundle.pt", "cpu", GraphOverrides(roadway_outline=0.6), engine="torch")
