@@ -24,7 +24,7 @@ from csboundary.graph.chains import edge_line, merge_chains
 from csboundary.graph.fragments import fragment_lengths
 from csboundary.graph.polyline import points_along, polyline_length
 
-KINDS = ("normal", "corner", "skeleton", "join", "attach", "seam", "outline")  # the kinds of predicted edges (others count as none of these)
+KINDS = ("normal", "corner", "skeleton", "join", "attach", "seam", "outline")  # the kinds of predicted edges (others: none of these)
 KEYPOINT, BOUNDARY, SURFACE = 0, 1, 2  # channels of the FPN's maps
 SIDE_OFFSET_PX = 6.0  # how far to each side the road surface is read
 FAR_OFFSET_PX = 16.0  # ... and farther out, past a sidewalk (2.4 m at 0.15 m)

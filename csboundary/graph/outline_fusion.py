@@ -184,7 +184,8 @@ def cut_along(graph: BoundaryGraph, mask: np.ndarray, config: OutlineConfig) -> 
 def placed_on_ridge(line: np.ndarray, boundary: np.ndarray, config: OutlineConfig) -> np.ndarray:
     """``line`` resampled every 2 px, each inner point moved along the line's normal to the
     boundary map's largest value within ``place_px`` (when it reaches ``place_level``), the moves
-    median-smoothed over 7 points; the ends stay where they are; then simplified."""
+    median-smoothed over 31 points (60 px: a line moved whole, not a zigzag); the ends stay
+    where they are; then simplified."""
     line = np.asarray(line, float)
     points, _ = dense_samples(line, 2.0)
     if config.place_px >= 1 and len(points) >= 5:
@@ -199,8 +200,8 @@ def placed_on_ridge(line: np.ndarray, boundary: np.ndarray, config: OutlineConfi
         values = np.asarray(boundary)[rows, cols]
         best = values.argmax(axis=1)
         shift = np.where(values.max(axis=1) >= config.place_level, offsets[best], 0.0)
-        padded = np.pad(shift, 3, mode="edge")
-        shift = np.median(np.lib.stride_tricks.sliding_window_view(padded, 7), axis=1)
+        padded = np.pad(shift, 15, mode="edge")
+        shift = np.median(np.lib.stride_tricks.sliding_window_view(padded, 31), axis=1)
         shift[0] = shift[-1] = 0.0
         points = points + shift[:, None] * normal
     if len(points) > 2 and config.simplify_px > 0:
