@@ -20,7 +20,7 @@ def test_every_predicting_command_takes_the_one_declaration_of_the_graph_options
     group = help_as_read(typer.main.get_command(app))
     assert set(GRAPH_OPTIONS) == {f.name for f in dataclasses.fields(GraphOverrides)}
     flags = {p.opts[0] for p in group.commands["predict"].params if p.name in GRAPH_OPTIONS}
-    assert len(flags) == len(GRAPH_OPTIONS) == 13
+    assert len(flags) == len(GRAPH_OPTIONS) == 14
     for command, params in ((name, group.commands[name].params) for name in group.commands):
         declared = {p.opts[0] for p in params if p.param_type_name == "option"}
         if command in TAKERS:
