@@ -132,7 +132,7 @@ def test_fit_confidence_on_cities_without_ground_truth_is_one_line(tmp_path):
         empty.to_file(truth, layer=LAYER, driver="GPKG")
     for given, needle in ((cities[:1], "needs at least two"), (cities, "no predicted edge lies on the ground truth")):
         done = run_cli("fit-confidence", *map(str, given), "--out", str(tmp_path / "fitted.pt"), "--trees", "5", "--device", "cpu",
-                       "--quiet")
+                       "--engine", "torch", "--quiet")  # an error path: no ONNX export to wait for
         lines = done.stderr.strip().splitlines()
         assert done.returncode == 2 and len(lines) == 1 and needle in lines[0] and str(cities[0]) in lines[0], done.stderr
         assert not (tmp_path / "fitted.pt").exists()
