@@ -47,6 +47,17 @@ def shipped_parts(folder: Path, **afanet_extra) -> tuple[Path, Path]:
     return folder / "fpn.pt", folder / "afanet.pt"
 
 
+def fpn_without_surface_head(fpn_path: Path, out: Path) -> Path:
+    """``fpn_path``'s FPN checkpoint without its road-surface head (an FPN from before the head),
+    written to ``out``: for tests of what needs the surface map."""
+    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+
+    shipped = load_checkpoint(fpn_path, ("fpn",))
+    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}
+    save_checkpoint(out, "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
+    return out
+
+
 def bundle_without(bundle: Path, out: Path, settings: tuple[str, ...]) -> Path:
     """A copy of ``bundle`` whose inference settings lack ``settings``: a bundle made before
     those settings existed."""

@@ -143,9 +143,9 @@ def test_a_bundle_carries_the_outline_and_the_command_line_turns_it_off(tmp_path
     from csboundary.errors import InputError
     from csboundary.graph.settings import GraphOverrides
     from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
+    from csboundary.models.checkpoint import load_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
-    from helpers import shipped_parts
+    from helpers import fpn_without_surface_head, shipped_parts
 
     fpn_path, afanet_path = shipped_parts(tmp_path)
     make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", outline_sure=0.65)
@@ -154,9 +154,7 @@ def test_a_bundle_carries_the_outline_and_the_command_line_turns_it_off(tmp_path
     assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["inference"]["outline_sure"] == 0.65
     off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(roadway_outline=0), engine="torch")
     assert not off.settings.outline.active
-    shipped = load_checkpoint(fpn_path, ("fpn",))
-    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}
-    save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
+    fpn_without_surface_head(fpn_path, tmp_path / "plain.pt")
     with pytest.raises(InputError, match="surface head"):
         make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", outline_sure=0.65)
     make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "plain-bundle.pt")

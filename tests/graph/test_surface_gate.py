@@ -71,9 +71,8 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
 
     from csboundary.errors import InputError
     from csboundary.models.bundle import make_bundle
-    from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
-    from helpers import shipped_parts
+    from helpers import fpn_without_surface_head, shipped_parts
 
     fpn_path, afanet_path = shipped_parts(tmp_path)
     make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", surface_strong=0.5, surface_both_sides=0.7, surface_gate_px=8)
@@ -84,8 +83,6 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
     assert not gated.settings.surface.active and gated.settings.gate.active
     assert gated.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
     assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_gate=0), engine="torch").settings.gate.active
-    shipped = load_checkpoint(fpn_path, ("fpn",))
-    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}
-    save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
+    fpn_without_surface_head(fpn_path, tmp_path / "plain.pt")
     with pytest.raises(InputError, match="surface head"):
         make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_gate_px=8)
