@@ -28,8 +28,14 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
     fpn = PatchPredictor.load(None, torch.device("cpu")).fpn.eval()
-    variants = {"float32": (fpn, False), "bfloat16": (fpn, True), "bfloat16, norms folded": (fold_batch_norms(fpn), True)}
-    x = torch.rand(1, 4, 1100, 1100, generator=torch.Generator().manual_seed(0)).contiguous(memory_format=torch.channels_last)
+    variants = {
+        "float32": (fpn, False),
+        "bfloat16": (fpn, True),
+        "bfloat16, norms folded": (fold_batch_norms(fpn), True),
+    }
+    x = torch.rand(1, 4, 1100, 1100, generator=torch.Generator().manual_seed(0)).contiguous(
+        memory_format=torch.channels_last
+    )
     times = {name: [] for name in variants}
     outputs = {}
     with torch.inference_mode():
@@ -41,11 +47,15 @@ def main() -> None:
                         start = time.perf_counter()
                         model(x)
                         times[name].append(time.perf_counter() - start)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, bfloat16 units: {bfloat16_hardware(torch.device('cpu'))}, "
-          f"median of {args.rounds} x {args.repeats} runs")
+    print(
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, bfloat16 units: {bfloat16_hardware(torch.device('cpu'))}, "
+        f"median of {args.rounds} x {args.repeats} runs"
+    )
     for name in variants:
         difference = float((outputs[name] - outputs["float32"]).abs().max())
-        print(f"{name:24s} {statistics.median(times[name]):.3f} s per window, probabilities within {difference:.3f} of float32")
+        print(
+            f"{name:24s} {statistics.median(times[name]):.3f} s per window, probabilities within {difference:.3f} of float32"
+        )
 
 
 if __name__ == "__main__":

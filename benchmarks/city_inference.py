@@ -16,10 +16,10 @@ from __future__ import annotations
 import argparse
 import json
 
-from csboundary.metrics.report import format_rows, write_scores
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
+from csboundary.metrics.report import format_rows, write_scores
 from csboundary.models.device import resolve_device
 from csboundary.pipeline.evaluation.oracle import OracleModel
 from csboundary.pipeline.prediction.patch import PatchPredictor
@@ -38,9 +38,19 @@ def main() -> None:
 
     with Mosaic.open(layout.tiles_dir(args.city)) as mosaic:
         lines = list(read_ground_truth(layout.ground_truth_path(args.city), mosaic.crs).geometry)
-        model = OracleModel.from_lines(lines, mosaic) if args.oracle else PatchPredictor.load(None, resolve_device(args.device))
-        settings = {"model": "oracle" if args.oracle else "shipped weights", "batch_size": args.batch_size, "city": args.city}
-        result, summary = run_prediction(mosaic, model, args.out, batch_size=args.batch_size, settings=settings, ground_truth=lines)
+        model = (
+            OracleModel.from_lines(lines, mosaic)
+            if args.oracle
+            else PatchPredictor.load(None, resolve_device(args.device))
+        )
+        settings = {
+            "model": "oracle" if args.oracle else "shipped weights",
+            "batch_size": args.batch_size,
+            "city": args.city,
+        }
+        result, summary = run_prediction(
+            mosaic, model, args.out, batch_size=args.batch_size, settings=settings, ground_truth=lines
+        )
     scores = evaluate_run(result, lines, seed=args.seed)
     write_scores(f"{args.out}/scores.json", scores)
     print(format_rows(scores))

@@ -40,8 +40,25 @@ print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_max
 def city(cache: Path, n: int, tile_size: int) -> Path:
     path = cache / f"test-s0-{n}x{n}-{tile_size}"
     if not (path / "city.json").exists():
-        subprocess.run([sys.executable, "-m", "csboundary", "synth", str(path), "--seed", "0", "--split", "test",
-                        "--tiles", f"{n}x{n}", "--tile-size", str(tile_size), "--quiet"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "csboundary",
+                "synth",
+                str(path),
+                "--seed",
+                "0",
+                "--split",
+                "test",
+                "--tiles",
+                f"{n}x{n}",
+                "--tile-size",
+                str(tile_size),
+                "--quiet",
+            ],
+            check=True,
+        )
     return path
 
 
@@ -55,14 +72,18 @@ def main() -> None:
     for n in (int(v) for v in args.sizes.split(",")):
         tiles = city(args.cache, n, args.tile_size) / "tiles"
         with tempfile.TemporaryDirectory() as out:
-            done = subprocess.run([sys.executable, "-c", CHILD, str(tiles), out], check=True, capture_output=True, text=True)
+            done = subprocess.run(
+                [sys.executable, "-c", CHILD, str(tiles), out], check=True, capture_output=True, text=True
+            )
         row = {"tiles": f"{n}x{n}", **json.loads(done.stdout.strip().splitlines()[-1])}
         rows.append(row)
-        print(f"{row['tiles']:>4s} tiles of {args.tile_size} px: {row['patches']:4d} patches, peak RSS {row['peak_rss_mb']:7.1f} MB "
-              f"(after the city pipeline {row['peak_rss_prediction_mb']:7.1f} MB; maps stored {row['map_store_peak_mb']:5.1f} MB), "
-              f"{row['seconds']:6.1f} s; {row['edges']} edges; s/patch graph stitching {row['seconds_per_patch']['graph_stitching']}, "
-              f"confidence {row['seconds_per_patch']['confidence']}; outputs {row['outputs_s']:.1f} s; files (MB) {row['files_mb']}",
-              flush=True)
+        print(
+            f"{row['tiles']:>4s} tiles of {args.tile_size} px: {row['patches']:4d} patches, peak RSS {row['peak_rss_mb']:7.1f} MB "
+            f"(after the city pipeline {row['peak_rss_prediction_mb']:7.1f} MB; maps stored {row['map_store_peak_mb']:5.1f} MB), "
+            f"{row['seconds']:6.1f} s; {row['edges']} edges; s/patch graph stitching {row['seconds_per_patch']['graph_stitching']}, "
+            f"confidence {row['seconds_per_patch']['confidence']}; outputs {row['outputs_s']:.1f} s; files (MB) {row['files_mb']}",
+            flush=True,
+        )
     if len(rows) > 1:
         growth = rows[-1]["peak_rss_mb"] / rows[0]["peak_rss_mb"] - 1
         print(f"peak RSS growth {rows[0]['tiles']} -> {rows[-1]['tiles']}: {100 * growth:+.1f} % (limit +20 %)")

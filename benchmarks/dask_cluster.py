@@ -37,8 +37,25 @@ def peak_rss_mb() -> float:
 
 def predict(city: Path, out: Path, *extra: str) -> tuple[dict, float]:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), "--device", "cpu", "--quiet", "--restart",
-                    *extra], check=True, capture_output=True, text=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "csboundary",
+            "predict",
+            str(city),
+            "--out",
+            str(out),
+            "--device",
+            "cpu",
+            "--quiet",
+            "--restart",
+            *extra,
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return json.loads((out / "summary.json").read_text()), time.perf_counter() - start
 
 
@@ -50,9 +67,27 @@ def predict_killing_a_worker(city: Path, out: Path, address: str, threads: int) 
     with Client(address) as client:
         victim = sorted(client.run(os.getpid).values())[0]
     start = time.perf_counter()
-    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), "--device", "cpu", "--quiet",
-                            "--restart", "--scheduler", address, "--threads", str(threads)], stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
+    job = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "csboundary",
+            "predict",
+            str(city),
+            "--out",
+            str(out),
+            "--device",
+            "cpu",
+            "--quiet",
+            "--restart",
+            "--scheduler",
+            address,
+            "--threads",
+            str(threads),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     graphs = out / ".csboundary-run" / "graphs"
     while not graphs.exists() or len(list(graphs.glob("*.npz"))) < 12:
         time.sleep(0.05)
@@ -68,12 +103,43 @@ def cluster(work: Path, workers: int, threads: int):
     scheduler_file = work / f"scheduler-{workers}.json"
     scheduler_file.unlink(missing_ok=True)
     env = dict(os.environ, OMP_NUM_THREADS=str(threads))
-    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--scheduler-file", str(scheduler_file), "--port", "0",
-                               "--dashboard-address", ":0"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs = [
+        subprocess.Popen(
+            [
+                str(BIN / "dask"),
+                "scheduler",
+                "--scheduler-file",
+                str(scheduler_file),
+                "--port",
+                "0",
+                "--dashboard-address",
+                ":0",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
     while not scheduler_file.exists():
         time.sleep(0.1)
-    procs += [subprocess.Popen([str(BIN / "dask"), "worker", "--scheduler-file", str(scheduler_file), "--nthreads", "1", "--nworkers", "1",
-                                "--no-dashboard"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(workers)]
+    procs += [
+        subprocess.Popen(
+            [
+                str(BIN / "dask"),
+                "worker",
+                "--scheduler-file",
+                str(scheduler_file),
+                "--nthreads",
+                "1",
+                "--nworkers",
+                "1",
+                "--no-dashboard",
+            ],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for _ in range(workers)
+    ]
     address = json.loads(scheduler_file.read_text())["address"]
     from distributed import Client
 
@@ -88,8 +154,12 @@ def same_files(a: Path, b: Path) -> bool:
 
     if any((a / name).read_bytes() != (b / name).read_bytes() for name in ("graph.json", "boundaries.geojson")):
         return False
-    return all(pyogrio.read_dataframe(a / "boundaries.gpkg", layer=layer).equals(pyogrio.read_dataframe(b / "boundaries.gpkg", layer=layer))
-               for layer in ("road_boundaries", "edges"))
+    return all(
+        pyogrio.read_dataframe(a / "boundaries.gpkg", layer=layer).equals(
+            pyogrio.read_dataframe(b / "boundaries.gpkg", layer=layer)
+        )
+        for layer in ("road_boundaries", "edges")
+    )
 
 
 def main() -> None:
@@ -101,7 +171,10 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     t = args.threads
     rows = []
-    for name, extra in ((f"local, 1 process x {t} threads", ("--threads", str(t))), ("local, 1 process x 1 thread", ("--threads", "1"))):
+    for name, extra in (
+        (f"local, 1 process x {t} threads", ("--threads", str(t))),
+        ("local, 1 process x 1 thread", ("--threads", "1")),
+    ):
         summary, wall = predict(args.city, args.work / f"local-{extra[1]}", *extra)
         rows.append((name, summary, wall, f"local-{extra[1]}", {}))
     for workers, threads, kill in ((1, t, False), (t, 1, False), (t, 1, True)):
@@ -111,12 +184,16 @@ def main() -> None:
             if kill:
                 summary, wall = predict_killing_a_worker(args.city, args.work / folder, address, threads)
             else:
-                summary, wall = predict(args.city, args.work / folder, "--scheduler", address, "--threads", str(threads))
+                summary, wall = predict(
+                    args.city, args.work / folder, "--scheduler", address, "--threads", str(threads)
+                )
             from distributed import Client
 
             with Client(address) as client:
-                memory = {"workers": sorted(round(v) for v in client.run(peak_rss_mb).values()),
-                          "scheduler": round(client.run_on_scheduler(peak_rss_mb))}
+                memory = {
+                    "workers": sorted(round(v) for v in client.run(peak_rss_mb).values()),
+                    "scheduler": round(client.run_on_scheduler(peak_rss_mb)),
+                }
         finally:
             for p in reversed(procs):
                 p.terminate()
@@ -128,12 +205,16 @@ def main() -> None:
     for row in rows:
         name, summary, wall, folder, memory = row[:5]
         n = summary["patches"]
-        line = (f"{name:34s} {wall:6.1f} s wall, {summary['seconds']['total'] / n:.3f} s/patch, {summary['km2_per_hour']:7.2f} km2/h, "
-                f"client peak RSS {summary['peak_rss_mb']['total']:.0f} MB")
+        line = (
+            f"{name:34s} {wall:6.1f} s wall, {summary['seconds']['total'] / n:.3f} s/patch, {summary['km2_per_hour']:7.2f} km2/h, "
+            f"client peak RSS {summary['peak_rss_mb']['total']:.0f} MB"
+        )
         if memory:
             same = same_files(args.work / folder, args.work / row[5])
-            line += (f"; worker peak RSS {memory['workers']} MB, scheduler {memory['scheduler']} MB; graph.json, GeoJSON and every "
-                     f"GeoPackage feature == {row[5]}: {same}")
+            line += (
+                f"; worker peak RSS {memory['workers']} MB, scheduler {memory['scheduler']} MB; graph.json, GeoJSON and every "
+                f"GeoPackage feature == {row[5]}: {same}"
+            )
         print(line, flush=True)
 
 

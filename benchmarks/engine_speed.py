@@ -56,16 +56,40 @@ def main() -> None:
     parser.add_argument("city", nargs="?", type=Path, default=Path("data/cities/test-s7-2x2-2000"))
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--weights", default=None, help="weights bundle (default: the shipped one)")
-    parser.add_argument("--bfloat16", action="store_true",
-                        help="also the onnx engine with --precision bfloat16 (the FPN in PyTorch under bfloat16 autocast)")
-    parser.add_argument("--fpn-threads", type=int, default=None,
-                        help="threads for the networks (1: the FPN on one core, the rest of the pipeline on another)")
+    parser.add_argument(
+        "--bfloat16",
+        action="store_true",
+        help="also the onnx engine with --precision bfloat16 (the FPN in PyTorch under bfloat16 autocast)",
+    )
+    parser.add_argument(
+        "--fpn-threads",
+        type=int,
+        default=None,
+        help="threads for the networks (1: the FPN on one core, the rest of the pipeline on another)",
+    )
     args = parser.parse_args()
     if args.fpn_threads:
         torch.set_num_threads(args.fpn_threads)  # ONNX Runtime's sessions take their thread count from it
     if not (args.city / "city.json").exists():
-        subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "7", "--split", "test", "--tiles", "2x2",
-                        "--tile-size", "2000", "--quiet"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "csboundary",
+                "synth",
+                str(args.city),
+                "--seed",
+                "7",
+                "--split",
+                "test",
+                "--tiles",
+                "2x2",
+                "--tile-size",
+                "2000",
+                "--quiet",
+            ],
+            check=True,
+        )
     rows = {}
     with tempfile.TemporaryDirectory() as tmp, Mosaic.open(args.city / "tiles") as mosaic:
         grid = PatchGrid.for_mosaic(mosaic)
@@ -78,7 +102,9 @@ def main() -> None:
                 predictor.use_engine("auto", args.weights)
                 print(f"default: the {predictor.engine} engine, FPN in {predictor.precision_choice}", flush=True)
             else:
-                predictor.use_precision(engine.split("+")[1] if "+" in engine else "float32")  # before the engine: int8 is made there
+                predictor.use_precision(
+                    engine.split("+")[1] if "+" in engine else "float32"
+                )  # before the engine: int8 is made there
                 predictor.use_engine(engine.split("+")[0], args.weights)
             fpn, fpn_cores = fpn_only(predictor, images, args.repeat)
             out = Path(tmp) / engine
@@ -91,24 +117,32 @@ def main() -> None:
             # overlap on this machine's cores could not beat (both networks' work at full use).
             rest = run_cores - fpn_cores
             bound = max(1.0, run_cores / (cores_available() * fpn))
-            print(f"{engine}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
-                  f"{summary['km2_per_hour']} km2/h\n       {stage_table(summary)}\n"
-                  f"       core s/patch: FPN alone {fpn_cores:.3f}, end to end {run_cores:.3f}, the rest {rest:.3f}; "
-                  f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}\n"
-                  f"       core s/patch by stage (the thread that ran it; whole with one thread per network): "
-                  + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in summary["core_seconds_per_patch"].items())
-                  + f"; post-processing (all but the FPN) {sum(v for k, v in summary['core_seconds_per_patch'].items() if k != 'fpn'):.3f}",
-                  flush=True)
+            print(
+                f"{engine}: FPN alone {fpn:.3f} s/patch, end to end {total:.3f} s/patch, ratio {total / fpn:.2f} (limit 1.2), "
+                f"{summary['km2_per_hour']} km2/h\n       {stage_table(summary)}\n"
+                f"       core s/patch: FPN alone {fpn_cores:.3f}, end to end {run_cores:.3f}, the rest {rest:.3f}; "
+                f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}\n"
+                f"       core s/patch by stage (the thread that ran it; whole with one thread per network): "
+                + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in summary["core_seconds_per_patch"].items())
+                + f"; post-processing (all but the FPN) {sum(v for k, v in summary['core_seconds_per_patch'].items() if k != 'fpn'):.3f}",
+                flush=True,
+            )
     (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
-    print(f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster")
+    print(
+        f"onnx / torch end-to-end throughput: {os_['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / of:.2f}x faster"
+    )
     for engine in ("default",) + extra:
         ef, _, es, _ = rows[engine]
-        print(f"{engine} / torch end-to-end throughput: {es['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / ef:.2f}x faster")
+        print(
+            f"{engine} / torch end-to-end throughput: {es['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / ef:.2f}x faster"
+        )
     if tg == og:
         print("graph.json identical for both engines")
     else:
         a, b = json.loads(tg), json.loads(og)
-        print(f"graph.json differs: {len(a['vertices'])} vs {len(b['vertices'])} vertices, {len(a['edges'])} vs {len(b['edges'])} edges")
+        print(
+            f"graph.json differs: {len(a['vertices'])} vs {len(b['vertices'])} vertices, {len(a['edges'])} vs {len(b['edges'])} edges"
+        )
 
 
 if __name__ == "__main__":

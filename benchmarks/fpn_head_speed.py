@@ -43,15 +43,20 @@ def main() -> None:
         "encoder": lambda: full.encoder(small),
         "top-down path": lambda: top_down(features, full.lateral, full.smooth),
         "stride-2 stem": lambda: full.stem((x - 0.5) / 0.25),
-        "upsample + concat": lambda: torch.cat([F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False), stem], 1),
+        "upsample + concat": lambda: torch.cat(
+            [F.interpolate(fused, size=stem.shape[-2:], mode="bilinear", align_corners=False), stem], 1
+        ),
         "head": lambda: full.head(joined),
         "final upsample": lambda: F.interpolate(logits, scale_factor=2, mode="bilinear", align_corners=False),
     }
     for name, fn in parts.items():
         print(f"full head, {name:18s} {seconds(fn, args.repeat):.3f} s")
     patch = torch.rand(1, 4, 1100, 1100).to(memory_format=cl)
-    for label, overrides in (("full head", {}), ("light head, stem 16", {"head": "light", "stem": 16}),
-                             ("light head, stem 24", {"head": "light", "stem": 24})):
+    for label, overrides in (
+        ("full head", {}),
+        ("light head, stem 16", {"head": "light", "stem": 16}),
+        ("light head, stem 24", {"head": "light", "stem": 24}),
+    ):
         model = FPN(FPNConfig(backbone="efficientnet-lite0", pretrained=False, **overrides)).eval().to(memory_format=cl)
         print(f"FPN, {label:20s} {seconds(lambda: model(patch), args.repeat):.3f} s per 1100 px patch")
 

@@ -44,7 +44,9 @@ def main() -> None:
         "efficientnet-lite1 @0.5": FPNConfig(backbone="efficientnet-lite1", pretrained=False),
         "efficientnet-lite2 @0.5 (shipped)": FPNConfig(backbone="efficientnet-lite2", pretrained=False),
     }
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {args.size}x{args.size} px, median of {args.repeats}")
+    print(
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, {args.size}x{args.size} px, median of {args.repeats}"
+    )
     print(f"{'FPN':36s} {'params':>9s} {'eager s':>9s} {'ch-last s':>10s} {'eager x':>8s} {'ch-last x':>10s}")
     base = None
     for name, config in models.items():
@@ -54,7 +56,9 @@ def main() -> None:
         last = seconds_per_patch(model, x.contiguous(memory_format=torch.channels_last), args.repeats)
         base = base or (eager, last)
         params = sum(p.numel() for p in model.parameters())
-        print(f"{name:36s} {params / 1e6:8.2f}M {eager:9.3f} {last:10.3f} {eager / base[0]:8.2f} {last / base[1]:10.2f}")
+        print(
+            f"{name:36s} {params / 1e6:8.2f}M {eager:9.3f} {last:10.3f} {eager / base[0]:8.2f} {last / base[1]:10.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -26,8 +26,8 @@ from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.models.maps import unit_bands
 from csboundary.models.onnx_engine import export_fpn
-from csboundary.models.onnx_session import LEVELS, open_session
 from csboundary.models.onnx_quantization import quantize_fpn
+from csboundary.models.onnx_session import LEVELS, open_session
 from csboundary.pipeline.prediction.patch import PatchPredictor
 from csboundary.pipeline.prediction.run import peak_rss_mb
 
@@ -39,16 +39,23 @@ def main() -> None:
     parser.add_argument("--windows", type=int, default=4)
     args = parser.parse_args()
     with Mosaic.open(args.city / "tiles") as mosaic:
-        windows = [unit_bands(mosaic.read(p.expanded).data[None]) for p in list(PatchGrid.for_mosaic(mosaic))[: args.windows]]
+        windows = [
+            unit_bands(mosaic.read(p.expanded).data[None]) for p in list(PatchGrid.for_mosaic(mosaic))[: args.windows]
+        ]
     float_model = export_fpn(PatchPredictor.load(None, torch.device("cpu")).fpn)
     before = peak_rss_mb()
     start = time.perf_counter()
     int8_model = quantize_fpn(float_model)
-    print(f"quantized in {time.perf_counter() - start:.1f} s; peak memory {peak_rss_mb():.0f} MB (before quantizing {before:.0f} MB); "
-          f"{len(float_model) / 2**20:.1f} MB -> {len(int8_model) / 2**20:.1f} MB")
+    print(
+        f"quantized in {time.perf_counter() - start:.1f} s; peak memory {peak_rss_mb():.0f} MB (before quantizing {before:.0f} MB); "
+        f"{len(float_model) / 2**20:.1f} MB -> {len(int8_model) / 2**20:.1f} MB"
+    )
     threads = torch.get_num_threads()
-    sessions = {(name, level): open_session(model, threads, level, name)
-                for name, model in (("float32", float_model), ("int8", int8_model)) for level in LEVELS}
+    sessions = {
+        (name, level): open_session(model, threads, level, name)
+        for name, model in (("float32", float_model), ("int8", int8_model))
+        for level in LEVELS
+    }
     probs = {key: [] for key in sessions}
     times = {key: [] for key in sessions}
     for key, session in sessions.items():
@@ -63,8 +70,10 @@ def main() -> None:
     reference = probs["float32", "extended"]
     for (name, level), found in probs.items():
         diff = np.concatenate([np.abs(a - b).ravel() for a, b in zip(found, reference)])
-        print(f"{name:8s} {level:9s} {statistics.median(times[name, level]):.3f} s per window, {threads} threads; "
-              f"probability difference to float32: mean {diff.mean():.5f}, largest {diff.max():.3f}, over 0.1 {np.mean(diff > 0.1):.5f}")
+        print(
+            f"{name:8s} {level:9s} {statistics.median(times[name, level]):.3f} s per window, {threads} threads; "
+            f"probability difference to float32: mean {diff.mean():.5f}, largest {diff.max():.3f}, over 0.1 {np.mean(diff > 0.1):.5f}"
+        )
 
 
 if __name__ == "__main__":

@@ -30,9 +30,11 @@ def main() -> None:
         manifest = write_city_labels(city, f"{tmp}/labels", progress=False)
         total = time.perf_counter() - t0
     c = manifest["counts"]
-    print(f"{c['patches']} patches ({manifest['mosaic'][0]}x{manifest['mosaic'][1]} px): {total:.1f} s in all, "
-          f"{manifest['seconds']['prepare']:.2f} s keypoints, {total / c['patches']:.2f} s per patch; "
-          f"{c['vertices']} vertices, {c['edges']} edges ({c['corner_edges']} corner)")
+    print(
+        f"{c['patches']} patches ({manifest['mosaic'][0]}x{manifest['mosaic'][1]} px): {total:.1f} s in all, "
+        f"{manifest['seconds']['prepare']:.2f} s keypoints, {total / c['patches']:.2f} s per patch; "
+        f"{c['vertices']} vertices, {c['edges']} edges ({c['corner_edges']} corner)"
+    )
 
 
 if __name__ == "__main__":

@@ -38,8 +38,14 @@ def write_tiles(source: Path, out: Path, tile: int | None) -> int:
         return len(list(out.glob("*.tif")))
     with Mosaic.open(source) as mosaic:
         size = tile or max(mosaic.width, mosaic.height)
-        profile = {"driver": "GTiff", "count": 4, "dtype": "uint8", "crs": mosaic.crs, "tiled": size >= 512,
-                   **({"blockxsize": 512, "blockysize": 512} if size >= 512 else {})}
+        profile = {
+            "driver": "GTiff",
+            "count": 4,
+            "dtype": "uint8",
+            "crs": mosaic.crs,
+            "tiled": size >= 512,
+            **({"blockxsize": 512, "blockysize": 512} if size >= 512 else {}),
+        }
         n = 0
         for row in range(0, mosaic.height, size):
             for col in range(0, mosaic.width, size):
@@ -48,8 +54,14 @@ def write_tiles(source: Path, out: Path, tile: int | None) -> int:
                 win = PixelWindow(col, row, min(size, mosaic.width - col), min(size, mosaic.height - row))
                 read = mosaic.read(win)
                 transform = rasterio.windows.transform(Window(col, row, win.width, win.height), mosaic.transform)
-                with rasterio.open(out / f"t_{row:06d}_{col:06d}.tif", "w", width=win.width, height=win.height, transform=transform,
-                                   **profile) as dst:
+                with rasterio.open(
+                    out / f"t_{row:06d}_{col:06d}.tif",
+                    "w",
+                    width=win.width,
+                    height=win.height,
+                    transform=transform,
+                    **profile,
+                ) as dst:
                     dst.write(np.asarray(read.data, np.uint8))
                 n += 1
     return n
@@ -57,9 +69,25 @@ def write_tiles(source: Path, out: Path, tile: int | None) -> int:
 
 def predict(tiles: Path, out: Path, nofile: int) -> dict:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "csboundary", "predict", str(tiles), "--out", str(out), "--device", "cpu", "--quiet",
-                    "--restart"],
-                   check=True, preexec_fn=_limit(nofile), capture_output=True, text=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "csboundary",
+            "predict",
+            str(tiles),
+            "--out",
+            str(out),
+            "--device",
+            "cpu",
+            "--quiet",
+            "--restart",
+        ],
+        check=True,
+        preexec_fn=_limit(nofile),
+        capture_output=True,
+        text=True,
+    )
     summary = json.loads((out / "summary.json").read_text())
     summary["wall_s"] = time.perf_counter() - start
     return summary
@@ -73,8 +101,25 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/tmp/many-tiles"))
     args = parser.parse_args()
     if not (args.city / "city.json").exists():
-        subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "0", "--split", "test", "--tiles", "2x2",
-                        "--tile-size", "5000", "--quiet"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "csboundary",
+                "synth",
+                str(args.city),
+                "--seed",
+                "0",
+                "--split",
+                "test",
+                "--tiles",
+                "2x2",
+                "--tile-size",
+                "5000",
+                "--quiet",
+            ],
+            check=True,
+        )
     one = write_tiles(args.city / "tiles", args.work / "one", None)
     many = write_tiles(args.city / "tiles", args.work / f"many-{args.tile}", args.tile)
     rows = {}
@@ -82,13 +127,17 @@ def main() -> None:
         summary = predict(folder, args.work / f"out-{folder.name}", args.nofile)
         n = summary["patches"]
         rows[name] = summary
-        print(f"{name:>11s} (ulimit -n {args.nofile}): {n} patches, {summary['seconds']['total'] / n:.3f} s/patch "
-              f"(read {summary['seconds']['read'] / n:.3f}), {summary['km2_per_hour']} km2/h, peak RSS "
-              f"{summary['peak_rss_mb']['total']:.0f} MB",
-              flush=True)
+        print(
+            f"{name:>11s} (ulimit -n {args.nofile}): {n} patches, {summary['seconds']['total'] / n:.3f} s/patch "
+            f"(read {summary['seconds']['read'] / n:.3f}), {summary['km2_per_hour']} km2/h, peak RSS "
+            f"{summary['peak_rss_mb']['total']:.0f} MB",
+            flush=True,
+        )
     (a, b) = rows.values()
     ratio = (b["seconds"]["total"] / b["patches"]) / (a["seconds"]["total"] / a["patches"])
-    same = (args.work / "out-one" / "graph.json").read_bytes() == (args.work / f"out-many-{args.tile}" / "graph.json").read_bytes()
+    same = (args.work / "out-one" / "graph.json").read_bytes() == (
+        args.work / f"out-many-{args.tile}" / "graph.json"
+    ).read_bytes()
     print(f"{one} vs {many} tiles: time per patch ratio {ratio:.3f} (limit 1.10); graph.json identical: {same}")
 
 

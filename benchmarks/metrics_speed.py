@@ -38,7 +38,9 @@ def city_graph(tiles: tuple[int, int], seed: int, vertices: int) -> BoundaryGrap
     city = plan_city(config, "test", seed, tiles)
     gt = city.ground_truth()
     rows, cols = tiles
-    transform = Affine(config.gsd, 0, config.origin_x, 0, -config.gsd, config.origin_y + rows * config.tile_size * config.gsd)
+    transform = Affine(
+        config.gsd, 0, config.origin_x, 0, -config.gsd, config.origin_y + rows * config.tile_size * config.gsd
+    )
     dense = flatten(BoundaryGraph.from_world_lines(list(gt.geometry), transform, crs=config.crs))
     spacing = float(gt.length.sum()) / config.gsd / vertices  # about `vertices` samples in all
     for _ in range(20):  # adjust: chains add their end vertices
@@ -46,7 +48,9 @@ def city_graph(tiles: tuple[int, int], seed: int, vertices: int) -> BoundaryGrap
         if abs(sampled.n_vertices - vertices) <= vertices * 0.002:
             break
         spacing *= sampled.n_vertices / vertices
-    return BoundaryGraph(sampled.points, np.stack([sampled.edge_u, sampled.edge_v], axis=1), transform=transform, crs=config.crs)
+    return BoundaryGraph(
+        sampled.points, np.stack([sampled.edge_u, sampled.edge_v], axis=1), transform=transform, crs=config.crs
+    )
 
 
 def perturb(graph: BoundaryGraph, seed: int) -> BoundaryGraph:
@@ -87,17 +91,23 @@ def main() -> None:
     pred = perturb(gt, args.seed + 1)
     config = MetricConfig()
     at_30 = resample(flatten(gt), config.spacing).n_vertices, resample(flatten(pred), config.spacing).n_vertices
-    print(f"graphs built in {time.perf_counter() - t0:.1f} s (not timed below): ground truth {gt.n_vertices} vertices / "
-          f"{gt.n_edges} edges, prediction {pred.n_vertices} vertices / {pred.n_edges} edges; "
-          f"{at_30[0]} and {at_30[1]} vertices after the metrics' own {config.spacing:g} px resampling")
+    print(
+        f"graphs built in {time.perf_counter() - t0:.1f} s (not timed below): ground truth {gt.n_vertices} vertices / "
+        f"{gt.n_edges} edges, prediction {pred.n_vertices} vertices / {pred.n_edges} edges; "
+        f"{at_30[0]} and {at_30[1]} vertices after the metrics' own {config.spacing:g} px resampling"
+    )
     t_paper, v_paper = best_of(args.repeat, lambda: apls_paper(pred, gt, seed=args.seed, config=config))
     t_sym, v_sym = best_of(args.repeat, lambda: apls_symmetric(pred, gt, seed=args.seed, config=config))
     t_tlts, v_tlts = best_of(args.repeat, lambda: tlts(pred, gt, seed=args.seed, config=config))
     print(f"APLS paper      {t_paper:6.2f} s   = {v_paper:.4f}")
-    print(f"APLS symmetric  {t_sym:6.2f} s   = {v_sym.score:.4f} (gt->pred {v_sym.gt_to_pred:.4f} on {v_sym.n_pairs_gt} pairs, "
-          f"pred->gt {v_sym.pred_to_gt:.4f} on {v_sym.n_pairs_pred} pairs)")
-    print(f"TLTS            {t_tlts:6.2f} s   = {v_tlts.score:.4f} (too long {v_tlts.too_long:.3f}, too short {v_tlts.too_short:.3f}, "
-          f"infeasible {v_tlts.infeasible:.3f}; {v_tlts.n_pairs} pairs)")
+    print(
+        f"APLS symmetric  {t_sym:6.2f} s   = {v_sym.score:.4f} (gt->pred {v_sym.gt_to_pred:.4f} on {v_sym.n_pairs_gt} pairs, "
+        f"pred->gt {v_sym.pred_to_gt:.4f} on {v_sym.n_pairs_pred} pairs)"
+    )
+    print(
+        f"TLTS            {t_tlts:6.2f} s   = {v_tlts.score:.4f} (too long {v_tlts.too_long:.3f}, too short {v_tlts.too_short:.3f}, "
+        f"infeasible {v_tlts.infeasible:.3f}; {v_tlts.n_pairs} pairs)"
+    )
     total = t_paper + t_sym + t_tlts
     print(f"all three       {total:6.2f} s   (target <= 5 s on one core: {'met' if total <= 5 else 'MISSED'})")
     for apls in ("paper", "symmetric"):

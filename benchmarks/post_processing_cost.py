@@ -107,10 +107,14 @@ def main() -> None:
         wall, cores = time.perf_counter() - start, time.process_time() - cores
         threads = clock.stop()
     n = summary["patches"]
-    print(f"{args.engine}, {n} patches, without the FPN: wall {wall / n:.3f} s/patch, core {cores / n:.3f} s/patch "
-          f"(outputs {summary['seconds']['outputs']:.2f} s)")
-    print("  by thread, core s/patch: " + ", ".join(f"{name} {seconds / n:.3f}" for name, seconds in
-                                                    sorted(threads.items(), key=lambda kv: -kv[1])))
+    print(
+        f"{args.engine}, {n} patches, without the FPN: wall {wall / n:.3f} s/patch, core {cores / n:.3f} s/patch "
+        f"(outputs {summary['seconds']['outputs']:.2f} s)"
+    )
+    print(
+        "  by thread, core s/patch: "
+        + ", ".join(f"{name} {seconds / n:.3f}" for name, seconds in sorted(threads.items(), key=lambda kv: -kv[1]))
+    )
 
 
 if __name__ == "__main__":

@@ -29,7 +29,9 @@ def command(city: Path, out: Path) -> list[str]:
 
 def windows_done(out: Path) -> int:
     folder = out / STORE / "graphs"
-    return sum(1 for p in folder.iterdir() if p.suffix == ".npz" and not p.name.startswith(".")) if folder.exists() else 0
+    return (
+        sum(1 for p in folder.iterdir() if p.suffix == ".npz" and not p.name.startswith(".")) if folder.exists() else 0
+    )
 
 
 def main() -> None:
@@ -39,8 +41,25 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/tmp/resume-bench"))
     args = parser.parse_args()
     if not (args.city / "city.json").exists():
-        subprocess.run([sys.executable, "-m", "csboundary", "synth", str(args.city), "--seed", "1", "--split", "test", "--tiles", "1x1",
-                        "--tile-size", "5000", "--quiet"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "csboundary",
+                "synth",
+                str(args.city),
+                "--seed",
+                "1",
+                "--split",
+                "test",
+                "--tiles",
+                "1x1",
+                "--tile-size",
+                "5000",
+                "--quiet",
+            ],
+            check=True,
+        )
     whole, killed = args.work / "uninterrupted", args.work / "killed"
     for folder in (whole, killed):
         subprocess.run(["rm", "-rf", str(folder)], check=True)
@@ -61,7 +80,9 @@ def main() -> None:
     job.wait()
     t_killed = time.perf_counter() - start
     at_kill = windows_done(killed)
-    print(f"SIGKILL after {t_killed:.1f} s with {at_kill} of {n} windows done; graph.json written: {(killed / 'graph.json').exists()}")
+    print(
+        f"SIGKILL after {t_killed:.1f} s with {at_kill} of {n} windows done; graph.json written: {(killed / 'graph.json').exists()}"
+    )
 
     start = time.perf_counter()
     subprocess.run(command(args.city, killed), check=True, capture_output=True)
@@ -71,11 +92,15 @@ def main() -> None:
     fpn_total = work["patches_reused"] + 1 + work["patches_predicted"]
     windows_total = work["windows_reused"] + 1 + work["windows_connected"]
     same = (killed / "graph.json").read_bytes() == (whole / "graph.json").read_bytes()
-    print(f"resumed in {t_resumed:.1f} s: reused {work['patches_reused']} patch maps and {work['windows_reused']} window graphs; "
-          f"predicted {work['patches_predicted']} patches, connected {work['windows_connected']} windows")
-    print(f"total work, killed + resumed (counting one in-flight batch and window as lost): FPN {fpn_total / n:.2f}x, "
-          f"windows {windows_total / n:.2f}x, time {(t_killed + t_resumed) / t_whole:.2f}x (limit 1.1x work); "
-          f"graph.json identical: {same}")
+    print(
+        f"resumed in {t_resumed:.1f} s: reused {work['patches_reused']} patch maps and {work['windows_reused']} window graphs; "
+        f"predicted {work['patches_predicted']} patches, connected {work['windows_connected']} windows"
+    )
+    print(
+        f"total work, killed + resumed (counting one in-flight batch and window as lost): FPN {fpn_total / n:.2f}x, "
+        f"windows {windows_total / n:.2f}x, time {(t_killed + t_resumed) / t_whole:.2f}x (limit 1.1x work); "
+        f"graph.json identical: {same}"
+    )
 
 
 if __name__ == "__main__":

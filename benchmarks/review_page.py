@@ -33,7 +33,13 @@ def browser():
 
     options = webdriver.ChromeOptions()
     options.binary_location = "/usr/bin/chromium"
-    for flag in ("--headless=new", "--no-sandbox", "--disable-background-networking", "--disable-gpu", "--window-size=1400,900"):
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-background-networking",
+        "--disable-gpu",
+        "--window-size=1400,900",
+    ):
         options.add_argument(flag)
     return webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=options)
 
@@ -66,23 +72,39 @@ def main() -> None:
     if not page.exists():
         start = time.perf_counter()
         district = ["--bounds", args.bounds] if args.bounds else []
-        subprocess.run([sys.executable, "-m", "csboundary", "review", str(args.prediction), "--out", str(folder), "--quiet", *district],
-                       check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "csboundary",
+                "review",
+                str(args.prediction),
+                "--out",
+                str(folder),
+                "--quiet",
+                *district,
+            ],
+            check=True,
+        )
         print(f"csboundary review: {time.perf_counter() - start:.1f} s")
     data = (folder / "data.js").read_text()
     meta = json.loads(data[data.index("=") + 1 : data.rindex(";")])
     tiles = sum(1 for _ in (folder / "tiles").rglob("*.jpg"))
-    print(f"page of {meta['width']}x{meta['height']} px, {len(meta['edges'])} edges in {len(meta.get('boundaries') or [])} boundaries, "
-          f"{meta['levels']} pyramid levels, {tiles} tiles, "
-          f"data.js {len(data) / 1e6:.1f} MB")
+    print(
+        f"page of {meta['width']}x{meta['height']} px, {len(meta['edges'])} edges in {len(meta.get('boundaries') or [])} boundaries, "
+        f"{meta['levels']} pyramid levels, {tiles} tiles, "
+        f"data.js {len(data) / 1e6:.1f} MB"
+    )
     driver = browser()
     try:
         driver.get(page.as_uri())
         wait(driver, ALL_VISIBLE_TILES_DRAWN)
         opened = driver.execute_script("return performance.now()")
-        print(f"open: {opened / 1000:.2f} s until the page is built and the first view's "
-              f"{driver.execute_script('return window.review.loadedTiles()')} "
-              "tiles are drawn")
+        print(
+            f"open: {opened / 1000:.2f} s until the page is built and the first view's "
+            f"{driver.execute_script('return window.review.loadedTiles()')} "
+            "tiles are drawn"
+        )
         first = "document.querySelector('#edge-list li:not([hidden])')"  # the least sure boundary of the draft
         lowest = int(driver.execute_script(f"return +{first}.dataset.boundary"))
         times = {}
@@ -95,14 +117,18 @@ def main() -> None:
                     REVIEW_DATA.height) * {factor};
                     r.state.ox = p[0] - c.width / 2 / r.state.scale; r.state.oy = p[1] - c.height / 2 / r.state.scale; r.render();""")
                 time.sleep(0.5)  # let the tiles of that view load
-            samples = driver.execute_script("const r = window.review; return Array.from({length: 20}, () => r.drawNow());")
+            samples = driver.execute_script(
+                "const r = window.review; return Array.from({length: 20}, () => r.drawNow());"
+            )
             times[name] = statistics.median(samples)
         print("redraw (median of 20): " + ", ".join(f"{k} {v:.1f} ms" for k, v in times.items()))
         driver.execute_script("window.review.fit(); document.getElementById('show-gt').click();")
         start = time.perf_counter()
         driver.find_element("css selector", "#edge-list li:not([hidden])").click()
         wait(driver, f"return window.review.state.selected === {lowest}")
-        print(f"select from the list: {1000 * (time.perf_counter() - start):.0f} ms (click to selection, through WebDriver)")
+        print(
+            f"select from the list: {1000 * (time.perf_counter() - start):.0f} ms (click to selection, through WebDriver)"
+        )
         if args.screenshot:
             time.sleep(1.0)
             args.screenshot.parent.mkdir(parents=True, exist_ok=True)

@@ -46,21 +46,40 @@ def main() -> None:
         city = args.city
         if city is None:
             city = Path(tmp) / "city"
-            subprocess.run([*command, "synth", str(city), "--seed", "7", "--split", "test", "--tiles", "2x2", "--tile-size", "2000",
-                            "--quiet"], check=True)
+            subprocess.run(
+                [
+                    *command,
+                    "synth",
+                    str(city),
+                    "--seed",
+                    "7",
+                    "--split",
+                    "test",
+                    "--tiles",
+                    "2x2",
+                    "--tile-size",
+                    "2000",
+                    "--quiet",
+                ],
+                check=True,
+            )
         walls = []
         for run in range(2):
             out = Path(tmp) / f"pred-{run}"
             start = time.perf_counter()
-            subprocess.run([*command, "predict", str(city), "--out", str(out), "--quiet"], check=True, capture_output=True)
+            subprocess.run(
+                [*command, "predict", str(city), "--out", str(out), "--quiet"], check=True, capture_output=True
+            )
             walls.append(time.perf_counter() - start)
         graph = BoundaryGraph.read_json(out / "graph.json")
         shape = best_of(args.repeat, lambda: straighten(drop_bubbles(graph)))
         costs = ReviewCosts()
         draft = best_of(args.repeat, lambda: review_draft(graph_boundaries(graph), costs, 0.152))
     print(f"{city}: {graph.n_edges} edges; predict {walls[1]:.2f} s wall (first run {walls[0]:.2f} s)")
-    print(f"bubbles + straightening {shape * 1000:.0f} ms ({shape / walls[1]:.1%} of predict); "
-          f"review draft {draft * 1000:.0f} ms ({draft / walls[1]:.1%}); together {(shape + draft) / walls[1]:.1%}")
+    print(
+        f"bubbles + straightening {shape * 1000:.0f} ms ({shape / walls[1]:.1%} of predict); "
+        f"review draft {draft * 1000:.0f} ms ({draft / walls[1]:.1%}); together {(shape + draft) / walls[1]:.1%}"
+    )
 
 
 if __name__ == "__main__":

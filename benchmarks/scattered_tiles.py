@@ -15,10 +15,10 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-from datetime import datetime
 import subprocess
 import sys
 import time
+from datetime import datetime
 from pathlib import Path
 
 import rasterio
@@ -27,8 +27,16 @@ from rasterio.windows import Window
 
 SIDE = 1000
 SPREAD = 382_000  # px: the scattered mosaic's bounding box
-PLACES = [(0, 0), (51_000, 300_000), (120_000, 77_000), (199_000, 381_000 - SIDE), (250_000, 160_000), (302_000, 12_000),
-          (340_000, 240_000), (381_000 - SIDE, 330_000)]  # (col, row) of each tile's corner, px
+PLACES = [
+    (0, 0),
+    (51_000, 300_000),
+    (120_000, 77_000),
+    (199_000, 381_000 - SIDE),
+    (250_000, 160_000),
+    (302_000, 12_000),
+    (340_000, 240_000),
+    (381_000 - SIDE, 330_000),
+]  # (col, row) of each tile's corner, px
 
 
 def write_tiles(city: Path, out: Path, scattered: bool) -> Path:
@@ -41,15 +49,25 @@ def write_tiles(city: Path, out: Path, scattered: bool) -> Path:
             row, col = divmod(k, 4)
             data = src.read(window=Window(col * SIDE, row * SIDE, SIDE, SIDE))
             c, r = PLACES[k] if scattered else (col * SIDE, row * SIDE)
-            profile = dict(src.profile, width=SIDE, height=SIDE, transform=t * Affine.translation(c, r), tiled=True,
-                           blockxsize=256, blockysize=256, compress="deflate")
+            profile = dict(
+                src.profile,
+                width=SIDE,
+                height=SIDE,
+                transform=t * Affine.translation(c, r),
+                tiled=True,
+                blockxsize=256,
+                blockysize=256,
+                compress="deflate",
+            )
             with rasterio.open(out / f"tile-{k}.tif", "w", **profile) as dst:
                 dst.write(data)
     return out
 
 
-PEAK = ("import resource, subprocess, sys; code = subprocess.run(sys.argv[1:]).returncode; "
-        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, file=sys.stderr); sys.exit(code)")
+PEAK = (
+    "import resource, subprocess, sys; code = subprocess.run(sys.argv[1:]).returncode; "
+    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, file=sys.stderr); sys.exit(code)"
+)
 
 
 def timed(command: list[str]) -> tuple[float, float, str]:
@@ -78,18 +96,41 @@ def main() -> None:
         work = args.work / f"adapt-{name}"
         shutil.rmtree(work, ignore_errors=True)
         (args.work / f"{name}.pt").unlink(missing_ok=True)
-        seconds, peak, last = timed(cli + ["adapt", str(folder), "--out", str(args.work / f"{name}.pt"), "--work", str(work),
-                                           "--fpn-steps", str(args.steps), "--afanet-steps", "0", "--synthetic-cities", "1",
-                                           "--cache", str(args.work / "synthetic"), "--quiet", "--device", "cpu"])
+        seconds, peak, last = timed(
+            cli
+            + [
+                "adapt",
+                str(folder),
+                "--out",
+                str(args.work / f"{name}.pt"),
+                "--work",
+                str(work),
+                "--fpn-steps",
+                str(args.steps),
+                "--afanet-steps",
+                "0",
+                "--synthetic-cities",
+                "1",
+                "--cache",
+                str(args.work / "synthetic"),
+                "--quiet",
+                "--device",
+                "cpu",
+            ]
+        )
         row = {"layout": name, "adapt_s": round(seconds, 1), "adapt_peak_mb": round(peak)}
         log = work / "fpn" / "train.log"
-        if log.exists():  # seconds per step: the log's first and last event, so set-up before the first step is left out
+        if (
+            log.exists()
+        ):  # seconds per step: the log's first and last event, so set-up before the first step is left out
             events = [json.loads(line) for line in log.read_text().splitlines()]
             span = datetime.fromisoformat(events[-1]["time"]) - datetime.fromisoformat(events[0]["time"])
             row["adapt_s_per_step"] = round(span.total_seconds() / args.steps, 2)
         row["adapt_last"] = last
         if not args.skip_predict:
-            seconds, peak2, last = timed(cli + ["predict", str(folder), "--out", str(args.work / f"pred-{name}"), "--quiet", "--restart"])
+            seconds, peak2, last = timed(
+                cli + ["predict", str(folder), "--out", str(args.work / f"pred-{name}"), "--quiet", "--restart"]
+            )
             row.update(predict_s=round(seconds, 1), predict_peak_mb=round(peak2))
             summary = args.work / f"pred-{name}" / "summary.json"
             if summary.exists():

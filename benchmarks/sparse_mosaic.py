@@ -24,16 +24,28 @@ from rasterio.windows import Window
 
 
 def write(path: Path, data: np.ndarray, size: int, profile: dict) -> None:
-    profile = dict(profile, width=size, height=size, tiled=True, blockxsize=512, blockysize=512, compress="deflate",
-                   nodata=0, SPARSE_OK=True)
+    profile = dict(
+        profile,
+        width=size,
+        height=size,
+        tiled=True,
+        blockxsize=512,
+        blockysize=512,
+        compress="deflate",
+        nodata=0,
+        SPARSE_OK=True,
+    )
     with rasterio.open(path, "w", **profile) as dst:
         dst.write(data, window=Window(0, 0, data.shape[2], data.shape[1]))
 
 
 def predict(image: Path, out: Path) -> tuple[float, dict]:
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "csboundary", "predict", str(image), "--out", str(out), "--quiet", "--restart"],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "csboundary", "predict", str(image), "--out", str(out), "--quiet", "--restart"],
+        capture_output=True,
+        text=True,
+    )
     seconds = time.perf_counter() - start
     if done.returncode != 0:
         raise SystemExit(done.stderr)
@@ -52,7 +64,9 @@ def main() -> None:
     with rasterio.open(tile) as src:
         data = src.read(window=Window(0, 0, args.corner, args.corner))
         profile = {k: src.profile[k] for k in ("driver", "count", "dtype", "crs", "transform")}
-    data = np.where(data == 0, 1, data).astype(data.dtype)  # no pixel of the data equals nodata (a black pixel stays data)
+    data = np.where(data == 0, 1, data).astype(
+        data.dtype
+    )  # no pixel of the data equals nodata (a black pixel stays data)
     corner, sparse = args.work / "corner.tif", args.work / "sparse.tif"
     write(corner, data, args.corner, profile)
     write(sparse, data, args.size, profile)
@@ -60,8 +74,10 @@ def main() -> None:
     t_corner, s_corner = predict(corner, args.work / "out-corner")
     t_sparse, s_sparse = predict(sparse, args.work / "out-sparse")
     print(f"corner alone: {t_corner:.1f} s, {s_corner['patches']} patches, {s_corner['counts']['edges']} edges")
-    print(f"sparse mosaic: {t_sparse:.1f} s, {s_sparse['patches']} patches ({s_sparse['patches_without_imagery']} without imagery), "
-          f"{s_sparse['counts']['edges']} edges")
+    print(
+        f"sparse mosaic: {t_sparse:.1f} s, {s_sparse['patches']} patches ({s_sparse['patches_without_imagery']} without imagery), "
+        f"{s_sparse['counts']['edges']} edges"
+    )
     print(f"ratio {t_sparse / t_corner:.2f} (acceptance: at most 1.5)")
     if s_sparse["stderr"]:
         print("said:", s_sparse["stderr"])

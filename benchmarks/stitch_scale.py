@@ -59,27 +59,45 @@ def one(n: int, one_pass: bool, keep: bool, block: int | None = None) -> dict:
 
     from csboundary.data.grid import PatchGrid
     from csboundary.data.units import ground_units
-    from csboundary.pipeline.prediction.city_blocks import CityCollector, CityGraphRecipe, stream_city_graph
     from csboundary.pipeline.outputs.prediction_files import GraphWriter
+    from csboundary.pipeline.prediction.city_blocks import CityCollector, CityGraphRecipe, stream_city_graph
 
     side = max(1, round(math.sqrt(n)))
     transform = Affine(PIXEL_M, 0, 580000, 0, -PIXEL_M, 4510000)
     grid = PatchGrid(side * 1000, side * 1000, transform)
     recipe = CityGraphRecipe(crs=CRS, **({"block": block} if block else {}))
     with tempfile.TemporaryDirectory(dir=Path(__file__).resolve().parents[1] / "runs") as tmp:
-        files = {"gpkg": Path(tmp) / "boundaries.gpkg", "geojson": Path(tmp) / "boundaries.geojson", "graph_json": Path(tmp) / "graph.json"}
+        files = {
+            "gpkg": Path(tmp) / "boundaries.gpkg",
+            "geojson": Path(tmp) / "boundaries.geojson",
+            "graph_json": Path(tmp) / "graph.json",
+        }
         writer = GraphWriter(files, CRS, transform, ground_units(CRS, transform * (0, 0)))
         collector = CityCollector(transform, CRS) if keep else None
         start = time.perf_counter()
-        made = stream_city_graph(lambda index: patch_graph(grid.patch(*index)), grid, recipe, writer=writer.add, collector=collector,
-                                 one_pass=one_pass)
+        made = stream_city_graph(
+            lambda index: patch_graph(grid.patch(*index)),
+            grid,
+            recipe,
+            writer=writer.add,
+            collector=collector,
+            one_pass=one_pass,
+        )
         counts = writer.close()
         seconds = time.perf_counter() - start
         sizes = {k: round(p.stat().st_size / 2**20, 1) for k, p in files.items()}
-    return {"patches": len(grid), "seconds": round(seconds, 2), "ms_per_patch": round(seconds / len(grid) * 1000, 2),
-            "vertices": counts["vertices"], "edges": counts["edges"], "boundaries": counts["boundaries"], "held_peak": made.held_peak,
-            "files_mb": sizes, "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "stages": {k: round(v, 2) for k, v in made.seconds.items()}}
+    return {
+        "patches": len(grid),
+        "seconds": round(seconds, 2),
+        "ms_per_patch": round(seconds / len(grid) * 1000, 2),
+        "vertices": counts["vertices"],
+        "edges": counts["edges"],
+        "boundaries": counts["boundaries"],
+        "held_peak": made.held_peak,
+        "files_mb": sizes,
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "stages": {k: round(v, 2) for k, v in made.seconds.items()},
+    }
 
 
 def main() -> None:
@@ -93,12 +111,16 @@ def main() -> None:
     print(f"mode: {'one pass' if '--one-pass' in flags else 'blocks'}{', graph kept' if '--keep' in flags else ''}")
     print("patches  seconds  ms/patch  vertices    edges  boundaries  held_peak  gpkg_mb  json_mb  peak_rss_mb")
     for n in sizes:
-        out = subprocess.run([sys.executable, __file__, "--one", str(n), *flags], check=True, capture_output=True, text=True).stdout
+        out = subprocess.run(
+            [sys.executable, __file__, "--one", str(n), *flags], check=True, capture_output=True, text=True
+        ).stdout
         r = json.loads(out.strip().splitlines()[-1])
-        print(f"{r['patches']:7d}  {r['seconds']:7.1f}  {r['ms_per_patch']:8.2f}  {r['vertices']:8d}  {r['edges']:7d}  "
-              f"{r['boundaries']:10d}"
-              f"  {r['held_peak']:9d}  {r['files_mb']['gpkg']:7.1f}  {r['files_mb']['graph_json']:7.1f}  {r['peak_rss_mb']:11.1f}",
-              flush=True)
+        print(
+            f"{r['patches']:7d}  {r['seconds']:7.1f}  {r['ms_per_patch']:8.2f}  {r['vertices']:8d}  {r['edges']:7d}  "
+            f"{r['boundaries']:10d}"
+            f"  {r['held_peak']:9d}  {r['files_mb']['gpkg']:7.1f}  {r['files_mb']['graph_json']:7.1f}  {r['peak_rss_mb']:11.1f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

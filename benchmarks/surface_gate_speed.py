@@ -43,7 +43,9 @@ def street_surface(size: int = 1100) -> np.ndarray:
 def opencv_change(surface: np.ndarray, radius: int, full: float) -> np.ndarray:
     """The gate as it was computed: OpenCV's kernel over every pixel of the disc."""
     disc = disc_kernel(radius)
-    spread = cv2.dilate(surface, disc, borderType=cv2.BORDER_REPLICATE) - cv2.erode(surface, disc, borderType=cv2.BORDER_REPLICATE)
+    spread = cv2.dilate(surface, disc, borderType=cv2.BORDER_REPLICATE) - cv2.erode(
+        surface, disc, borderType=cv2.BORDER_REPLICATE
+    )
     return np.clip(spread / np.float32(full), 0.0, 1.0)
 
 
@@ -70,8 +72,11 @@ def patch_gate(opencv: bool) -> None:
 
 def predict_seconds(city: Path, out: Path, extra: tuple[str, ...]) -> tuple[float, float]:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), "--quiet", "--restart", *extra],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), "--quiet", "--restart", *extra],
+        check=True,
+        capture_output=True,
+    )
     wall = time.perf_counter() - start
     return wall, json.loads((out / "summary.json").read_text())["seconds"]["total"]
 
@@ -88,7 +93,9 @@ def predict_ratio(city: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--city", type=Path, help="a city directory to run predict on, without and with --surface-gate 200")
+    parser.add_argument(
+        "--city", type=Path, help="a city directory to run predict on, without and with --surface-gate 200"
+    )
     parser.add_argument("--opencv", action="store_true", help="also time OpenCV's kernel at 100 and 200 px (slow)")
     args = parser.parse_args()
     patch_gate(args.opencv)

@@ -33,9 +33,11 @@ def main() -> None:
     t0 = time.perf_counter()
     city = plan_city(config, "test", args.seed, (rows, cols))
     plan = time.perf_counter() - t0
-    print(f"plan {rows}x{cols} city ({city.size_m[0]:.0f} x {city.size_m[1]:.0f} m): {plan:.2f} s "
-          f"({plan / (rows * cols):.2f} s per tile); {len(city.scene.buildings)} buildings, {len(city.scene.trees)} trees, "
-          f"{len(city.scene.cars)} cars")
+    print(
+        f"plan {rows}x{cols} city ({city.size_m[0]:.0f} x {city.size_m[1]:.0f} m): {plan:.2f} s "
+        f"({plan / (rows * cols):.2f} s per tile); {len(city.scene.buildings)} buildings, {len(city.scene.trees)} trees, "
+        f"{len(city.scene.cars)} cars"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for row in range(rows):
             for col in range(cols):
@@ -45,8 +47,10 @@ def main() -> None:
                 t0 = time.perf_counter()
                 write_geotiff(f"{tmp}/t.tif", image, city.transform(row, col), config.crs)
                 write = time.perf_counter() - t0
-                print(f"tile ({row},{col}) {args.tile_size}x{args.tile_size}: render {render:.2f} s, write GeoTIFF {write:.2f} s, "
-                      f"plan share {plan / (rows * cols):.2f} s -> {render + write + plan / (rows * cols):.2f} s in all (one core)")
+                print(
+                    f"tile ({row},{col}) {args.tile_size}x{args.tile_size}: render {render:.2f} s, write GeoTIFF {write:.2f} s, "
+                    f"plan share {plan / (rows * cols):.2f} s -> {render + write + plan / (rows * cols):.2f} s in all (one core)"
+                )
 
 
 if __name__ == "__main__":

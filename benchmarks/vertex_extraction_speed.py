@@ -29,7 +29,9 @@ def main() -> None:
         start = time.perf_counter()
         graph = extract_vertices(prob)
         times.append(time.perf_counter() - start)
-    print(f"1100x1100 map, 150 pieces: {graph.n_vertices} vertices, {graph.n_edges} corner edges; median {np.median(times):.3f} s")
+    print(
+        f"1100x1100 map, 150 pieces: {graph.n_vertices} vertices, {graph.n_edges} corner edges; median {np.median(times):.3f} s"
+    )
 
 
 if __name__ == "__main__":

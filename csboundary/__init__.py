@@ -12,8 +12,19 @@ and ``cli`` on top. The Python API (docs/api.md) is importable from here: ``csbo
 
 __version__ = "0.1.0"
 
-__all__ = ["GraphOverrides", "GraphSettings", "adapt", "evaluate", "evaluate_model", "evaluate_set", "finetune", "load_model", "predict",
-           "predict_patch", "read_prediction"]
+__all__ = [
+    "GraphOverrides",
+    "GraphSettings",
+    "adapt",
+    "evaluate",
+    "evaluate_model",
+    "evaluate_set",
+    "finetune",
+    "load_model",
+    "predict",
+    "predict_patch",
+    "read_prediction",
+]
 
 
 def __getattr__(name: str):

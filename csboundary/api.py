@@ -19,12 +19,29 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
-__all__ = ["GraphOverrides", "GraphSettings", "adapt", "evaluate", "evaluate_model", "evaluate_set", "finetune", "load_model", "predict",
-           "predict_patch", "read_prediction"]
+__all__ = [
+    "GraphOverrides",
+    "GraphSettings",
+    "adapt",
+    "evaluate",
+    "evaluate_model",
+    "evaluate_set",
+    "finetune",
+    "load_model",
+    "predict",
+    "predict_patch",
+    "read_prediction",
+]
 
 
-def load_model(weights: str | Path | None = None, *, device: str = "auto", engine: str = "auto", precision: str = "auto",
-               graph: GraphOverrides = GraphOverrides()) -> PatchPredictor:
+def load_model(
+    weights: str | Path | None = None,
+    *,
+    device: str = "auto",
+    engine: str = "auto",
+    precision: str = "auto",
+    graph: GraphOverrides = GraphOverrides(),
+) -> PatchPredictor:
     """The networks of a weights bundle (default: the shipped one) with its graph settings, and
     ``graph`` over them (the command line's graph options); ``device`` auto|cpu|cuda, ``engine``
     auto|torch|onnx, ``precision`` auto|float32|bfloat16|int8, as the commands take them. Its
@@ -34,8 +51,14 @@ def load_model(weights: str | Path | None = None, *, device: str = "auto", engin
     return load_predictor(weights, device, graph, engine=engine, precision=precision)
 
 
-def predict(imagery: str | Path | Sequence[str | Path], out: str | Path, model: PatchPredictor | None = None, *,
-            progress: bool = False, **options) -> dict:
+def predict(
+    imagery: str | Path | Sequence[str | Path],
+    out: str | Path,
+    model: PatchPredictor | None = None,
+    *,
+    progress: bool = False,
+    **options,
+) -> dict:
     """Predict a city (GeoTIFF tiles, a folder of them or a city folder) into the folder ``out``
     and return its ``summary.json``; ``model`` defaults to :func:`load_model`. ``options`` are
     :func:`csboundary.pipeline.prediction.predict.predict_to_folder`'s (``gsd``, ``batch_size``,
@@ -47,7 +70,9 @@ def predict(imagery: str | Path | Sequence[str | Path], out: str | Path, model: 
     return predict_to_folder(inputs, out, _model(model), progress=progress, **options)
 
 
-def predict_patch(image: str | Path, out: str | Path, model: PatchPredictor | None = None, *, gsd: float | None = None) -> BoundaryGraph:
+def predict_patch(
+    image: str | Path, out: str | Path, model: PatchPredictor | None = None, *, gsd: float | None = None
+) -> BoundaryGraph:
     """The graph of one image of at most 1100 x 1100 px at the model's pixel size, as ``predict``
     would make it, written into ``out`` (graph.json, boundaries.geojson, overlay.png)."""
     from csboundary.pipeline.prediction.predict import predict_patch_to_folder
@@ -61,7 +86,9 @@ def _model(model) -> PatchPredictor:
     if model is None:
         return load_model()
     if not isinstance(model, PatchPredictor):
-        raise InputError(str(model)[:80], "is not a loaded model: give csboundary.load_model(WEIGHTS), or leave model out")
+        raise InputError(
+            str(model)[:80], "is not a loaded model: give csboundary.load_model(WEIGHTS), or leave model out"
+        )
     return model
 
 
@@ -77,14 +104,18 @@ def evaluate(prediction: str | Path, ground_truth: str | Path, *, seed: int = 0,
     return scores(pred, truth, seed=seed, extent=extent, metres_per_px=frame_metres_per_px(frame))
 
 
-def evaluate_model(city: str | Path, model: PatchPredictor | None = None, *, seed: int = 0, progress: bool = False) -> dict:
+def evaluate_model(
+    city: str | Path, model: PatchPredictor | None = None, *, seed: int = 0, progress: bool = False
+) -> dict:
     """A model's scores on a labelled city, at patch and city scale (``evaluate-model``)."""
     from csboundary.pipeline.evaluation.evaluate_set import evaluate_city
 
     return evaluate_city(city, model or load_model(), seed, progress=progress)
 
 
-def evaluate_set(folder: str | Path, model: PatchPredictor | None = None, *, seed: int = 0, progress: bool = False) -> dict:
+def evaluate_set(
+    folder: str | Path, model: PatchPredictor | None = None, *, seed: int = 0, progress: bool = False
+) -> dict:
     """A model's city-scale scores on every labelled city of ``folder``, and their mean."""
     from csboundary.pipeline.evaluation.evaluate_set import evaluate_set as scores
 

@@ -19,7 +19,9 @@ from csboundary.errors import reject_unknown
 T = TypeVar("T")
 
 
-def config_from_dict(cls: type[T], data: Mapping[str, Any], what: str | None = None, nested: Mapping[str, type] | None = None) -> T:
+def config_from_dict(
+    cls: type[T], data: Mapping[str, Any], what: str | None = None, nested: Mapping[str, type] | None = None
+) -> T:
     """``cls(**data)`` with unknown keys refused, lists turned into tuples where the default is a
     tuple, and the fields in ``nested`` built from their own tables."""
     what = what or cls.__name__

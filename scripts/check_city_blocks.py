@@ -25,28 +25,46 @@ from csboundary.data import city as layout  # noqa: E402
 from csboundary.data.model_view import mosaic_units  # noqa: E402
 from csboundary.data.raster import Mosaic  # noqa: E402
 from csboundary.graph.stitching import StitchConfig  # noqa: E402
-from csboundary.pipeline.prediction.city_job import DEFAULT_CHANNELS  # noqa: E402
+from csboundary.pipeline.outputs.prediction_files import GraphWriter  # noqa: E402
 from csboundary.pipeline.prediction.city import predict_city  # noqa: E402
 from csboundary.pipeline.prediction.city_blocks import CityGraphRecipe, stream_city_graph  # noqa: E402
+from csboundary.pipeline.prediction.city_job import DEFAULT_CHANNELS  # noqa: E402
 from csboundary.pipeline.prediction.edge_confidence import core_sampler  # noqa: E402
-from csboundary.pipeline.outputs.prediction_files import GraphWriter  # noqa: E402
 from csboundary.pipeline.prediction.patch import load_predictor  # noqa: E402
 from csboundary.pipeline.prediction.run_store import RunStore  # noqa: E402
 
 
 def written(result, store, model, block: int, one_pass: bool, folder: Path) -> dict:
     grid = result.grid
-    recipe = CityGraphRecipe(StitchConfig(), result.graph.crs, model.settings.min_fragment_px, model.settings.attach_px, model.confidence,
-                             model.settings.min_confidence, True, block=block)
-    files = {"gpkg": folder / "boundaries.gpkg", "geojson": folder / "boundaries.geojson", "graph_json": folder / "graph.json"}
+    recipe = CityGraphRecipe(
+        StitchConfig(),
+        result.graph.crs,
+        model.settings.min_fragment_px,
+        model.settings.attach_px,
+        model.confidence,
+        model.settings.min_confidence,
+        True,
+        block=block,
+    )
+    files = {
+        "gpkg": folder / "boundaries.gpkg",
+        "geojson": folder / "boundaries.geojson",
+        "graph_json": folder / "graph.json",
+    }
     writer = GraphWriter(files, result.graph.crs, grid.transform, mosaic_units(store.mosaic))
     sample = core_sampler(grid, store.load_core, store.channels or DEFAULT_CHANNELS)
     stream_city_graph(result.patch_graphs.__getitem__, grid, recipe, sample, writer.add, one_pass=one_pass)
     counts = writer.close()
-    layers = {f"layer {layer}": pyogrio.read_dataframe(files["gpkg"], layer=layer).to_wkt().to_csv() for layer in ("road_boundaries",
-                                                                                                                   "edges")}
-    return {"edges": counts["edges"], "boundaries": counts["boundaries"],
-            **{name: hashlib.sha256(files[name].read_bytes()).hexdigest() for name in ("graph_json", "geojson")}, **layers}
+    layers = {
+        f"layer {layer}": pyogrio.read_dataframe(files["gpkg"], layer=layer).to_wkt().to_csv()
+        for layer in ("road_boundaries", "edges")
+    }
+    return {
+        "edges": counts["edges"],
+        "boundaries": counts["boundaries"],
+        **{name: hashlib.sha256(files[name].read_bytes()).hexdigest() for name in ("graph_json", "geojson")},
+        **layers,
+    }
 
 
 def main() -> None:
@@ -68,9 +86,12 @@ def main() -> None:
                     blocks = written(result, store, model, block, False, Path(b))
                 same = one == blocks
                 failed += not same
-                print(f"{city.name}: {result.grid.shape[0]}x{result.grid.shape[1]} patches, block {block}: {one['edges']} edges, "
-                      f"{one['boundaries']} boundaries; blocks {'==' if same else '!='} one pass"
-                      + ("" if same else f" ({', '.join(k for k in one if one[k] != blocks[k])} differ)"), flush=True)
+                print(
+                    f"{city.name}: {result.grid.shape[0]}x{result.grid.shape[1]} patches, block {block}: {one['edges']} edges, "
+                    f"{one['boundaries']} boundaries; blocks {'==' if same else '!='} one pass"
+                    + ("" if same else f" ({', '.join(k for k in one if one[k] != blocks[k])} differ)"),
+                    flush=True,
+                )
     sys.exit(1 if failed else 0)
 
 

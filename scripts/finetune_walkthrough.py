@@ -40,17 +40,42 @@ def perfect_review(prediction: Path, city: Path) -> dict:
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     t = graph.transform
     world = lambda line: [[float(v) for v in t * (float(c), float(r))] for c, r in line]  # noqa: E731
-    features = [{"type": "Feature", "properties": {"action": "delete", "edge": k},
-                 "geometry": {"type": "LineString", "coordinates": world(edge_line(graph, k))}} for k in range(graph.n_edges)]
+    features = [
+        {
+            "type": "Feature",
+            "properties": {"action": "delete", "edge": k},
+            "geometry": {"type": "LineString", "coordinates": world(edge_line(graph, k))},
+        }
+        for k in range(graph.n_edges)
+    ]
     for line in read_ground_truth(city / "ground_truth.gpkg", graph.crs).geometry:
         xy = np.asarray(line.coords)[:, :2]
-        parts = [xy[: len(xy) // 2 + 1], xy[len(xy) // 2:]] if np.allclose(xy[0], xy[-1]) else [xy]  # a ring: two halves
-        features += [{"type": "Feature", "properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": p.tolist()}}
-                     for p in parts if len(p) >= 2]
+        parts = (
+            [xy[: len(xy) // 2 + 1], xy[len(xy) // 2 :]] if np.allclose(xy[0], xy[-1]) else [xy]
+        )  # a ring: two halves
+        features += [
+            {
+                "type": "Feature",
+                "properties": {"action": "add"},
+                "geometry": {"type": "LineString", "coordinates": p.tolist()},
+            }
+            for p in parts
+            if len(p) >= 2
+        ]
     width, height = json.loads((prediction / "summary.json").read_text())["mosaic_px"]
     ring = world([(0, 0), (width, 0), (width, height), (0, height), (0, 0)])
-    features.append({"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [ring]}})
-    return {"type": "FeatureCollection", "properties": {"crs": graph.crs, "tool": "scripts/finetune_walkthrough.py"}, "features": features}
+    features.append(
+        {
+            "type": "Feature",
+            "properties": {"action": "complete"},
+            "geometry": {"type": "Polygon", "coordinates": [ring]},
+        }
+    )
+    return {
+        "type": "FeatureCollection",
+        "properties": {"crs": graph.crs, "tool": "scripts/finetune_walkthrough.py"},
+        "features": features,
+    }
 
 
 def main() -> None:
@@ -63,7 +88,9 @@ def main() -> None:
     district, rest = cities[1::2], cities[0::2]
     out = args.out
     seconds = {}
-    seconds["predict district"] = sum(cli("predict", str(c), "--out", str(out / "pred" / c.name), "--quiet") for c in district)
+    seconds["predict district"] = sum(
+        cli("predict", str(c), "--out", str(out / "pred" / c.name), "--quiet") for c in district
+    )
     start = time.perf_counter()
     for city in district:
         pred = out / "pred" / city.name
@@ -73,10 +100,13 @@ def main() -> None:
         cli("apply-review", str(pred), str(edits))
     seconds["apply-review district"] = time.perf_counter() - start
     cache = ["--cache", args.cache] if args.cache else []
-    seconds["finetune"] = cli("finetune", *[str(out / "pred" / c.name) for c in district], "--out", str(out / "tuned.pt"), *cache)
-    seconds["predict rest (tuned)"] = sum(cli("predict", str(c), "--out", str(out / "pred-tuned" / c.name), "--weights",
-                                              str(out / "tuned.pt"),
-                                              "--quiet") for c in rest)
+    seconds["finetune"] = cli(
+        "finetune", *[str(out / "pred" / c.name) for c in district], "--out", str(out / "tuned.pt"), *cache
+    )
+    seconds["predict rest (tuned)"] = sum(
+        cli("predict", str(c), "--out", str(out / "pred-tuned" / c.name), "--weights", str(out / "tuned.pt"), "--quiet")
+        for c in rest
+    )
     rest_set = out / "rest"
     rest_set.mkdir(exist_ok=True)
     for city in rest:
@@ -84,10 +114,22 @@ def main() -> None:
         if not link.exists():
             link.symlink_to(city.resolve())
     cli("evaluate-set", str(rest_set), "--json", str(out / "rest-base.json"), "--quiet")
-    cli("evaluate-set", str(rest_set), "--weights", str(out / "tuned.pt"), "--json", str(out / "rest-tuned.json"), "--quiet")
+    cli(
+        "evaluate-set",
+        str(rest_set),
+        "--weights",
+        str(out / "tuned.pt"),
+        "--json",
+        str(out / "rest-tuned.json"),
+        "--quiet",
+    )
     scores = {name: json.loads((out / f"rest-{name}.json").read_text())["mean"] for name in ("base", "tuned")}
-    record = {"district": [c.name for c in district], "rest": [c.name for c in rest], "seconds": seconds,
-              "rest_scores": {k: {m: v[m] for m in ("precision@5", "f1@5", "apls", "tlts")} for k, v in scores.items()}}
+    record = {
+        "district": [c.name for c in district],
+        "rest": [c.name for c in rest],
+        "seconds": seconds,
+        "rest_scores": {k: {m: v[m] for m in ("precision@5", "f1@5", "apls", "tlts")} for k, v in scores.items()},
+    }
     (out / "walkthrough.json").write_text(json.dumps(record, indent=1) + "\n")
     print(json.dumps(record, indent=1))
 

@@ -13,10 +13,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import rasterio
-
-from csboundary.data.ground_truth import read_ground_truth
 from evaluate_styles import STYLES, city_dir
 
+from csboundary.data.ground_truth import read_ground_truth
 
 # the scored styles, then those only drawn here (not in experiments/scripts/evaluate_styles.py's tables yet)
 MONTAGE_STYLES = (*STYLES, *(s for s in ("dense",) if s not in STYLES))
@@ -32,7 +31,9 @@ def crop_with_truth(city: Path, size: int = 2000, side: int = 480, tile: str = "
     for line in read_ground_truth(city / "ground_truth.gpkg", crs).geometry:
         for part in getattr(line, "geoms", [line]):
             cols, rows = inverse * np.asarray(part.coords).T
-            cv2.polylines(rgb, [np.stack([cols, rows], 1).round().astype(np.int32)], False, (255, 0, 255), 2, cv2.LINE_AA)
+            cv2.polylines(
+                rgb, [np.stack([cols, rows], 1).round().astype(np.int32)], False, (255, 0, 255), 2, cv2.LINE_AA
+            )
     return cv2.resize(rgb[:size, :size], (side, side), interpolation=cv2.INTER_AREA)
 
 
@@ -48,7 +49,7 @@ def main() -> None:
         cv2.putText(image, style, (12, 36), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (255, 255, 255), 2, cv2.LINE_AA)
         tiles.append(image)
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % 3)  # fill the last row
-    rows = [np.hstack(tiles[i:i + 3]) for i in range(0, len(tiles), 3)]
+    rows = [np.hstack(tiles[i : i + 3]) for i in range(0, len(tiles), 3)]
     cv2.imwrite(str(args.out), np.vstack(rows)[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 85])
     print(f"{args.out}: {len(MONTAGE_STYLES)} styles")
 

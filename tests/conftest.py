@@ -134,7 +134,9 @@ def onnx_cache(tmp_path_factory):
         yield Path(os.environ[CACHE_ENV])
         return
     base = tmp_path_factory.getbasetemp()
-    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "onnx-cache"  # the run's folder, above the workers'
+    folder = (
+        base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    ) / "onnx-cache"  # the run's folder, above the workers'
     folder.mkdir(parents=True, exist_ok=True)
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(CACHE_ENV, str(folder))

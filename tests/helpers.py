@@ -12,8 +12,14 @@ from hypothesis import strategies as st
 
 def run_cli(*args: str, cwd: Path | None = None, timeout: int = 600, preexec_fn=None) -> subprocess.CompletedProcess:
     """``python -m csboundary ARGS`` as a user runs it: exit code, stdout, stderr."""
-    return subprocess.run([sys.executable, "-m", "csboundary", *args], capture_output=True, text=True, cwd=cwd, timeout=timeout,
-                          preexec_fn=preexec_fn)
+    return subprocess.run(
+        [sys.executable, "-m", "csboundary", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        preexec_fn=preexec_fn,
+    )
 
 
 def obey_file_permissions() -> None:
@@ -43,7 +49,9 @@ def shipped_parts(folder: Path, **afanet_extra) -> tuple[Path, Path]:
 
     shipped = load_checkpoint(shipped_weights(), ("bundle",))
     save_checkpoint(folder / "fpn.pt", "fpn", fpn=shipped["fpn"], fpn_config=shipped["fpn_config"])
-    save_checkpoint(folder / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"], **afanet_extra)
+    save_checkpoint(
+        folder / "afanet.pt", "afanet", afanet=shipped["afanet"], afanet_config=shipped["afanet_config"], **afanet_extra
+    )
     return folder / "fpn.pt", folder / "afanet.pt"
 
 

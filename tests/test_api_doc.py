@@ -30,6 +30,7 @@ def test_the_api_doc_examples_run(tmp_path, monkeypatch):
             calls.append((name, [str(p) for p in inputs], str(out), options))
             Path(out).write_bytes(_shipped().read_bytes())
             return {"work": str(tmp_path / "work")}
+
         return run
 
     monkeypatch.setattr(finetune_module, "finetune", stand_in("finetune"))
@@ -48,8 +49,15 @@ def test_the_api_doc_examples_run(tmp_path, monkeypatch):
     kept = json.loads(Path("patch/graph.json").read_text())["edges"]
     assert kept and all(e["score"] >= 0.5 for e in kept)  # the edge confidence is the score graph.json carries
     assert "['city', 'patch']" in text and "['my_city']" in text
-    assert [c[:3] for c in calls] == [("finetune", ["my_set/my_city"], "tuned.pt"), ("adapt", ["my_set/my_city/tiles"], "adapted.pt")]
-    assert calls[0][3]["budget"].fpn_steps == 1000 and calls[0][3]["device"] == "cpu" and calls[1][3]["weights"] == "tuned.pt"
+    assert [c[:3] for c in calls] == [
+        ("finetune", ["my_set/my_city"], "tuned.pt"),
+        ("adapt", ["my_set/my_city/tiles"], "adapted.pt"),
+    ]
+    assert (
+        calls[0][3]["budget"].fpn_steps == 1000
+        and calls[0][3]["device"] == "cpu"
+        and calls[1][3]["weights"] == "tuned.pt"
+    )
     assert namespace["tuned"].settings == namespace["model"].settings  # the stand-in wrote the shipped bundle
 
 

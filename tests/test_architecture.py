@@ -15,8 +15,21 @@ import pytest
 
 import csboundary
 
-LAYERS = {"errors": 0, "config": 1, "data": 2, "graph": 3, "labels": 4, "metrics": 4, "viz": 4, "models": 5, "pipeline": 6,
-          "qgis_plugin": 6, "api": 7, "cli": 7, "__main__": 8}
+LAYERS = {
+    "errors": 0,
+    "config": 1,
+    "data": 2,
+    "graph": 3,
+    "labels": 4,
+    "metrics": 4,
+    "viz": 4,
+    "models": 5,
+    "pipeline": 6,
+    "qgis_plugin": 6,
+    "api": 7,
+    "cli": 7,
+    "__main__": 8,
+}
 PACKAGE = Path(csboundary.__file__).parent
 
 
@@ -32,7 +45,11 @@ def imports_of(path: Path) -> list[tuple[int, str]]:
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             # ``from csboundary import X``: a layer when X is one (``__version__`` is the package's own)
-            names = [node.module] if node.module != "csboundary" else [f"csboundary.{a.name}" for a in node.names if a.name in LAYERS]
+            names = (
+                [node.module]
+                if node.module != "csboundary"
+                else [f"csboundary.{a.name}" for a in node.names if a.name in LAYERS]
+            )
             found += [(node.lineno, name) for name in names if name.startswith("csboundary")]
         elif isinstance(node, ast.Import):
             found += [(node.lineno, a.name) for a in node.names if a.name.startswith("csboundary")]
@@ -66,7 +83,9 @@ def test_every_import_points_down():
 def test_an_upward_import_is_caught(tmp_path):
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / "fine.py").write_text("from csboundary.errors import InputError\n")
-    (tmp_path / "data" / "bad.py").write_text("def f():\n    from csboundary.pipeline.prediction.run import run_prediction\n")
+    (tmp_path / "data" / "bad.py").write_text(
+        "def f():\n    from csboundary.pipeline.prediction.run import run_prediction\n"
+    )
     (tmp_path / "viz").mkdir()
     (tmp_path / "viz" / "peer.py").write_text("import csboundary.metrics.apls\n")
     assert upward_imports(tmp_path) == [
@@ -119,5 +138,9 @@ MAX_MODULE_LINES = 450  # a module longer than this holds more than one job: spl
 
 
 def test_no_module_is_too_long_to_hold_one_job():
-    long = {str(p.relative_to(PACKAGE)): n for p in PACKAGE.rglob("*.py") if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
+    long = {
+        str(p.relative_to(PACKAGE)): n
+        for p in PACKAGE.rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES
+    }
     assert long == {}

@@ -18,8 +18,18 @@ from csboundary.models.fpn import FPNConfig
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import CitySpec, WorldsConfig
 
-CONFIGS = [FPNConfig, AfANetConfig, AugmentConfig, LabelConfig, SynthConfig, WorldsConfig, TrainConfig, ICurbConfig,
-           Sat2GraphOptions, OrientationOptions]
+CONFIGS = [
+    FPNConfig,
+    AfANetConfig,
+    AugmentConfig,
+    LabelConfig,
+    SynthConfig,
+    WorldsConfig,
+    TrainConfig,
+    ICurbConfig,
+    Sat2GraphOptions,
+    OrientationOptions,
+]
 
 
 @pytest.mark.parametrize("cls", CONFIGS, ids=lambda c: c.__name__)

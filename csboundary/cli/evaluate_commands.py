@@ -9,25 +9,47 @@ from typing import Optional
 
 import typer
 
-from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file,
-                                    readable_inputs, with_graph_options)
+from csboundary.cli.options import (
+    DeviceOption,
+    EngineOption,
+    PrecisionOption,
+    QuietOption,
+    WeightsOption,
+    finite,
+    out_dir,
+    out_file,
+    readable_inputs,
+    with_graph_options,
+)
 from csboundary.graph.settings import GraphOverrides
 
 
 def evaluate(
-    pred: Path = typer.Argument(..., help="Predicted boundaries: csboundary graph JSON, GeoPackage or GeoJSON LineStrings."),
-    gt: Path = typer.Argument(...,
-                              help="Ground truth: graph JSON, GeoPackage/GeoJSON, or a city directory (its ground_truth.gpkg and tiles)."),
+    pred: Path = typer.Argument(
+        ..., help="Predicted boundaries: csboundary graph JSON, GeoPackage or GeoJSON LineStrings."
+    ),
+    gt: Path = typer.Argument(
+        ..., help="Ground truth: graph JSON, GeoPackage/GeoJSON, or a city directory (its ground_truth.gpkg and tiles)."
+    ),
     scale: str = typer.Option("city", help="city (whole graphs) | patch (1000 px patch cores, averaged)."),
-    apls: str = typer.Option("paper", help="APLS variant: paper (Topo-boundary/csBoundary) | symmetric (SpaceNet style)."),
+    apls: str = typer.Option(
+        "paper", help="APLS variant: paper (Topo-boundary/csBoundary) | symmetric (SpaceNet style)."
+    ),
     seed: int = typer.Option(0, min=0, help="Seed of the sampled vertex pairs; equal seeds give identical results."),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Also write every number (and per-patch scores) to this JSON file."),
-    raster: Optional[Path] = typer.Option(None,
-                                          help="City directory, GeoTIFF(s) or tile directory whose pixel grid is the frame (world -> "
-                                          "pixels)."),
-    gsd: Optional[float] = typer.Option(None, callback=finite,
-                                        help="Without a raster: pixel size (world units) of a frame at the inputs' top-left corner."),
-    pixels: bool = typer.Option(False, "--pixels", help="The inputs' coordinates are pixels (col, row), not world coordinates."),
+    json_out: Optional[Path] = typer.Option(
+        None, "--json", help="Also write every number (and per-patch scores) to this JSON file."
+    ),
+    raster: Optional[Path] = typer.Option(
+        None, help="City directory, GeoTIFF(s) or tile directory whose pixel grid is the frame (world -> pixels)."
+    ),
+    gsd: Optional[float] = typer.Option(
+        None,
+        callback=finite,
+        help="Without a raster: pixel size (world units) of a frame at the inputs' top-left corner.",
+    ),
+    pixels: bool = typer.Option(
+        False, "--pixels", help="The inputs' coordinates are pixels (col, row), not world coordinates."
+    ),
     tau: str = typer.Option("2,5,10", help="Relaxation radii in pixels for precision/recall/F1, comma-separated."),
 ) -> None:
     """Relaxed precision/recall/F1, APLS and TLTS of PRED against GT (definitions: docs/metrics.md)."""
@@ -35,11 +57,11 @@ def evaluate(
         raise typer.BadParameter("must be city or patch", param_hint="--scale")
     if apls not in ("paper", "symmetric"):
         raise typer.BadParameter("must be paper or symmetric", param_hint="--apls")
-    from csboundary.metrics.report import format_table, write_scores
+    from csboundary.errors import InputError
     from csboundary.metrics import MetricConfig
     from csboundary.metrics import evaluate as run_metrics
-    from csboundary.errors import InputError
     from csboundary.metrics.io import frame_metres_per_px, grid_for, load_pair
+    from csboundary.metrics.report import format_table, write_scores
     from csboundary.metrics.sampling import RasterTooLarge
 
     try:
@@ -57,13 +79,25 @@ def evaluate(
     grid = grid_for(frame, pred_graph, gt_graph) if scale == "patch" else None
     extent = (0, 0, frame.width, frame.height) if frame.width else None
     try:
-        result = run_metrics(pred_graph, gt_graph, scale=scale, grid=grid, apls=apls, seed=seed, config=config, extent=extent,
-                             metres_per_px=frame_metres_per_px(frame))
+        result = run_metrics(
+            pred_graph,
+            gt_graph,
+            scale=scale,
+            grid=grid,
+            apls=apls,
+            seed=seed,
+            config=config,
+            extent=extent,
+            metres_per_px=frame_metres_per_px(frame),
+        )
     except RasterTooLarge as exc:
         if extent is None:  # nothing says where the imagery is: a raster would cut the lines to it
             raise InputError(f"{pred} / {gt}", f"{exc}; give --raster to clip to the imagery") from exc
-        raise InputError(f"{pred} / {gt}", f"{exc.size} within the imagery {frame.source}: more than the metrics take at once; "
-                                           "evaluate a smaller part of it") from exc
+        raise InputError(
+            f"{pred} / {gt}",
+            f"{exc.size} within the imagery {frame.source}: more than the metrics take at once; "
+            "evaluate a smaller part of it",
+        ) from exc
     result["inputs"] = {"pred": str(pred), "gt": str(gt), "frame": frame.source, "crs": frame.crs}
     typer.echo(format_table(result))
     if json_out is not None:
@@ -131,15 +165,21 @@ def evaluate_set_cmd(
 
 
 def benchmark(
-    out: Path = typer.Option(Path("docs/benchmark"),
-                             help="Folder for tables.md, table*.csv, fig7-comparison.png, benchmark.json, predictions/."),
-    city: Optional[Path] = typer.Option(None,
-                                        help="Test city with ground truth (default: the test-split city seed 1, 1x1 tile of 5000 px, "
-                                        "built on first use)."),
+    out: Path = typer.Option(
+        Path("docs/benchmark"),
+        help="Folder for tables.md, table*.csv, fig7-comparison.png, benchmark.json, predictions/.",
+    ),
+    city: Optional[Path] = typer.Option(
+        None,
+        help="Test city with ground truth (default: the test-split city seed 1, 1x1 tile of 5000 px, "
+        "built on first use).",
+    ),
     weights_dir: Optional[Path] = typer.Option(None, help="Weights folder (default: the package's shipped weights)."),
-    methods: Optional[str] = typer.Option(None,
-                                          help="Comma-separated subset of: " + "csboundary, orientation-refine, sat2graph, icurb, "
-                                          "ablation-full, no-global, no-local."),
+    methods: Optional[str] = typer.Option(
+        None,
+        help="Comma-separated subset of: " + "csboundary, orientation-refine, sat2graph, icurb, "
+        "ablation-full, no-global, no-local.",
+    ),
     seed: int = typer.Option(0, help="Seed of the APLS/TLTS pair sampling."),
     device: DeviceOption = "auto",
     quiet: bool = typer.Option(False, help="No progress bars."),

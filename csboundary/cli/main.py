@@ -22,7 +22,9 @@ from csboundary.cli import data_commands, evaluate_commands, predict_commands, t
 from csboundary.data.atomic import is_disk_full
 from csboundary.errors import InputError, InputWarning
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="City-scale road-boundary graphs from aerial imagery.")
+app = typer.Typer(
+    add_completion=False, no_args_is_help=True, help="City-scale road-boundary graphs from aerial imagery."
+)
 
 COMMANDS = (  # (name, function)
     ("demo", predict_commands.demo),
@@ -62,8 +64,15 @@ def _print_version(asked: bool) -> None:
 
 
 @app.callback()
-def _options(version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
-                                          help="Print the version and exit (the QGIS plugin's check of the environment).")) -> None:
+def _options(
+    version: bool = typer.Option(
+        False,
+        "--version",
+        is_eager=True,
+        callback=_print_version,
+        help="Print the version and exit (the QGIS plugin's check of the environment).",
+    ),
+) -> None:
     pass
 
 
@@ -92,12 +101,21 @@ def help_as_read(group):
                 name = param.metavar or param.name.upper() + ("..." if param.nargs != 1 else "")
                 param.metavar = name
                 param.display_type_rich = lambda ctx: None
-                param.get_usage_pieces = lambda ctx, name=name, required=param.required: [name if required else f"[{name}]"]
+                param.get_usage_pieces = lambda ctx, name=name, required=param.required: [
+                    name if required else f"[{name}]"
+                ]
         command.get_help_option = _bare_flag(command.get_help_option)
     return group
 
 
-VALUE_NAMES = {"<path>": "PATH", "<int>": "N", "<int range>": "N", "<float>": "NUMBER", "<float range>": "NUMBER", "<str>": "TEXT"}
+VALUE_NAMES = {
+    "<path>": "PATH",
+    "<int>": "N",
+    "<int range>": "N",
+    "<float>": "NUMBER",
+    "<float range>": "NUMBER",
+    "<str>": "TEXT",
+}
 
 
 def value_name(typed: str | None) -> str | None:
@@ -111,14 +129,15 @@ def _bare_flag(get_option):
         if option is not None:
             option.metavar = ""
         return option
+
     return bare
 
 
 def first_sentence(text: str) -> str:
     """Up to the first full stop that ends a sentence (not one inside ``0.03`` or ``e.g.``)."""
     for k in range(len(text) - 1):
-        if text[k] == "." and text[k + 1] == " " and not text[max(0, k - 3):k + 1].endswith(("e.g.", "i.e.", "Fig.")):
-            return text[:k + 1]
+        if text[k] == "." and text[k + 1] == " " and not text[max(0, k - 3) : k + 1].endswith(("e.g.", "i.e.", "Fig.")):
+            return text[: k + 1]
     return text
 
 
@@ -136,11 +155,13 @@ class Interrupted(BaseException):
 
 
 # what an interrupted command keeps, by subcommand (the message the interruption ends with)
-RESUMES = {"predict": "a predict run keeps its finished patches: the same command continues it",
-           "finetune": "fine-tuning keeps its runs in its work folder: the same command continues them",
-           "adapt": "adapting keeps its runs in its work folder: the same command continues them",
-           "evaluate-finetune": "the finished folds are kept: the same command continues with the next",
-           "train": "training keeps its last checkpoint (RUN-last.pt): --resume it to continue"}
+RESUMES = {
+    "predict": "a predict run keeps its finished patches: the same command continues it",
+    "finetune": "fine-tuning keeps its runs in its work folder: the same command continues them",
+    "adapt": "adapting keeps its runs in its work folder: the same command continues them",
+    "evaluate-finetune": "the finished folds are kept: the same command continues with the next",
+    "train": "training keeps its last checkpoint (RUN-last.pt): --resume it to continue",
+}
 
 
 def _subcommand() -> str | None:
@@ -177,24 +198,39 @@ def main() -> None:
     except InputError as exc:
         typer.echo(f"error: {exc}", err=True)
         sys.exit(2)
-    except (OSError, MemoryError) as exc:  # a full disk, a vanished file, no memory: the system's problem, said in one line
+    except (
+        OSError,
+        MemoryError,
+    ) as exc:  # a full disk, a vanished file, no memory: the system's problem, said in one line
         name = getattr(exc, "filename", None)
-        typer.echo(f"error: {name + ': ' if name else ''}{exc.strerror or exc if isinstance(exc, OSError) else 'out of memory'}", err=True)
+        typer.echo(
+            f"error: {name + ': ' if name else ''}{exc.strerror or exc if isinstance(exc, OSError) else 'out of memory'}",
+            err=True,
+        )
         sys.exit(1)
     except Exception as exc:  # a bug, not the user's input: one line, the traceback on request
         if os.environ.get("CSBOUNDARY_DEBUG"):
             raise
         message = " ".join(str(exc).split())[:300]
         if is_disk_full(exc):  # GDAL and SQLite say a full disk with their own exception types, naming no file
-            typer.echo(f"error: no space left on device ({type(exc).__name__}: {message}): free some space and run the same "
-                       "command again", err=True)
+            typer.echo(
+                f"error: no space left on device ({type(exc).__name__}: {message}): free some space and run the same "
+                "command again",
+                err=True,
+            )
             sys.exit(1)
-        typer.echo(f"error: internal error ({type(exc).__name__}: {message}); please report it, with the traceback "
-                   "that CSBOUNDARY_DEBUG=1 prints", err=True)
+        typer.echo(
+            f"error: internal error ({type(exc).__name__}: {message}); please report it, with the traceback "
+            "that CSBOUNDARY_DEBUG=1 prints",
+            err=True,
+        )
         sys.exit(1)
     except (Interrupted, KeyboardInterrupt) as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
-        typer.echo(f"interrupted ({signal.Signals(signum).name}): temporaries removed; no partial file was left under a final name "
-                   f"({RESUMES.get(_subcommand(), 'run the command again to redo it')})", err=True)
+        typer.echo(
+            f"interrupted ({signal.Signals(signum).name}): temporaries removed; no partial file was left under a final name "
+            f"({RESUMES.get(_subcommand(), 'run the command again to redo it')})",
+            err=True,
+        )
         sys.exit(128 + signum)
     sys.exit(code if isinstance(code, int) else 0)

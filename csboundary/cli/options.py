@@ -19,20 +19,28 @@ SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length 
 LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit)."
 GAP_HELP = "Longest stretch of an AfANet edge, in pixels, where the boundary map is below the gap level (0 = no check)."
 FILL_HELP = "Fill in segmentation-skeleton stretches at least this long that no edge covers, in pixels (0 = off)."
-JOIN_HELP = "Join two dangling ends at most this many pixels apart that head towards each other over boundary (0 = off)."
-ATTACH_HELP = ("City graph: join a dangling end to the nearest line of another piece at most this many pixels ahead of it "
-               "(0 = off).")
-ATTACH_BACKED_HELP = ("Join a dangling end of a window's graph to the nearest line of another piece at most this many pixels ahead "
-                      "of it where the boundary map backs the join, as --join-ends (0 = off).")
+JOIN_HELP = (
+    "Join two dangling ends at most this many pixels apart that head towards each other over boundary (0 = off)."
+)
+ATTACH_HELP = (
+    "City graph: join a dangling end to the nearest line of another piece at most this many pixels ahead of it "
+    "(0 = off)."
+)
+ATTACH_BACKED_HELP = (
+    "Join a dangling end of a window's graph to the nearest line of another piece at most this many pixels ahead "
+    "of it where the boundary map backs the join, as --join-ends (0 = off)."
+)
 FRAGMENT_HELP = "Drop connected pieces of the city graph shorter than this, in pixels (0 = keep all)."
 THRESHOLD_HELP = "Adjacency probability for an edge."
 ENGINE_HELP = "The networks on PyTorch or ONNX Runtime (auto: onnx on a CPU when installed)."
-PRECISION_HELP = ("The FPN's arithmetic. auto: int8 where this CPU runs it faster "
-                  "than float32 on ONNX Runtime (timed once per machine and weights file), else float32. bfloat16 runs it in PyTorch "
-                  "under autocast: 2.5x faster on CPUs "
-                  "with AMX (Intel Xeon 4th generation and later), slower on CPUs without bfloat16 units. int8 runs it quantized on "
-                  "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.5-2.8x faster on CPUs with VNNI or AMX. "
-                  "Scores move a little with either (docs/cpu-inference.md).")
+PRECISION_HELP = (
+    "The FPN's arithmetic. auto: int8 where this CPU runs it faster "
+    "than float32 on ONNX Runtime (timed once per machine and weights file), else float32. bfloat16 runs it in PyTorch "
+    "under autocast: 2.5x faster on CPUs "
+    "with AMX (Intel Xeon 4th generation and later), slower on CPUs without bfloat16 units. int8 runs it quantized on "
+    "ONNX Runtime (CPU, onnx engine; prepared once per weights file): 2.5-2.8x faster on CPUs with VNNI or AMX. "
+    "Scores move a little with either (docs/cpu-inference.md)."
+)
 DEVICE_HELP = "Where the networks run (auto: CUDA when present)."
 WEIGHTS_HELP = "Weights bundle (default: the shipped weights)."
 
@@ -60,35 +68,71 @@ PrecisionOption = Annotated[str, typer.Option(metavar="auto|float32|bfloat16|int
 DeviceOption = Annotated[str, typer.Option(metavar="auto|cpu|cuda", help=DEVICE_HELP)]
 QuietOption = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
 
-SURFACE_HELP = ("Road-surface check: an edge needs this mean road-surface probability beside it, or a connected edge that has it "
-                "(0 = off; the FPN needs a surface head).")
-GATE_HELP = ("Surface gate: keypoint and boundary maps are kept only within this many pixels of a change of the road surface "
-             "(roofs, lots and rows of parked cars lose their outlines; 0 = off; the FPN needs a surface head).")
-OUTLINE_HELP = ("Roadway outline: where the road-surface map is at least this sure on one side and at most 1 minus it on the "
-                "other, and the boundary map backs it, the roadway's outline replaces the edges along it (0 = off; the FPN needs a "
-                "surface head).")
-CONFIDENCE_HELP = ("Drop the city graph's edges whose confidence (the calibrated probability that an edge is a true boundary) is "
-                   "below this (0 = keep all; docs/confidence.md shows precision and recall against it).")
+SURFACE_HELP = (
+    "Road-surface check: an edge needs this mean road-surface probability beside it, or a connected edge that has it "
+    "(0 = off; the FPN needs a surface head)."
+)
+GATE_HELP = (
+    "Surface gate: keypoint and boundary maps are kept only within this many pixels of a change of the road surface "
+    "(roofs, lots and rows of parked cars lose their outlines; 0 = off; the FPN needs a surface head)."
+)
+OUTLINE_HELP = (
+    "Roadway outline: where the road-surface map is at least this sure on one side and at most 1 minus it on the "
+    "other, and the boundary map backs it, the roadway's outline replaces the edges along it (0 = off; the FPN needs a "
+    "surface head)."
+)
+CONFIDENCE_HELP = (
+    "Drop the city graph's edges whose confidence (the calibrated probability that an edge is a true boundary) is "
+    "below this (0 = keep all; docs/confidence.md shows precision and recall against it)."
+)
 DEGREE_HELP = "Edges per vertex at most (0 = no limit; default: the weights', 2 = polylines)."
 GRAPH_PANEL = "Graph settings (default: the weights'; bundle-weights: off)"
 
 
 def _graph_option(flag: str, metavar: str, help: str, low: float = 0.0, high: float | None = None, kind: type = float):
-    return Annotated[Optional[kind], typer.Option(flag, metavar=metavar, callback=finite if kind is float else None, min=low, max=high,
-                                                  help=help, rich_help_panel=GRAPH_PANEL)]
+    return Annotated[
+        Optional[kind],
+        typer.Option(
+            flag,
+            metavar=metavar,
+            callback=finite if kind is float else None,
+            min=low,
+            max=high,
+            help=help,
+            rich_help_panel=GRAPH_PANEL,
+        ),
+    ]
 
 
 # The graph options: one per field of GraphOverrides, their ranges GraphOverrides' (graph/settings.py). Commands take them as one
 # ``graph: GraphOverrides`` parameter through ``with_graph_options``.
-GRAPH_HELP = {"edge_threshold": ("P", THRESHOLD_HELP), "min_edge_support": ("P", SUPPORT_HELP), "max_edge_length": ("PX", LENGTH_HELP),
-              "max_edge_gap": ("PX", GAP_HELP), "fill_min_length": ("PX", FILL_HELP), "join_ends": ("PX", JOIN_HELP),
-              "attach_ends": ("PX", ATTACH_HELP), "attach_backed": ("PX", ATTACH_BACKED_HELP), "surface_check": ("P", SURFACE_HELP),
-              "surface_gate": ("PX", GATE_HELP), "roadway_outline": ("P", OUTLINE_HELP), "max_degree": ("N", DEGREE_HELP),
-              "min_fragment_length": ("PX", FRAGMENT_HELP),
-              "min_confidence": ("P", CONFIDENCE_HELP)}
-GRAPH_OPTIONS = {name: _graph_option("--" + name.replace("_", "-"), metavar, help, low=GRAPH_OVERRIDE_RANGES[name][0],
-                                     high=GRAPH_OVERRIDE_RANGES[name][1], kind=int if name == "max_degree" else float)
-                 for name, (metavar, help) in GRAPH_HELP.items()}  # the ranges: GraphOverrides' own
+GRAPH_HELP = {
+    "edge_threshold": ("P", THRESHOLD_HELP),
+    "min_edge_support": ("P", SUPPORT_HELP),
+    "max_edge_length": ("PX", LENGTH_HELP),
+    "max_edge_gap": ("PX", GAP_HELP),
+    "fill_min_length": ("PX", FILL_HELP),
+    "join_ends": ("PX", JOIN_HELP),
+    "attach_ends": ("PX", ATTACH_HELP),
+    "attach_backed": ("PX", ATTACH_BACKED_HELP),
+    "surface_check": ("P", SURFACE_HELP),
+    "surface_gate": ("PX", GATE_HELP),
+    "roadway_outline": ("P", OUTLINE_HELP),
+    "max_degree": ("N", DEGREE_HELP),
+    "min_fragment_length": ("PX", FRAGMENT_HELP),
+    "min_confidence": ("P", CONFIDENCE_HELP),
+}
+GRAPH_OPTIONS = {
+    name: _graph_option(
+        "--" + name.replace("_", "-"),
+        metavar,
+        help,
+        low=GRAPH_OVERRIDE_RANGES[name][0],
+        high=GRAPH_OVERRIDE_RANGES[name][1],
+        kind=int if name == "max_degree" else float,
+    )
+    for name, (metavar, help) in GRAPH_HELP.items()
+}  # the ranges: GraphOverrides' own
 
 
 def with_graph_options(command: Callable) -> Callable:
@@ -102,8 +146,10 @@ def with_graph_options(command: Callable) -> Callable:
     parameters = []
     for parameter in signature.parameters.values():
         if parameter.name == "graph":
-            parameters += [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=annotation)
-                           for name, annotation in GRAPH_OPTIONS.items()]
+            parameters += [
+                inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=annotation)
+                for name, annotation in GRAPH_OPTIONS.items()
+            ]
         else:
             parameters.append(parameter.replace(kind=inspect.Parameter.KEYWORD_ONLY))
 

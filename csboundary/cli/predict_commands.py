@@ -11,30 +11,58 @@ from typing import Optional
 import numpy as np
 import typer
 
-from csboundary.cli.options import (DeviceOption, EngineOption, PrecisionOption, QuietOption, WeightsOption, finite, out_dir, out_file,
-                                    parse_numbers, positive, readable_inputs, with_graph_options)
+from csboundary.cli.options import (
+    DeviceOption,
+    EngineOption,
+    PrecisionOption,
+    QuietOption,
+    WeightsOption,
+    finite,
+    out_dir,
+    out_file,
+    parse_numbers,
+    positive,
+    readable_inputs,
+    with_graph_options,
+)
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph.settings import GraphOverrides
 
 
 @with_graph_options
 def predict(
-    inputs: list[Path] = typer.Argument(..., metavar="IMAGERY...", help="GeoTIFF tile(s), a directory of tiles, or a city directory."),
-    out: Path = typer.Option(..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."),
+    inputs: list[Path] = typer.Argument(
+        ..., metavar="IMAGERY...", help="GeoTIFF tile(s), a directory of tiles, or a city directory."
+    ),
+    out: Path = typer.Option(
+        ..., "--out", help="Output folder (boundaries.gpkg/.geojson, graph.json, PNGs, summary.json)."
+    ),
     weights: WeightsOption = None,
     graph: GraphOverrides = GraphOverrides(),
-    batch_size: int = typer.Option(1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."),
-    write_maps: bool = typer.Option(False, "--write-maps",
-                                    help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."),
-    lanelet2: bool = typer.Option(False, "--lanelet2",
-                                  help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."),
-    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of imagery without a CRS (needed then)."),
-    restart: bool = typer.Option(False, "--restart", help="Discard the unfinished run in --out instead of resuming it."),
-    scheduler: Optional[str] = typer.Option(None,
-                                            help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers "
-                                            "share."),
-    workers: Optional[int] = typer.Option(None, min=1, help="Run on a local Dask cluster of this many worker processes."),
-    threads: Optional[int] = typer.Option(None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."),
+    batch_size: int = typer.Option(
+        1, min=1, help="Patches per FPN batch (more is faster on a GPU, needs more memory)."
+    ),
+    write_maps: bool = typer.Option(
+        False, "--write-maps", help="Also write the stitched probability maps as a Cloud-Optimized GeoTIFF (maps.tif)."
+    ),
+    lanelet2: bool = typer.Option(
+        False, "--lanelet2", help="Also write the boundaries as a Lanelet2 map (map.osm + map_projector_info.yaml)."
+    ),
+    gsd: Optional[float] = typer.Option(
+        None, callback=positive, help="Pixel size in metres of imagery without a CRS (needed then)."
+    ),
+    restart: bool = typer.Option(
+        False, "--restart", help="Discard the unfinished run in --out instead of resuming it."
+    ),
+    scheduler: Optional[str] = typer.Option(
+        None, help="Run on this Dask cluster (tcp://HOST:8786); --out must be on a filesystem its workers share."
+    ),
+    workers: Optional[int] = typer.Option(
+        None, min=1, help="Run on a local Dask cluster of this many worker processes."
+    ),
+    threads: Optional[int] = typer.Option(
+        None, min=1, help="Torch threads per process (default: all cores; with --workers N, cores / N)."
+    ),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
@@ -56,27 +84,54 @@ def predict(
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
 
     def announce(plan, view) -> None:
-        where = (f"({plan.n_rows}x{plan.n_cols})" if plan.planned is None else
-                 f"under {counted(len(view.mosaic.footprint), 'group')} of tiles kilometres apart, of a {plan.n_rows}x{plan.n_cols} grid")
-        typer.echo(f"{out}: {counted(len(plan), 'patch')} {where} over {view.mosaic.width}x{view.mosaic.height} px "
-                   f"at {predictor.pixel_size_m:g} m; FPN in {predictor.precision_choice or predictor.precision}", err=True)
+        where = (
+            f"({plan.n_rows}x{plan.n_cols})"
+            if plan.planned is None
+            else f"under {counted(len(view.mosaic.footprint), 'group')} of tiles kilometres apart, of a {plan.n_rows}x{plan.n_cols} grid"
+        )
+        typer.echo(
+            f"{out}: {counted(len(plan), 'patch')} {where} over {view.mosaic.width}x{view.mosaic.height} px "
+            f"at {predictor.pixel_size_m:g} m; FPN in {predictor.precision_choice or predictor.precision}",
+            err=True,
+        )
 
-    summary = predict_to_folder(inputs, out, predictor, weights=weights, gsd=gsd, batch_size=batch_size, write_maps=write_maps,
-                                lanelet2=lanelet2, restart=restart, scheduler=scheduler, workers=workers, threads=threads,
-                                progress=not quiet, on_plan=announce)
+    summary = predict_to_folder(
+        inputs,
+        out,
+        predictor,
+        weights=weights,
+        gsd=gsd,
+        batch_size=batch_size,
+        write_maps=write_maps,
+        lanelet2=lanelet2,
+        restart=restart,
+        scheduler=scheduler,
+        workers=workers,
+        threads=threads,
+        progress=not quiet,
+        on_plan=announce,
+    )
     c = summary["counts"]
-    typer.echo(f"{out}: {counted(c['edges'], 'edge')}, {counted(c['vertices'], 'vertex', 'vertices')}, {c['boundary_km']} km of boundary\n"
-               f"{stage_table(summary)}\nwrote {out}: {written_files(out)}")
+    typer.echo(
+        f"{out}: {counted(c['edges'], 'edge')}, {counted(c['vertices'], 'vertex', 'vertices')}, {c['boundary_km']} km of boundary\n"
+        f"{stage_table(summary)}\nwrote {out}: {written_files(out)}"
+    )
 
 
 @with_graph_options
 def predict_patch(
-    image: Path = typer.Argument(..., help="One image: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."),
+    image: Path = typer.Argument(
+        ..., help="One image: a GeoTIFF (or any raster) of at most 1100x1100 px, 4 bands (or RGB)."
+    ),
     out: Path = typer.Option(..., "--out", help="Output folder: graph.json, boundaries.geojson, overlay.png."),
-    weights: Optional[Path] = typer.Option(None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."),
+    weights: Optional[Path] = typer.Option(
+        None, help="Weights bundle (default: the shipped weights) or an AfANet checkpoint."
+    ),
     fpn_weights: Optional[Path] = typer.Option(None, help="FPN checkpoint, when --weights is an AfANet checkpoint."),
     graph: GraphOverrides = GraphOverrides(),
-    gsd: Optional[float] = typer.Option(None, callback=positive, help="Pixel size in metres of an image without a CRS."),
+    gsd: Optional[float] = typer.Option(
+        None, callback=positive, help="Pixel size in metres of an image without a CRS."
+    ),
     engine: EngineOption = "auto",
     precision: PrecisionOption = "auto",
     device: DeviceOption = "auto",
@@ -92,12 +147,16 @@ def predict_patch(
     predictor = load_predictor(weights, device, graph, fpn_weights=fpn_weights, engine=engine, precision=precision)
     drawn = predict_patch_to_folder(image, out, predictor, gsd)
     kinds = drawn.edge_kinds or []
-    typer.echo(f"{out}: {drawn.n_vertices} vertices, {drawn.n_edges} edges ({kinds.count('corner')} corner, "
-               f"{kinds.count('skeleton')} filled in from the segmentation)")
+    typer.echo(
+        f"{out}: {drawn.n_vertices} vertices, {drawn.n_edges} edges ({kinds.count('corner')} corner, "
+        f"{kinds.count('skeleton')} filled in from the segmentation)"
+    )
 
 
-BOUNDS_HELP = ("One district: MINX,MINY,MAXX,MAXY in the prediction's CRS; the edges meeting it are read from the GeoPackage's "
-               "spatial index, so a city of any size is handled a district at a time.")
+BOUNDS_HELP = (
+    "One district: MINX,MINY,MAXX,MAXY in the prediction's CRS; the edges meeting it are read from the GeoPackage's "
+    "spatial index, so a city of any size is handled a district at a time."
+)
 
 
 def district_bounds(text: str | None) -> tuple[float, float, float, float] | None:
@@ -112,10 +171,18 @@ def district_bounds(text: str | None) -> tuple[float, float, float, float] | Non
 def export_lanelet2(
     prediction: Path = typer.Argument(..., help="A predict output folder (its graph.json), or a graph.json file."),
     out: Path = typer.Option(..., "--out", help="Lanelet2 OSM file to write; map_projector_info.yaml goes beside it."),
-    origin: Optional[str] = typer.Option(None, help="Projection origin LAT,LON (default: the middle of the boundaries)."),
+    origin: Optional[str] = typer.Option(
+        None, help="Projection origin LAT,LON (default: the middle of the boundaries)."
+    ),
     bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
-    min_confidence: Optional[float] = typer.Option(None, "--min-confidence", callback=finite, min=0.0, max=1.0,
-                                                   help="Leave out the edges whose confidence is below this (0 = keep all)."),
+    min_confidence: Optional[float] = typer.Option(
+        None,
+        "--min-confidence",
+        callback=finite,
+        min=0.0,
+        max=1.0,
+        help="Leave out the edges whose confidence is below this (0 = keep all).",
+    ),
 ) -> None:
     """The predicted boundaries as a Lanelet2 map: one road_border linestring per boundary (closed
     loops closed), confidence as an attribute, UTM projector around the origin (Autoware's
@@ -139,19 +206,26 @@ def export_lanelet2(
     check_finite_geometry(graph, source)
     if min_confidence:
         if graph.n_edges and (graph.edge_scores is None or not np.isfinite(graph.edge_scores).all()):
-            raise InputError(source, "its edges carry no confidence to compare with --min-confidence (predicted without one)")
+            raise InputError(
+                source, "its edges carry no confidence to compare with --min-confidence (predicted without one)"
+            )
         if not predicted_with_confidence(prediction):
-            raise InputError(source, "was predicted with weights that have no edge confidence: its scores are the network's, not "
-                                     "calibrated probabilities, so --min-confidence would filter on them (fit-confidence, then "
-                                     "predict again)")
+            raise InputError(
+                source,
+                "was predicted with weights that have no edge confidence: its scores are the network's, not "
+                "calibrated probabilities, so --min-confidence would filter on them (fit-confidence, then "
+                "predict again)",
+            )
         kept = graph.edge_subgraph(graph.edge_scores >= min_confidence) if graph.n_edges else graph
         typer.echo(f"--min-confidence {min_confidence:g}: {kept.n_edges} of {graph.n_edges} edges kept")
         graph = kept
     if graph.n_edges == 0:
         warnings.warn(f"{source}: no boundary to export{' in --bounds' if box else ''}; the map is empty", InputWarning)
     written = write_lanelet2(graph, out, at)
-    typer.echo(f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
-               f"in {written['projector_info']}")
+    typer.echo(
+        f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
+        f"in {written['projector_info']}"
+    )
 
 
 def predicted_with_confidence(prediction: Path) -> bool:
@@ -169,11 +243,17 @@ def predicted_with_confidence(prediction: Path) -> bool:
 def review(
     prediction: Path = typer.Argument(..., help="A predict output folder."),
     out: Optional[Path] = typer.Option(None, "--out", help="Folder of the page (default: PREDICTION/review)."),
-    ground_truth: Optional[Path] = typer.Option(None, help="Boundaries to show as a toggle (default: the city's own, if any)."),
+    ground_truth: Optional[Path] = typer.Option(
+        None, help="Boundaries to show as a toggle (default: the city's own, if any)."
+    ),
     bounds: Optional[str] = typer.Option(None, help=BOUNDS_HELP),
-    gpkg: Optional[Path] = typer.Option(None, "--gpkg", help="Write this GeoPackage instead of the page, to review in a GIS: "
-                                        "the review draft's boundaries to edit (layer boundaries), those held back from it "
-                                        "(held_back) and an empty 'complete' polygon layer (apply-review reads it)."),
+    gpkg: Optional[Path] = typer.Option(
+        None,
+        "--gpkg",
+        help="Write this GeoPackage instead of the page, to review in a GIS: "
+        "the review draft's boundaries to edit (layer boundaries), those held back from it "
+        "(held_back) and an empty 'complete' polygon layer (apply-review reads it).",
+    ),
     quiet: QuietOption = False,
 ) -> None:
     """A self-contained review page: imagery with pan and zoom, boundaries coloured by
@@ -187,25 +267,36 @@ def review(
     if gpkg is not None:
         from csboundary.data.atomic import check_output_file
 
-        if box is not None:  # apply-review takes an edge missing from the layer as deleted: a district's layer would delete the rest
-            raise typer.BadParameter("--gpkg writes the whole city's edges; review a district with the page (--bounds without --gpkg)",
-                                     param_hint="--gpkg")
+        if (
+            box is not None
+        ):  # apply-review takes an edge missing from the layer as deleted: a district's layer would delete the rest
+            raise typer.BadParameter(
+                "--gpkg writes the whole city's edges; review a district with the page (--bounds without --gpkg)",
+                param_hint="--gpkg",
+            )
 
         done = write_review_layers(prediction, check_output_file(gpkg, (".gpkg",)))
-        typer.echo(f"{done['gpkg']}: {done['boundaries']} boundaries to review ({done['edges']} edges; layers boundaries, "
-                   f"held_back ({done['held_back']} not worth a look), complete)")
+        typer.echo(
+            f"{done['gpkg']}: {done['boundaries']} boundaries to review ({done['edges']} edges; layers boundaries, "
+            f"held_back ({done['held_back']} not worth a look), complete)"
+        )
         return
     out_dir(out or prediction / "review")
     done = write_review(prediction, out, ground_truth, progress=not quiet, bounds=box)
     truth = f", ground truth {done['ground_truth']}" if done["ground_truth"] else ""
-    typer.echo(f"{done['page']}: {done['draft']} boundaries to review ({done['edges']} edges; "
-               f"{done['boundaries'] - done['draft']} held back){truth}")
+    typer.echo(
+        f"{done['page']}: {done['draft']} boundaries to review ({done['edges']} edges; "
+        f"{done['boundaries'] - done['draft']} held back){truth}"
+    )
 
 
 def apply_review(
     prediction: Path = typer.Argument(..., help="The predict output folder the review page was made from."),
-    edits: Path = typer.Argument(..., help="The edits the page exported (edits.geojson), or a copy of the prediction's "
-                                 "boundaries.gpkg whose edges layer was edited in QGIS (with an optional 'complete' polygon layer)."),
+    edits: Path = typer.Argument(
+        ...,
+        help="The edits the page exported (edits.geojson), or a copy of the prediction's "
+        "boundaries.gpkg whose edges layer was edited in QGIS (with an optional 'complete' polygon layer).",
+    ),
 ) -> None:
     """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
     GeoJSON and map.osm (when present), and appends what a person changed, and the areas marked
@@ -214,12 +305,16 @@ def apply_review(
 
     done = merge(prediction, edits)
     if "already_applied" in done:
-        typer.echo(f"{prediction}: {edits} was already applied on {done['already_applied'].get('time', '?')}; nothing changed")
+        typer.echo(
+            f"{prediction}: {edits} was already applied on {done['already_applied'].get('time', '?')}; nothing changed"
+        )
         return
-    typer.echo(f"{prediction}: {len(done['deleted_edges'])} deleted, {len(done['accepted_edges'])} accepted, "
-               f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added, "
-               f"{len(done['complete_areas'])} areas marked complete: "
-               f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}")
+    typer.echo(
+        f"{prediction}: {len(done['deleted_edges'])} deleted, {len(done['accepted_edges'])} accepted, "
+        f"{len(done['moved_vertices'])} vertices moved, {len(done['added_edges'])} added, "
+        f"{len(done['complete_areas'])} areas marked complete: "
+        f"{done['edges_before']} -> {done['edges_after']} edges; recorded in {done['log']}"
+    )
 
 
 def qgis_plugin(
@@ -232,9 +327,15 @@ def qgis_plugin(
     from csboundary.qgis_plugin import plugin_version, write_plugin_zip
 
     written = write_plugin_zip(check_output_file(out, (".zip",)))
-    here = [p for p in (Path(sys.argv[0]), Path(sys.executable).with_name("csboundary")) if p.name.startswith("csboundary") and p.is_file()]
-    typer.echo(f"{written}: the csboundary QGIS plugin {plugin_version()}; give it this environment's command under Settings > "
-               f"Options > Processing > Providers > csboundary: {here[0].resolve() if here else 'csboundary'}")
+    here = [
+        p
+        for p in (Path(sys.argv[0]), Path(sys.executable).with_name("csboundary"))
+        if p.name.startswith("csboundary") and p.is_file()
+    ]
+    typer.echo(
+        f"{written}: the csboundary QGIS plugin {plugin_version()}; give it this environment's command under Settings > "
+        f"Options > Processing > Providers > csboundary: {here[0].resolve() if here else 'csboundary'}"
+    )
 
 
 def demo(

@@ -9,9 +9,9 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import zipfile
 import re
 import shutil
+import zipfile
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -67,8 +67,11 @@ def is_disk_full(exc: BaseException, folder: str | Path | None = None) -> bool:
         if seen is None:
             break
         text = str(seen).lower()
-        if (isinstance(seen, OSError) and seen.errno in FULL_ERRNOS) or any(word in text for word in FULL_WORDS) or \
-                ("requested" in text and "written" in text):
+        if (
+            (isinstance(seen, OSError) and seen.errno in FULL_ERRNOS)
+            or any(word in text for word in FULL_WORDS)
+            or ("requested" in text and "written" in text)
+        ):
             return True
         seen = seen.__cause__ or seen.__context__
     if folder is None or isinstance(exc, NEVER_DISK):  # a bad input or a bug is not a full disk, however little is free
@@ -144,8 +147,11 @@ def check_output_file(path: str | Path, suffixes: tuple[str, ...] = ()) -> Path:
     if suffixes and path.suffix.lower() not in suffixes:
         raise InputError(path, f"needs one of the extensions {', '.join(suffixes)}")
     if path.suffix.lower() in ZIP_SUFFIXES and path.is_file() and not zipfile.is_zipfile(path):
-        raise InputError(path, f"exists and is not {ZIP_SUFFIXES[path.suffix.lower()]}: writing would destroy it (give another name, "
-                               "or move it away)")
+        raise InputError(
+            path,
+            f"exists and is not {ZIP_SUFFIXES[path.suffix.lower()]}: writing would destroy it (give another name, "
+            "or move it away)",
+        )
     _probe(_writable_ancestor(path.parent, path), path)
     return path
 

@@ -46,7 +46,10 @@ def folder_lock(folder: str | Path, wait: bool = False) -> Iterator[None]:
     try:
         with contextlib.suppress(OSError):  # who holds it is a courtesy to the run it refuses (a full disk may deny it)
             os.ftruncate(fd, 0)
-            os.write(fd, f"pid {os.getpid()} on {socket.gethostname()}, started {time.strftime('%Y-%m-%d %H:%M:%S')}\n".encode())
+            os.write(
+                fd,
+                f"pid {os.getpid()} on {socket.gethostname()}, started {time.strftime('%Y-%m-%d %H:%M:%S')}\n".encode(),
+            )
         yield
     finally:
         _held.discard(key)
@@ -75,7 +78,9 @@ def locked_folder(folder: str | Path, option: str = "--out") -> Iterator[None]:
         with folder_lock(folder):
             yield
     except InputError:
-        if made and folder.is_dir() and not any(p.name != LOCK_FILE for p in folder.iterdir()):  # refused before anything was made
+        if (
+            made and folder.is_dir() and not any(p.name != LOCK_FILE for p in folder.iterdir())
+        ):  # refused before anything was made
             shutil.rmtree(folder, ignore_errors=True)
         raise
 
@@ -95,8 +100,9 @@ def _lock(path: Path, folder: Path, wait: bool = False) -> int | None:
         except BlockingIOError:
             holder = _holder(fd)
             os.close(fd)
-            raise InputError(folder, f"in use by another csboundary run ({holder}); wait for it to end, "
-                                     "or write into another folder") from None
+            raise InputError(
+                folder, f"in use by another csboundary run ({holder}); wait for it to end, or write into another folder"
+            ) from None
         except OSError:
             os.close(fd)
             return None

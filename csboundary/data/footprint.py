@@ -101,8 +101,12 @@ def groups(parts: Sequence[PixelWindow], gap: int = JOIN_PX) -> list[PixelWindow
     box = np.array([[p.col_off, p.row_off, p.col_end, p.row_end] for p in parts], np.int64)
     label = np.arange(len(parts))
     for i in range(len(parts)):  # near: the part grown by ``gap`` px meets the other
-        near = np.flatnonzero((box[:, 0] < box[i, 2] + gap) & (box[:, 2] + gap > box[i, 0]) & (box[:, 1] < box[i, 3] + gap)
-                              & (box[:, 3] + gap > box[i, 1]))
+        near = np.flatnonzero(
+            (box[:, 0] < box[i, 2] + gap)
+            & (box[:, 2] + gap > box[i, 0])
+            & (box[:, 1] < box[i, 3] + gap)
+            & (box[:, 3] + gap > box[i, 1])
+        )
         joined = np.unique(label[near])
         label[np.isin(label, joined)] = joined.min()
     out = []

@@ -83,8 +83,14 @@ class Patch:
 class PatchGrid:
     """The global grid of patches over a ``width x height`` mosaic with affine ``transform``."""
 
-    def __init__(self, width: int, height: int, transform: Affine = Affine.identity(), config: GridConfig = GridConfig(),
-                 footprint: Sequence[PixelWindow] | None = None):
+    def __init__(
+        self,
+        width: int,
+        height: int,
+        transform: Affine = Affine.identity(),
+        config: GridConfig = GridConfig(),
+        footprint: Sequence[PixelWindow] | None = None,
+    ):
         if width <= 0 or height <= 0:
             raise ValueError(f"mosaic must have pixels, got {width}x{height}")
         self.width = width
@@ -95,7 +101,9 @@ class PatchGrid:
         self.n_cols = math.ceil(width / config.core)
         self._patches: dict[tuple[int, int], Patch] = {}  # made once each: a run asks for every patch many times
         whole = footprint is None or list(footprint) == [PixelWindow(0, 0, width, height)]
-        self.planned: list[tuple[int, int]] | None = None if whole else cells_meeting(footprint, config.core, self.n_rows, self.n_cols)
+        self.planned: list[tuple[int, int]] | None = (
+            None if whole else cells_meeting(footprint, config.core, self.n_rows, self.n_cols)
+        )
         self._planned = None if self.planned is None else frozenset(self.planned)
 
     def __getstate__(self) -> dict:

@@ -36,8 +36,12 @@ def as_linestrings(geometry) -> list[LineString]:
     return []
 
 
-def write_ground_truth(path: str | Path, frame: gpd.GeoDataFrame, surface: gpd.GeoDataFrame | None = None,
-                       complete: gpd.GeoDataFrame | None = None) -> Path:
+def write_ground_truth(
+    path: str | Path,
+    frame: gpd.GeoDataFrame,
+    surface: gpd.GeoDataFrame | None = None,
+    complete: gpd.GeoDataFrame | None = None,
+) -> Path:
     """Write a GeoDataFrame of boundary LineStrings to a GeoPackage layer, atomically; with
     ``surface``, the roadway polygons as a second layer (``road_surface``); with ``complete``,
     the polygons where the boundaries are complete (``complete_area``)."""
@@ -75,7 +79,9 @@ def _read_polygons(path: str | Path, layer: str, crs=None) -> list | None:
     return [g for g in frame.geometry if g is not None and not g.is_empty]
 
 
-def read_ground_truth(path: str | Path, crs=None, bbox: tuple[float, float, float, float] | None = None) -> gpd.GeoDataFrame:
+def read_ground_truth(
+    path: str | Path, crs=None, bbox: tuple[float, float, float, float] | None = None
+) -> gpd.GeoDataFrame:
     """Read boundary LineStrings (GeoPackage, GeoJSON or anything OGR reads), exploded to parts,
     reprojected to ``crs`` when both it and the file's CRS are known; with ``bbox`` (in
     ``crs``) only the lines meeting it."""

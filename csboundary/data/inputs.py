@@ -17,7 +17,9 @@ def open_imagery(inputs: Sequence[str | Path], ground_truth: str | Path | None =
     without ground truth). A single city directory gives its tiles and, unless ``ground_truth``
     is given, its own ground truth. Raises InputError naming a file that cannot be read."""
     inputs = [Path(p) for p in inputs]
-    looks_like_city = len(inputs) == 1 and (layout.tiles_dir(inputs[0]).is_dir() or layout.ground_truth_path(inputs[0]).exists())
+    looks_like_city = len(inputs) == 1 and (
+        layout.tiles_dir(inputs[0]).is_dir() or layout.ground_truth_path(inputs[0]).exists()
+    )
     if looks_like_city:
         layout.read_meta(inputs[0])  # a city without a readable city.json is an interrupted write, not input
     if len(inputs) == 1 and layout.is_city_dir(inputs[0]):

@@ -52,7 +52,9 @@ class BandStretch:
         return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
 
-def fit_stretch(mosaic: Mosaic, percentiles: tuple[float, float] = STRETCH_PERCENTILES, side: int = 1024) -> BandStretch:
+def fit_stretch(
+    mosaic: Mosaic, percentiles: tuple[float, float] = STRETCH_PERCENTILES, side: int = 1024
+) -> BandStretch:
     """The stretch of ``mosaic``'s valid pixels, from an overview at most ``side`` px wide; for
     groups of tiles kilometres apart, from an overview of each group, all of them holding
     about ``side`` squared pixels (an overview of their box would shrink each to a few pixels)."""
@@ -78,7 +80,9 @@ class ResampledMosaic(Mosaic):
         width = max(1, int(math.floor(source.width * source.transform.a / unit_x + 1e-9)))
         height = max(1, int(math.floor(source.height * abs(source.transform.e) / unit_y + 1e-9)))
         t = source.transform
-        transform = Affine(unit_x, 0.0, t.c, 0.0, math.copysign(unit_y, t.e), t.f)  # a CRS-less picture keeps its rows going down
+        transform = Affine(
+            unit_x, 0.0, t.c, 0.0, math.copysign(unit_y, t.e), t.f
+        )  # a CRS-less picture keeps its rows going down
         super().__init__(source.tiles, source.crs, transform, width, height)
         self.source = source
         self.factor = (unit_x / t.a, unit_y / abs(t.e))  # source pixels per view pixel
@@ -98,14 +102,21 @@ class ResampledMosaic(Mosaic):
         if fx > 1.05 or fy > 1.05:  # shrinking: low-pass first so fine texture does not alias
             image = cv2.GaussianBlur(image, (0, 0), sigmaX=max(0.5 * fx, 0.01), sigmaY=max(0.5 * fy, 0.01))
         # view pixel centre (col + 0.5) lies at source column (col + 0.5) * fx, i.e. index - 0.5
-        matrix = np.array([[fx, 0.0, (window.col_off + 0.5) * fx - 0.5 - c0],
-                           [0.0, fy, (window.row_off + 0.5) * fy - 0.5 - r0]], dtype=np.float64)
+        matrix = np.array(
+            [[fx, 0.0, (window.col_off + 0.5) * fx - 0.5 - c0], [0.0, fy, (window.row_off + 0.5) * fy - 0.5 - r0]],
+            dtype=np.float64,
+        )
         size = (window.width, window.height)
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
         out = cv2.warpAffine(image, matrix, size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         if out.ndim == 2:
             out = out[..., None]
-        mask = cv2.warpAffine(valid, matrix, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT) > 0.5
+        mask = (
+            cv2.warpAffine(
+                valid, matrix, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT
+            )
+            > 0.5
+        )
         out = np.moveaxis(out, -1, 0)
         if self.stretch is not None:
             pixels = self.stretch.apply(out)
@@ -120,7 +131,9 @@ class ResampledMosaic(Mosaic):
         found = getattr(self, "_view_footprint", None)
         if found is None:
             parts = self.source.footprint
-            found = self._view_footprint = [self.window] if parts == [self.source.window] else scaled(parts, *self.factor, self.window)
+            found = self._view_footprint = (
+                [self.window] if parts == [self.source.window] else scaled(parts, *self.factor, self.window)
+            )
         return found
 
     def may_have_data(self, window: PixelWindow) -> bool:
@@ -174,7 +187,9 @@ def mosaic_units(mosaic: Mosaic, gsd: float | None = None) -> GroundUnits | None
     return ground_units(mosaic.crs, (float(centre[0]), float(centre[1])))
 
 
-def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODEL_GSD, assume_model_gsd: bool = False) -> ModelInput:
+def model_view(
+    mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODEL_GSD, assume_model_gsd: bool = False
+) -> ModelInput:
     """``mosaic`` as the model sees it (module doc). ``gsd`` gives the pixel size in metres of
     imagery without a CRS (and overrides nothing else); ``assume_model_gsd`` takes such imagery
     to be at the model's pixel size, with a warning (one image, as ``predict-patch`` reads it). Raises InputError for imagery without
@@ -183,36 +198,56 @@ def model_view(mosaic: Mosaic, gsd: float | None = None, model_gsd: float = MODE
     first = mosaic.tiles[0].path
     if mosaic.crs is None:
         if gsd is None and assume_model_gsd:
-            warnings.warn(f"{first}: no CRS: its pixels are taken to be the model's {model_gsd:g} m (give --gsd otherwise)", InputWarning,
-                          stacklevel=2)
+            warnings.warn(
+                f"{first}: no CRS: its pixels are taken to be the model's {model_gsd:g} m (give --gsd otherwise)",
+                InputWarning,
+                stacklevel=2,
+            )
             gsd = model_gsd * abs(mosaic.transform.a)
         if gsd is None:
-            raise InputError(first, "has no CRS, so its pixel size is unknown: give --gsd (metres per pixel) to predict it")
+            raise InputError(
+                first, "has no CRS, so its pixel size is unknown: give --gsd (metres per pixel) to predict it"
+            )
         units = mosaic_units(mosaic, gsd)
     else:
         if gsd is not None:
-            warnings.warn(f"{first}: --gsd ignored: the CRS {mosaic.crs.to_string()} gives the pixel size", InputWarning, stacklevel=2)
+            warnings.warn(
+                f"{first}: --gsd ignored: the CRS {mosaic.crs.to_string()} gives the pixel size",
+                InputWarning,
+                stacklevel=2,
+            )
         units = mosaic_units(mosaic)
     pixel = pixel_size_m(units, mosaic.transform)
     size = geometric_mean(pixel)
     low, high = PIXEL_SIZE_RANGE_M
     if not (low <= size <= high):
-        raise InputError(first,
-                         f"pixel size {size:.3g} m is outside {low:g}-{high:g} m: the model ({model_gsd:g} m) would not see curbs in it")
+        raise InputError(
+            first,
+            f"pixel size {size:.3g} m is outside {low:g}-{high:g} m: the model ({model_gsd:g} m) would not see curbs in it",
+        )
     dtype = np.dtype(mosaic.tiles[0].dtype)
     stretch = None if dtype == np.uint8 else fit_stretch(mosaic)
     if stretch is not None:
-        warnings.warn(f"{first}: {dtype} imagery stretched to 8 bits per band (2nd-98th percentile: "
-                      f"{', '.join(f'{lo:.4g}-{hi:.4g}' for lo, hi in zip(stretch.low, stretch.high))})", InputWarning, stacklevel=2)
+        warnings.warn(
+            f"{first}: {dtype} imagery stretched to 8 bits per band (2nd-98th percentile: "
+            f"{', '.join(f'{lo:.4g}-{hi:.4g}' for lo, hi in zip(stretch.low, stretch.high))})",
+            InputWarning,
+            stacklevel=2,
+        )
     needs_resample = max(abs(pixel[0] / model_gsd - 1), abs(pixel[1] / model_gsd - 1)) > RESAMPLE_TOLERANCE
     if needs_resample:
         factor = size / model_gsd
         if factor > WARN_FACTOR or factor < 1 / WARN_FACTOR:
-            warnings.warn(f"{first}: pixel size {size:.3g} m resampled to the model's {model_gsd:g} m "
-                          f"({'up' if factor > 1 else 'down'}sampled "
-                          f"{max(factor, 1 / factor):.2f}x); accuracy drops the further the input is from {model_gsd:g} m", InputWarning,
-                          stacklevel=2)
-        view: Mosaic = ResampledMosaic(mosaic, model_gsd / units.metres_per_unit[0], model_gsd / units.metres_per_unit[1], stretch)
+            warnings.warn(
+                f"{first}: pixel size {size:.3g} m resampled to the model's {model_gsd:g} m "
+                f"({'up' if factor > 1 else 'down'}sampled "
+                f"{max(factor, 1 / factor):.2f}x); accuracy drops the further the input is from {model_gsd:g} m",
+                InputWarning,
+                stacklevel=2,
+            )
+        view: Mosaic = ResampledMosaic(
+            mosaic, model_gsd / units.metres_per_unit[0], model_gsd / units.metres_per_unit[1], stretch
+        )
     elif stretch is not None:
         view = StretchedMosaic(mosaic, stretch)
     else:

@@ -13,7 +13,6 @@ in weakened form. Extra bands beyond 4 are ignored with a warning.
 from __future__ import annotations
 
 import dataclasses
-
 import math
 import threading
 import warnings
@@ -68,7 +67,9 @@ def find_rasters(source: str | Path | Sequence[str | Path]) -> list[Path]:
     for item in source:
         item = Path(item)
         if item.is_dir():
-            found = sorted(p for p in item.rglob("*") if p.suffix.lower() in RASTER_SUFFIXES and not p.name.startswith("."))
+            found = sorted(
+                p for p in item.rglob("*") if p.suffix.lower() in RASTER_SUFFIXES and not p.name.startswith(".")
+            )
             if not found:
                 raise InputError(item, "directory holds no raster files (*.tif, *.tiff, *.vrt)")
             paths.extend(found)
@@ -197,15 +198,18 @@ class Mosaic:
         self._lock = threading.RLock()  # a prefetching thread and the main thread share the open files
         self.max_open = MAX_OPEN_FILES
         self._coverage: dict[Path, tuple | None] = {}  # written blocks per tile, found on first use
-        self._boxes = np.array([[t.window.col_off, t.window.row_off, t.window.col_end, t.window.row_end] for t in tiles],
-                               dtype=np.int64).reshape(-1, 4)
+        self._boxes = np.array(
+            [[t.window.col_off, t.window.row_off, t.window.col_end, t.window.row_end] for t in tiles], dtype=np.int64
+        ).reshape(-1, 4)
 
     # -- construction ---------------------------------------------------------------------------
     @classmethod
     def open(cls, source: str | Path | Sequence[str | Path]) -> "Mosaic":
         """Open and validate every raster in ``source`` (file, list of files, or directory)."""
         paths = find_rasters(source)
-        with rasterio.Env(GDAL_DISABLE_READDIR_ON_OPEN="TRUE"):  # no folder listing per tile: side-cars are probed one by one
+        with rasterio.Env(
+            GDAL_DISABLE_READDIR_ON_OPEN="TRUE"
+        ):  # no folder listing per tile: side-cars are probed one by one
             infos = [(p, *_inspect(p)) for p in paths]
         first = infos[0]
         for path, crs, transform, count, dtype, width, height, alpha in infos:
@@ -223,10 +227,15 @@ class Mosaic:
                     raise InputError(path, "rotated or not north-up georeference is not supported")
             if (crs is None) != (first[1] is None) or (crs is not None and crs != first[1]):
                 raise InputError(path, f"CRS {crs} differs from {first[1]} of {first[0]}")
-            if not (math.isclose(transform.a, first[2].a, rel_tol=1e-9) and math.isclose(abs(transform.e), abs(first[2].e), rel_tol=1e-9)):
-                raise InputError(path,
-                                 f"pixel size {transform.a:g}x{abs(transform.e):g} differs from {first[2].a:g}x{abs(first[2].e):g} of "
-                                 f"{first[0]}")
+            if not (
+                math.isclose(transform.a, first[2].a, rel_tol=1e-9)
+                and math.isclose(abs(transform.e), abs(first[2].e), rel_tol=1e-9)
+            ):
+                raise InputError(
+                    path,
+                    f"pixel size {transform.a:g}x{abs(transform.e):g} differs from {first[2].a:g}x{abs(first[2].e):g} of "
+                    f"{first[0]}",
+                )
             if dtype != first[4]:
                 raise InputError(path, f"data type {dtype} differs from {first[4]} of {first[0]}")
         crs = first[1]
@@ -234,10 +243,15 @@ class Mosaic:
             if len(infos) > 1 and all(i[2] == Affine.identity() for i in infos):
                 raise InputError(paths[1], "no CRS and no georeference: tiles cannot be placed in one mosaic")
             if first[2] == Affine.identity():
-                warnings.warn(f"{first[0]}: no CRS and no georeference; working in pixel coordinates", InputWarning, stacklevel=2)
+                warnings.warn(
+                    f"{first[0]}: no CRS and no georeference; working in pixel coordinates", InputWarning, stacklevel=2
+                )
             else:
-                warnings.warn(f"{first[0]}: no CRS; coordinates follow the file's geotransform, in unknown units", InputWarning,
-                              stacklevel=2)
+                warnings.warn(
+                    f"{first[0]}: no CRS; coordinates follow the file's geotransform, in unknown units",
+                    InputWarning,
+                    stacklevel=2,
+                )
 
         res_x, res_y = first[2].a, first[2].e
         west = min(i[2].c for i in infos)
@@ -249,7 +263,9 @@ class Mosaic:
             dcol = (transform.c - first[2].c) / res_x
             drow = (transform.f - first[2].f) / res_y
             if abs(dcol - round(dcol)) > 1e-6 or abs(drow - round(drow)) > 1e-6:
-                raise InputError(path, f"not aligned to the pixel grid of {first[0]} (offset {dcol:.3f}, {drow:.3f} px)")
+                raise InputError(
+                    path, f"not aligned to the pixel grid of {first[0]} (offset {dcol:.3f}, {drow:.3f} px)"
+                )
             col = (transform.c - west) / res_x
             row = (transform.f - north) / res_y
             tiles.append(Tile(path, PixelWindow(int(round(col)), int(round(row)), width, height), count, dtype, alpha))
@@ -299,9 +315,25 @@ class Mosaic:
         if part is None:
             raise ValueError(f"{window} does not meet the mosaic {self.window}")
         window = part
-        tiles = [dataclasses.replace(t, window=PixelWindow(t.window.col_off - window.col_off, t.window.row_off - window.row_off,
-                                                           t.window.width, t.window.height)) for t in self._tiles_in(window)]
-        return Mosaic(tiles, self.crs, self.transform * Affine.translation(window.col_off, window.row_off), window.width, window.height)
+        tiles = [
+            dataclasses.replace(
+                t,
+                window=PixelWindow(
+                    t.window.col_off - window.col_off,
+                    t.window.row_off - window.row_off,
+                    t.window.width,
+                    t.window.height,
+                ),
+            )
+            for t in self._tiles_in(window)
+        ]
+        return Mosaic(
+            tiles,
+            self.crs,
+            self.transform * Affine.translation(window.col_off, window.row_off),
+            window.width,
+            window.height,
+        )
 
     # -- reading --------------------------------------------------------------------------------
     def read(self, window: PixelWindow, scale: float = 1.0) -> WindowRead:
@@ -356,7 +388,12 @@ class Mosaic:
         b = self._boxes
         if window.width <= 0 or window.height <= 0:
             return iter(())
-        hit = (b[:, 0] < window.col_end) & (b[:, 2] > window.col_off) & (b[:, 1] < window.row_end) & (b[:, 3] > window.row_off)
+        hit = (
+            (b[:, 0] < window.col_end)
+            & (b[:, 2] > window.col_off)
+            & (b[:, 1] < window.row_end)
+            & (b[:, 3] > window.row_off)
+        )
         return (self.tiles[i] for i in np.flatnonzero(hit))
 
     def may_have_data(self, window: PixelWindow) -> bool:
@@ -364,8 +401,10 @@ class Mosaic:
         city inside its bounding box) leaves the blocks outside the city unwritten, and such a
         window is known empty without reading (or decompressing) anything. True when unsure."""
         with self._lock:
-            return any(self._tile_may_have_data(tile, tile.window.intersection(window).relative_to(tile.window))
-                       for tile in self._tiles_in(window))
+            return any(
+                self._tile_may_have_data(tile, tile.window.intersection(window).relative_to(tile.window))
+                for tile in self._tiles_in(window)
+            )
 
     def _tile_may_have_data(self, tile: Tile, part: PixelWindow) -> bool:
         """Whether a written block of ``tile`` lies under ``part`` (tile pixels); True when unsure."""

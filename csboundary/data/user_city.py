@@ -56,8 +56,12 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     if len(frame) and not frame.intersects(box(xs.min(), ys.min(), xs.max(), ys.max())).any():
         raise InputError(ground_truth, f"no boundary lies on the tiles (checked in {crs}); is its CRS right?")
     if abs(pixel_m / MODEL_GSD - 1) > 0.15:
-        warnings.warn(f"{paths[0]}: pixel size {pixel_m:.3g} m differs from the model's {MODEL_GSD:g} m; resample the tiles "
-                      "(e.g. gdalwarp -tr) so training sees objects at the size it predicts them", InputWarning, stacklevel=2)
+        warnings.warn(
+            f"{paths[0]}: pixel size {pixel_m:.3g} m differs from the model's {MODEL_GSD:g} m; resample the tiles "
+            "(e.g. gdalwarp -tr) so training sees objects at the size it predicts them",
+            InputWarning,
+            stacklevel=2,
+        )
     out = begin_city(out)
     folder = tiles_dir(out)
     folder.mkdir(parents=True, exist_ok=True)
@@ -66,10 +70,20 @@ def make_city(tiles: list[str | Path], ground_truth: str | Path, out: str | Path
     if complete is not None:
         complete = complete.to_crs(crs) if complete.crs is not None else complete.set_crs(crs)
     write_ground_truth(ground_truth_path(out), frame, complete=complete)
-    meta = {"source": SOURCE, "crs": crs.to_string(), "gsd": gsd, "units": units.unit_name, "pixel_m": pixel_m, "width": size[0],
-            "height": size[1], "tiles": names,
-            "tile_sources": [str(p) for p in paths], "ground_truth_source": str(Path(ground_truth).resolve()),
-            "boundaries": len(frame), **({"complete_areas": len(complete)} if complete is not None else {}),
-            "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS."}
+    meta = {
+        "source": SOURCE,
+        "crs": crs.to_string(),
+        "gsd": gsd,
+        "units": units.unit_name,
+        "pixel_m": pixel_m,
+        "width": size[0],
+        "height": size[1],
+        "tiles": names,
+        "tile_sources": [str(p) for p in paths],
+        "ground_truth_source": str(Path(ground_truth).resolve()),
+        "boundaries": len(frame),
+        **({"complete_areas": len(complete)} if complete is not None else {}),
+        "notes": "Tiles are symbolic links to the user's files; ground truth reprojected to the tiles' CRS.",
+    }
     write_meta(out, meta)
     return meta

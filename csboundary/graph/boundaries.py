@@ -50,5 +50,7 @@ def graph_boundaries(graph: BoundaryGraph) -> list[Boundary]:
     the boundary's length that is true."""
     scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(graph.n_edges, np.nan), float)
     lengths = graph.edge_lengths() if graph.n_edges else np.zeros(0)
-    return [Boundary(chain.polyline, chain.edges, weighted_mean(scores[chain.edges], lengths[chain.edges]))
-            for chain in merge_chains(graph)]
+    return [
+        Boundary(chain.polyline, chain.edges, weighted_mean(scores[chain.edges], lengths[chain.edges]))
+        for chain in merge_chains(graph)
+    ]

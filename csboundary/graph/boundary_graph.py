@@ -94,13 +94,15 @@ class BoundaryGraph:
         renumber[used] = np.arange(len(used))
         picked = np.flatnonzero(keep)
         return BoundaryGraph(
-            self.vertices[used], renumber[edges],
+            self.vertices[used],
+            renumber[edges],
             vertex_kinds=None if self.vertex_kinds is None else [self.vertex_kinds[i] for i in used],
             edge_kinds=None if self.edge_kinds is None else [self.edge_kinds[k] for k in picked],
             edge_polylines=None if self.edge_polylines is None else [self.edge_polylines[k] for k in picked],
             edge_scores=None if self.edge_scores is None else np.asarray(self.edge_scores)[keep],
             edge_patches=None if self.edge_patches is None else self.edge_patches[keep],
-            transform=self.transform, crs=self.crs,
+            transform=self.transform,
+            crs=self.crs,
         )
 
     def world_vertices(self) -> np.ndarray:
@@ -127,8 +129,14 @@ class BoundaryGraph:
 
     # -- construction -------------------------------------------------------------------------------
     @classmethod
-    def from_polylines(cls, lines: Sequence[np.ndarray], transform: Affine | None = None, crs: str | None = None,
-                       snap: float = 1e-6, scores: Sequence[float] | None = None) -> "BoundaryGraph":
+    def from_polylines(
+        cls,
+        lines: Sequence[np.ndarray],
+        transform: Affine | None = None,
+        crs: str | None = None,
+        snap: float = 1e-6,
+        scores: Sequence[float] | None = None,
+    ) -> "BoundaryGraph":
         """A graph whose vertices are the polylines' points (shared points merged within ``snap``).
         ``scores`` (one per line) become the scores of the line's edges; a segment two lines share
         keeps the first line's."""
@@ -147,14 +155,21 @@ class BoundaryGraph:
                 if a != b:
                     edges.setdefault((min(a, b), max(a, b)), np.nan if scores is None else float(scores[n]))
         keys = sorted(edges)
-        graph = cls(np.array(points).reshape(-1, 2), np.array(keys, dtype=np.int64).reshape(-1, 2), transform=transform, crs=crs)
+        graph = cls(
+            np.array(points).reshape(-1, 2), np.array(keys, dtype=np.int64).reshape(-1, 2), transform=transform, crs=crs
+        )
         if scores is not None:
             graph.edge_scores = np.array([edges[k] for k in keys], dtype=float)
         return graph
 
     @classmethod
-    def from_world_lines(cls, lines: Sequence[LineString], transform: Affine, crs: str | None = None,
-                         scores: Sequence[float] | None = None) -> "BoundaryGraph":
+    def from_world_lines(
+        cls,
+        lines: Sequence[LineString],
+        transform: Affine,
+        crs: str | None = None,
+        scores: Sequence[float] | None = None,
+    ) -> "BoundaryGraph":
         """Graph of world LineStrings expressed in the pixel frame of ``transform`` (rounded to
         1e-6 px, so a line written from a graph's pixels reads back onto the same pixels and
         rasters), with ``scores`` per line as :meth:`from_polylines` takes them."""
@@ -168,19 +183,32 @@ class BoundaryGraph:
     # -- JSON -----------------------------------------------------------------------------------------
     def to_dict(self) -> dict:
         world = self.world_vertices() if self.transform is not None else None
-        edges = [edge_item(int(u), int(v), None if self.edge_kinds is None else self.edge_kinds[k],
-                           None if self.edge_polylines is None else self.edge_polylines[k],
-                           None if self.edge_scores is None else float(self.edge_scores[k]), self.edge_scores is not None,
-                           None if self.edge_patches is None else self.edge_patches[k])
-                 for k, (u, v) in enumerate(self.edges.tolist())]
-        return {**json_header(self.crs, self.transform), "vertices": vertex_items(self.vertices, world, self.vertex_kinds), "edges": edges}
+        edges = [
+            edge_item(
+                int(u),
+                int(v),
+                None if self.edge_kinds is None else self.edge_kinds[k],
+                None if self.edge_polylines is None else self.edge_polylines[k],
+                None if self.edge_scores is None else float(self.edge_scores[k]),
+                self.edge_scores is not None,
+                None if self.edge_patches is None else self.edge_patches[k],
+            )
+            for k, (u, v) in enumerate(self.edges.tolist())
+        ]
+        return {
+            **json_header(self.crs, self.transform),
+            "vertices": vertex_items(self.vertices, world, self.vertex_kinds),
+            "edges": edges,
+        }
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "<dict>") -> "BoundaryGraph":
         if data.get("format") != FORMAT:
             raise InputError(source, f"not a {FORMAT} JSON file (format={data.get('format')!r})")
         if data.get("version") != VERSION:
-            raise InputError(source, f"unsupported {FORMAT} version {data.get('version')!r} (this build reads {VERSION})")
+            raise InputError(
+                source, f"unsupported {FORMAT} version {data.get('version')!r} (this build reads {VERSION})"
+            )
         vertices = data.get("vertices", [])
         edges = data.get("edges", [])
         transform = Affine(*data["transform"][:6]) if data.get("transform") else None
@@ -193,8 +221,9 @@ class BoundaryGraph:
                 edge_polylines=[np.array(e["polyline_px"], dtype=float) if "polyline_px" in e else None for e in edges]
                 if any("polyline_px" in e for e in edges)
                 else None,
-                edge_scores=np.array([np.nan if e.get("score") is None else e["score"] for e in edges],
-                                     dtype=float) if any("score" in e for e in edges) else None,
+                edge_scores=np.array([np.nan if e.get("score") is None else e["score"] for e in edges], dtype=float)
+                if any("score" in e for e in edges)
+                else None,
                 edge_patches=np.array([e.get("patch", [-1, -1]) for e in edges], dtype=np.int64).reshape(-1, 2)
                 if any("patch" in e for e in edges)
                 else None,
@@ -224,7 +253,12 @@ class BoundaryGraph:
 
 def json_header(crs: str | None, transform: Affine | None) -> dict:
     """The fields of a graph.json before its vertices and edges."""
-    return {"format": FORMAT, "version": VERSION, "crs": crs, "transform": list(transform)[:6] if transform is not None else None}
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "crs": crs,
+        "transform": list(transform)[:6] if transform is not None else None,
+    }
 
 
 def vertex_items(vertices: np.ndarray, world: np.ndarray | None, kinds: Sequence[str] | None) -> list[dict]:

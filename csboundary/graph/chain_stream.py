@@ -115,7 +115,7 @@ class ChainStream:
         lowest edge, along that edge."""
         k = edges.index(min(edges))
         start = self._ends[edges[k]][0]
-        order = edges[k:] + edges[:k] if vertices[k] == start else [edges[k]] + edges[:k][::-1] + edges[k + 1:][::-1]
+        order = edges[k:] + edges[:k] if vertices[k] == start else [edges[k]] + edges[:k][::-1] + edges[k + 1 :][::-1]
         return self._with_directions([start, *self._walk_vertices(start, order)], order)
 
     def _walk_vertices(self, start: int, edges: list[int]) -> list[int]:

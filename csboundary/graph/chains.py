@@ -120,7 +120,9 @@ def merge_chains(graph: BoundaryGraph) -> list[Chain]:
     for verts, path in zip(found.vertices, found.edges):
         verts, path = np.asarray(verts, dtype=np.int64), np.asarray(path, dtype=np.int64)
         backwards = graph.edges[path, 0] != verts[:-1]  # a self-loop counts as walked forwards
-        pieces = [edge_line(graph, k)[::-1] if back else edge_line(graph, k) for k, back in zip(path.tolist(), backwards)]
+        pieces = [
+            edge_line(graph, k)[::-1] if back else edge_line(graph, k) for k, back in zip(path.tolist(), backwards)
+        ]
         polyline = np.concatenate([pieces[0]] + [p[1:] for p in pieces[1:]])
         out.append(Chain(verts, path, backwards, polyline))
     return out

@@ -45,7 +45,7 @@ def crossing_points(boundary: np.ndarray, config: CrossingConfig, existing: np.n
     for p in points:
         if tree is not None and tree.query(p)[0] < config.min_distance_px:
             continue
-        if any((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 < config.min_distance_px ** 2 for q in kept):
+        if any((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 < config.min_distance_px**2 for q in kept):
             continue
         kept.append(p)
     return np.array(kept, float).reshape(-1, 2)

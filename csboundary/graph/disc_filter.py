@@ -116,7 +116,9 @@ def _disc_extreme(image: np.ndarray, radius: int, pick, opencv) -> np.ndarray:
     return out
 
 
-def _sum_of_steps(values: np.ndarray, origin: tuple[int, int], steps, centre: tuple[int, int], shape: tuple[int, int], pick) -> np.ndarray:
+def _sum_of_steps(
+    values: np.ndarray, origin: tuple[int, int], steps, centre: tuple[int, int], shape: tuple[int, int], pick
+) -> np.ndarray:
     """The extreme over the sum of ``steps`` (moved by ``-centre``) at every pixel of an output
     of ``shape`` whose (0, 0) is ``values``' (-origin[1], -origin[0]) (rows, cols): each step
     taken on the part of the array where all its points are inside (the array shrinks)."""

@@ -24,7 +24,15 @@ from csboundary.graph.chains import edge_line, merge_chains
 from csboundary.graph.fragments import fragment_lengths
 from csboundary.graph.polyline import points_along, polyline_length
 
-KINDS = ("normal", "corner", "skeleton", "join", "attach", "seam", "outline")  # the kinds of predicted edges (others: none of these)
+KINDS = (
+    "normal",
+    "corner",
+    "skeleton",
+    "join",
+    "attach",
+    "seam",
+    "outline",
+)  # the kinds of predicted edges (others: none of these)
 KEYPOINT, BOUNDARY, SURFACE = 0, 1, 2  # channels of the FPN's maps
 SIDE_OFFSET_PX = 6.0  # how far to each side the road surface is read
 FAR_OFFSET_PX = 16.0  # ... and farther out, past a sidewalk (2.4 m at 0.15 m)
@@ -32,19 +40,49 @@ RIDGE_OFFSET_PX = 3.0  # the boundary map here beside the line: a sharp ridge fa
 STEP_PX = 2.0  # spacing of the points read along an edge
 MAX_DEGREE = 4  # degrees above this count as this
 
-GRAPH_FEATURES = ("score", *(f"kind_{k}" for k in KINDS), "log_length", "sinuosity", "degree_min", "degree_max",
-                  "log_piece_length", "log_piece_edges", "log_chain_length", "chain_sinuosity")
-MAP_FEATURES = ("boundary_mean", "boundary_min", "boundary_p10", "keypoint_max", "surface_on", "surface_high", "surface_low",
-                "surface_contrast", "boundary_ridge", "surface_far_high", "surface_far_low")
-CHAIN_FEATURES = ("boundary_mean", "surface_contrast", "surface_high", "boundary_ridge")  # also averaged over the edge's boundary
+GRAPH_FEATURES = (
+    "score",
+    *(f"kind_{k}" for k in KINDS),
+    "log_length",
+    "sinuosity",
+    "degree_min",
+    "degree_max",
+    "log_piece_length",
+    "log_piece_edges",
+    "log_chain_length",
+    "chain_sinuosity",
+)
+MAP_FEATURES = (
+    "boundary_mean",
+    "boundary_min",
+    "boundary_p10",
+    "keypoint_max",
+    "surface_on",
+    "surface_high",
+    "surface_low",
+    "surface_contrast",
+    "boundary_ridge",
+    "surface_far_high",
+    "surface_far_low",
+)
+CHAIN_FEATURES = (
+    "boundary_mean",
+    "surface_contrast",
+    "surface_high",
+    "boundary_ridge",
+)  # also averaged over the edge's boundary
 MAP_FEATURES = MAP_FEATURES + tuple(f"chain_{f}" for f in CHAIN_FEATURES)
 FEATURES = GRAPH_FEATURES + MAP_FEATURES
 
 Sampler = Callable[[np.ndarray], np.ndarray]
 
 
-def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None, groups: np.ndarray | None = None,
-                  degree: np.ndarray | None = None) -> np.ndarray:
+def edge_evidence(
+    graph: BoundaryGraph,
+    sample: Sampler | None = None,
+    groups: np.ndarray | None = None,
+    degree: np.ndarray | None = None,
+) -> np.ndarray:
     """(E, len(FEATURES)) evidence of every edge, in the order of :data:`FEATURES`; the map
     features are NaN without ``sample`` (and the surface ones when the maps have no surface).
 
@@ -68,7 +106,9 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None, groups: n
     piece, piece_length = fragment_lengths(grouped)
     piece_edges = np.bincount(piece, minlength=len(piece_length))
     chain_length, chain_chord, chain_of = np.zeros(n), np.zeros(n), np.zeros(n, np.int64)
-    for c, chain in enumerate(merge_chains(grouped)):  # the boundary (run through degree-2 vertices) each edge is part of
+    for c, chain in enumerate(
+        merge_chains(grouped)
+    ):  # the boundary (run through degree-2 vertices) each edge is part of
         chain_of[chain.edges] = c
         chain_length[chain.edges] = polyline_length(chain.polyline)
         chain_chord[chain.edges] = float(np.linalg.norm(chain.polyline[-1] - chain.polyline[0]))
@@ -87,7 +127,9 @@ def edge_evidence(graph: BoundaryGraph, sample: Sampler | None = None, groups: n
     }
     if sample is not None:
         columns.update(map_evidence(lines, sample))
-        for name in (f for f in CHAIN_FEATURES if not np.isnan(columns[f]).all()):  # a short edge borrows the evidence of
+        for name in (
+            f for f in CHAIN_FEATURES if not np.isnan(columns[f]).all()
+        ):  # a short edge borrows the evidence of
             # the boundary it is part of (length-weighted); not the surface's when the maps have none
             weight = np.maximum(length, 1e-6)
             total = np.bincount(chain_of, weights=np.nan_to_num(columns[name]) * weight)
@@ -127,7 +169,9 @@ def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarr
     m = len(pts)
     offsets = (0.0, SIDE_OFFSET_PX, -SIDE_OFFSET_PX, FAR_OFFSET_PX, -FAR_OFFSET_PX, RIDGE_OFFSET_PX, -RIDGE_OFFSET_PX)
     values = sample(np.concatenate([pts + d * nrm for d in offsets]))  # one pass over the maps
-    on, left, right, far_left, far_right, ridge_left, ridge_right = (values[k * m : (k + 1) * m] for k in range(len(offsets)))
+    on, left, right, far_left, far_right, ridge_left, ridge_right = (
+        values[k * m : (k + 1) * m] for k in range(len(offsets))
+    )
     n = len(lines)
     starts = np.searchsorted(owner, np.arange(n))
     stops = np.append(starts[1:], len(owner))
@@ -136,7 +180,11 @@ def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarr
     for k in range(n):
         s = slice(starts[k], stops[k])
         b = on[s, BOUNDARY]
-        out["boundary_mean"][k], out["boundary_min"][k], out["boundary_p10"][k] = np.mean(b), np.min(b), np.percentile(b, 10)
+        out["boundary_mean"][k], out["boundary_min"][k], out["boundary_p10"][k] = (
+            np.mean(b),
+            np.min(b),
+            np.percentile(b, 10),
+        )
         out["keypoint_max"][k] = np.max(on[s, KEYPOINT])
         out["boundary_ridge"][k] = np.mean(b - np.maximum(ridge_left[s, BOUNDARY], ridge_right[s, BOUNDARY]))
         if has_surface:
@@ -144,5 +192,7 @@ def map_evidence(lines: list[np.ndarray], sample: Sampler) -> dict[str, np.ndarr
             out["surface_on"][k] = np.mean(on[s, SURFACE])
             out["surface_low"][k], out["surface_high"][k] = sides
             out["surface_contrast"][k] = np.mean(np.abs(left[s, SURFACE] - right[s, SURFACE]))
-            out["surface_far_low"][k], out["surface_far_high"][k] = np.sort([np.mean(far_left[s, SURFACE]), np.mean(far_right[s, SURFACE])])
+            out["surface_far_low"][k], out["surface_far_high"][k] = np.sort(
+                [np.mean(far_left[s, SURFACE]), np.mean(far_right[s, SURFACE])]
+            )
     return out

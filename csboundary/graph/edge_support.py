@@ -77,7 +77,9 @@ def longest_gap(support: np.ndarray, starts: np.ndarray, ends: np.ndarray, level
     return segment_stats(support, starts, ends, level)[1]
 
 
-def segment_stats(support: np.ndarray, starts: np.ndarray, ends: np.ndarray, level: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def segment_stats(
+    support: np.ndarray, starts: np.ndarray, ends: np.ndarray, level: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """(mean, longest gap below ``level``) of ``support`` along each segment, from one sampling."""
     starts, ends = np.asarray(starts, float).reshape(-1, 2), np.asarray(ends, float).reshape(-1, 2)
     if len(starts) == 0:
@@ -91,8 +93,9 @@ def segment_stats(support: np.ndarray, starts: np.ndarray, ends: np.ndarray, lev
     return np.add.reduceat(values, first) / counts, np.maximum.reduceat(run, first)
 
 
-def unsupported_pairs(vertices: np.ndarray, probs: np.ndarray, boundary: np.ndarray, threshold: float,
-                      config: EdgeSupportConfig) -> np.ndarray:
+def unsupported_pairs(
+    vertices: np.ndarray, probs: np.ndarray, boundary: np.ndarray, threshold: float, config: EdgeSupportConfig
+) -> np.ndarray:
     """(K, 2) vertex pairs (i < j) whose adjacency probability reaches ``threshold`` but whose
     edge is too long or not supported by the boundary map."""
     candidates = np.argwhere(np.triu(np.maximum(probs, probs.T) >= threshold, 1))

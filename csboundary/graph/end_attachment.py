@@ -63,9 +63,16 @@ def dangling_ends(graph: BoundaryGraph) -> tuple[np.ndarray, np.ndarray, np.ndar
     return ends, edge_of[ends], headings
 
 
-def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind: str, headings: np.ndarray | None = None,
-                max_turn_deg: float = 60.0, merge_px: float = 1.0,
-                accept: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None) -> BoundaryGraph:
+def attach_ends(
+    graph: BoundaryGraph,
+    ends: np.ndarray,
+    radius: np.ndarray,
+    kind: str,
+    headings: np.ndarray | None = None,
+    max_turn_deg: float = 60.0,
+    merge_px: float = 1.0,
+    accept: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+) -> BoundaryGraph:
     """``graph`` with each of ``ends`` (vertices with one edge) joined to the nearest point within
     its ``radius`` of an edge in another connected piece (ahead of it when ``headings`` are given;
     a zero heading accepts any direction); ``graph`` itself when no end finds one. Pieces are
@@ -76,8 +83,9 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
     if not len(ends) or graph.n_edges == 0:
         return graph
     lines = [graph.edge_polyline(e) for e in range(graph.n_edges)]
-    ends_at, near_edges = STRtree([LineString(line) for line in lines]).query(points(graph.vertices[ends]), predicate="dwithin",
-                                                                              distance=radius)
+    ends_at, near_edges = STRtree([LineString(line) for line in lines]).query(
+        points(graph.vertices[ends]), predicate="dwithin", distance=radius
+    )
     near = [near_edges[ends_at == k] for k in range(len(ends))]
     edge_piece, _ = fragment_lengths(graph)
     vertex_piece = np.full(graph.n_vertices, -1)
@@ -96,7 +104,9 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
                 found.append((k, distance, e, segment, foot))
         candidates += sorted(found, key=lambda c: c[1])  # stable: the lower edge index wins a tie
     if accept is not None and candidates:
-        ok = np.asarray(accept(graph.vertices[ends[[c[0] for c in candidates]]], np.array([c[4] for c in candidates])), bool)
+        ok = np.asarray(
+            accept(graph.vertices[ends[[c[0] for c in candidates]]], np.array([c[4] for c in candidates])), bool
+        )
         candidates = [c for c, good in zip(candidates, ok) if good]
     cuts: dict[int, list[tuple[float, np.ndarray, int]]] = {}  # edge -> (arc position of the foot, foot, end)
     taken: set[int] = set()
@@ -111,8 +121,13 @@ def attach_ends(graph: BoundaryGraph, ends: np.ndarray, radius: np.ndarray, kind
     return _with_cuts(graph, lines, cuts, kind, merge_px)
 
 
-def _with_cuts(graph: BoundaryGraph, lines: list[np.ndarray], cuts: dict[int, list[tuple[float, np.ndarray, int]]], kind: str,
-               merge_px: float) -> BoundaryGraph:
+def _with_cuts(
+    graph: BoundaryGraph,
+    lines: list[np.ndarray],
+    cuts: dict[int, list[tuple[float, np.ndarray, int]]],
+    kind: str,
+    merge_px: float,
+) -> BoundaryGraph:
     """The graph with every cut edge split at its feet and each end joined to its foot."""
     vertices, kinds = [p for p in graph.vertices], list(graph.vertex_kinds or ["isolated"] * graph.n_vertices)
     tree = cKDTree(graph.vertices)
@@ -147,7 +162,14 @@ def _with_cuts(graph: BoundaryGraph, lines: list[np.ndarray], cuts: dict[int, li
         if line is not None:
             line = np.array(line, float)
             line[0], line[-1] = vertices[u], vertices[v]
-        new = {"u": u, "v": v, "line": line, "kind": edge_kind, "score": float(scores[e]), "patch": None if patches is None else patches[e]}
+        new = {
+            "u": u,
+            "v": v,
+            "line": line,
+            "kind": edge_kind,
+            "score": float(scores[e]),
+            "patch": None if patches is None else patches[e],
+        }
         key = (min(u, v), max(u, v))
         if key not in kept or better_edge(new["kind"], new["score"], kept[key]["kind"], kept[key]["score"]):
             kept[key] = new
@@ -167,9 +189,13 @@ def _with_cuts(graph: BoundaryGraph, lines: list[np.ndarray], cuts: dict[int, li
         put(start, int(v), rest if shaped[e] else None, e, edge_kinds[e])
     edges = list(kept.values())
     return BoundaryGraph(
-        np.array(vertices, float).reshape(-1, 2), np.array([[d["u"], d["v"]] for d in edges], np.int64).reshape(-1, 2),
-        vertex_kinds=kinds, edge_kinds=[d["kind"] for d in edges], edge_polylines=[d["line"] for d in edges],
+        np.array(vertices, float).reshape(-1, 2),
+        np.array([[d["u"], d["v"]] for d in edges], np.int64).reshape(-1, 2),
+        vertex_kinds=kinds,
+        edge_kinds=[d["kind"] for d in edges],
+        edge_polylines=[d["line"] for d in edges],
         edge_scores=np.array([d["score"] for d in edges], float),
         edge_patches=None if patches is None else np.array([d["patch"] for d in edges], np.int64).reshape(-1, 2),
-        transform=graph.transform, crs=graph.crs,
+        transform=graph.transform,
+        crs=graph.crs,
     )

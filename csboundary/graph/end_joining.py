@@ -33,7 +33,9 @@ JOIN = "join"
 @dataclass(frozen=True)
 class EndJoinConfig:
     max_px: float = 0.0  # longest join; 0 = off
-    attach_px: float = 0.0  # an end left dangling joins the nearest backed point of another piece's line this close; 0 = off
+    attach_px: float = (
+        0.0  # an end left dangling joins the nearest backed point of another piece's line this close; 0 = off
+    )
     max_turn_deg: float = 45.0  # largest angle between an end's heading and its join
     min_support: float = 0.3  # mean boundary probability along the join (map max-filtered over radius_px)
     max_gap_px: float = 10.0  # longest stretch of the join below gap_level
@@ -45,11 +47,19 @@ class EndJoinConfig:
         return self.max_px > 0 or self.attach_px > 0
 
     def __post_init__(self) -> None:
-        if not (self.max_px >= 0 and self.attach_px >= 0 and 0 <= self.max_turn_deg <= 180 and 0 <= self.min_support <= 1
-                and self.max_gap_px >= 0
-                and 0 <= self.gap_level <= 1 and self.radius_px >= 0):
-            raise ValueError(f"need max_px, attach_px, max_gap_px, radius_px >= 0, 0 <= max_turn_deg <= 180 and levels in [0, 1]; got "
-                             f"{self}")
+        if not (
+            self.max_px >= 0
+            and self.attach_px >= 0
+            and 0 <= self.max_turn_deg <= 180
+            and 0 <= self.min_support <= 1
+            and self.max_gap_px >= 0
+            and 0 <= self.gap_level <= 1
+            and self.radius_px >= 0
+        ):
+            raise ValueError(
+                f"need max_px, attach_px, max_gap_px, radius_px >= 0, 0 <= max_turn_deg <= 180 and levels in [0, 1]; got "
+                f"{self}"
+            )
 
 
 def end_headings(graph: BoundaryGraph) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +94,12 @@ def join_candidates(graph: BoundaryGraph, config: EndJoinConfig) -> np.ndarray:
     ok &= ~has_a | (np.sum(heading[a] * direction, axis=1) >= cos_turn)
     ok &= ~has_b | (np.sum(heading[b] * -direction, axis=1) >= cos_turn)
     existing = {tuple(sorted(map(int, e))) for e in graph.edges}
-    joined = np.array([(int(ends[i]), int(ends[j])) not in existing and (int(ends[j]), int(ends[i])) not in existing for i, j in pairs])
+    joined = np.array(
+        [
+            (int(ends[i]), int(ends[j])) not in existing and (int(ends[j]), int(ends[i])) not in existing
+            for i, j in pairs
+        ]
+    )
     ok &= joined
     order = np.argsort(length[ok], kind="stable")
     return np.stack([ends[a[ok]], ends[b[ok]]], axis=1)[order]
@@ -102,11 +117,20 @@ def join_ends(graph: BoundaryGraph, boundary: np.ndarray, config: EndJoinConfig)
     if config.attach_px <= 0:
         return graph
     ends, _, headings = dangling_ends(graph)
-    return attach_ends(graph, ends, config.attach_px, ATTACH, headings, config.max_turn_deg,
-                       accept=lambda starts, stops: backing(support, starts, stops, config)[0])
+    return attach_ends(
+        graph,
+        ends,
+        config.attach_px,
+        ATTACH,
+        headings,
+        config.max_turn_deg,
+        accept=lambda starts, stops: backing(support, starts, stops, config)[0],
+    )
 
 
-def backing(support: np.ndarray, starts: np.ndarray, stops: np.ndarray, config: EndJoinConfig) -> tuple[np.ndarray, np.ndarray]:
+def backing(
+    support: np.ndarray, starts: np.ndarray, stops: np.ndarray, config: EndJoinConfig
+) -> tuple[np.ndarray, np.ndarray]:
     """(backed (K,) bool, mean support (K,)) of the segments ``starts`` -> ``stops``: backed when the
     mean reaches ``min_support`` and no stretch below ``gap_level`` is longer than ``max_gap_px``."""
     mean, gap = segment_stats(support, starts, stops, config.gap_level)
@@ -132,10 +156,15 @@ def _joined(graph: BoundaryGraph, support: np.ndarray, config: EndJoinConfig) ->
         return graph
     n_old = graph.n_edges
     return BoundaryGraph(
-        graph.vertices, np.concatenate([graph.edges, np.array(chosen, np.int64)]), vertex_kinds=graph.vertex_kinds,
+        graph.vertices,
+        np.concatenate([graph.edges, np.array(chosen, np.int64)]),
+        vertex_kinds=graph.vertex_kinds,
         edge_kinds=list(graph.edge_kinds or ["normal"] * n_old) + [JOIN] * len(chosen),
         edge_polylines=list(graph.edge_polylines or [None] * n_old) + [None] * len(chosen),
         edge_scores=np.concatenate([graph.edge_scores if graph.edge_scores is not None else np.ones(n_old), scores]),
-        edge_patches=None if graph.edge_patches is None else np.concatenate([graph.edge_patches, np.zeros((len(chosen), 2), np.int64)]),
-        transform=graph.transform, crs=graph.crs,
+        edge_patches=None
+        if graph.edge_patches is None
+        else np.concatenate([graph.edge_patches, np.zeros((len(chosen), 2), np.int64)]),
+        transform=graph.transform,
+        crs=graph.crs,
     )

@@ -49,7 +49,8 @@ def graph_from_arrays(arrays) -> BoundaryGraph:
         points = arrays["polyline_points"]
         polylines = [None if start < 0 else points[start : start + n] for start, n in arrays["polyline_spans"]]
     return BoundaryGraph(
-        arrays["vertices"], arrays["edges"],
+        arrays["vertices"],
+        arrays["edges"],
         vertex_kinds=arrays["vertex_kinds"].tolist() if "vertex_kinds" in names else None,
         edge_kinds=arrays["edge_kinds"].tolist() if "edge_kinds" in names else None,
         edge_polylines=polylines,

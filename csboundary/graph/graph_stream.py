@@ -13,6 +13,7 @@ may still share.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 
 from csboundary.graph.boundary_graph import BoundaryGraph
@@ -108,10 +109,16 @@ class GraphStream:
         for k, (a, b) in enumerate(graph.edges.tolist()):
             u, v = int(ids[a]), int(ids[b])
             polyline = None if graph.edge_polylines is None else graph.edge_polylines[k]
-            edge = StreamEdge(self.n_edges, u, v, edge_line(graph, k), None if polyline is None else np.asarray(polyline, float),
-                              None if graph.edge_kinds is None else graph.edge_kinds[k],
-                              None if graph.edge_scores is None else float(graph.edge_scores[k]),
-                              None if graph.edge_patches is None else (int(graph.edge_patches[k][0]), int(graph.edge_patches[k][1])))
+            edge = StreamEdge(
+                self.n_edges,
+                u,
+                v,
+                edge_line(graph, k),
+                None if polyline is None else np.asarray(polyline, float),
+                None if graph.edge_kinds is None else graph.edge_kinds[k],
+                None if graph.edge_scores is None else float(graph.edge_scores[k]),
+                None if graph.edge_patches is None else (int(graph.edge_patches[k][0]), int(graph.edge_patches[k][1])),
+            )
             self.n_edges += 1
             edges.append(edge)
             self._edges[edge.id] = edge
@@ -134,7 +141,10 @@ class GraphStream:
                     del self._cells[_cell(key)]
         if step is not None:
             self._done = max(self._done, step)
-        return [StreamBoundary(chain, [self._edges.pop(e) for e in chain.edges]) for chain in self._chains.finish_vertices(final)]
+        return [
+            StreamBoundary(chain, [self._edges.pop(e) for e in chain.edges])
+            for chain in self._chains.finish_vertices(final)
+        ]
 
     def _count_close(self, key: tuple[float, float]) -> None:
         cx, cy = _cell(key)

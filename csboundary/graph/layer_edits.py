@@ -34,8 +34,11 @@ SAME_PX = 0.01  # a position that moved less than this (graph pixels) did not mo
 AGREE_PX = 0.5  # two features moving one vertex must put it within this of each other
 
 
-def layer_edits(graph: BoundaryGraph, rows: list[tuple[int | None, int | None, int | None, np.ndarray]],
-                areas: list[list[list[float]]] = ()) -> list[dict]:
+def layer_edits(
+    graph: BoundaryGraph,
+    rows: list[tuple[int | None, int | None, int | None, np.ndarray]],
+    areas: list[list[list[float]]] = (),
+) -> list[dict]:
     """The review page's edit features (GeoJSON, the graph's CRS) equivalent to an edited
     ``edges`` layer: ``rows`` are its features as (edge_id, u, v, (N, 2) world coordinates),
     ``edge_id``/``u``/``v`` None for a drawn feature; ``areas`` are the exterior rings (world
@@ -53,11 +56,15 @@ def layer_edits(graph: BoundaryGraph, rows: list[tuple[int | None, int | None, i
             drawn.append(line)
             continue
         if not 0 <= edge_id < graph.n_edges:
-            raise EditError(f"feature {number} of the edges layer: edge_id {edge_id} is not an edge of the graph (0..{graph.n_edges - 1})")
+            raise EditError(
+                f"feature {number} of the edges layer: edge_id {edge_id} is not an edge of the graph (0..{graph.n_edges - 1})"
+            )
         if (u, v) != tuple(int(x) for x in graph.edges[edge_id]):
-            raise EditError(f"feature {number} of the edges layer: edge {edge_id} joins vertices {u} and {v} there but "
-                            f"{graph.edges[edge_id][0]} and {graph.edges[edge_id][1]} in graph.json: the layer was written "
-                            "for another prediction")
+            raise EditError(
+                f"feature {number} of the edges layer: edge {edge_id} joins vertices {u} and {v} there but "
+                f"{graph.edges[edge_id][0]} and {graph.edges[edge_id][1]} in graph.json: the layer was written "
+                "for another prediction"
+            )
         kept[edge_id] = line
     moves: dict[int, tuple[np.ndarray, int]] = {}
     replaced: list[int] = []
@@ -69,20 +76,36 @@ def layer_edits(graph: BoundaryGraph, rows: list[tuple[int | None, int | None, i
             if np.abs(new - old).max() <= SAME_PX:
                 continue
             if vertex in moves and np.abs(moves[vertex][0] - new).max() > AGREE_PX:
-                raise EditError(f"vertex {vertex} is moved to two places, by edges {moves[vertex][1]} and {k}: move it once, "
-                                "with both lines (QGIS: topological editing)")
+                raise EditError(
+                    f"vertex {vertex} is moved to two places, by edges {moves[vertex][1]} and {k}: move it once, "
+                    "with both lines (QGIS: topological editing)"
+                )
             moves[int(vertex)] = (new, k)
         inside_same = len(line) == len(before) and np.abs(line[1:-1] - before[1:-1]).max(initial=0.0) <= SAME_PX
         if not inside_same:
             replaced.append(k)
-    features = [_feature("delete", _world(graph, original[k]), edge=k) for k in sorted(set(range(graph.n_edges)) - set(kept))]
+    features = [
+        _feature("delete", _world(graph, original[k]), edge=k) for k in sorted(set(range(graph.n_edges)) - set(kept))
+    ]
     features += [_feature("delete", _world(graph, original[k]), edge=k) for k in sorted(replaced)]
-    features += [{"type": "Feature", "properties": {"action": "move", "vertex": vertex},
-                  "geometry": {"type": "Point", "coordinates": _world(graph, new[None])[0]}} for vertex, (new, _) in sorted(moves.items())]
+    features += [
+        {
+            "type": "Feature",
+            "properties": {"action": "move", "vertex": vertex},
+            "geometry": {"type": "Point", "coordinates": _world(graph, new[None])[0]},
+        }
+        for vertex, (new, _) in sorted(moves.items())
+    ]
     features += [_feature("add", _world(graph, kept[k])) for k in sorted(replaced)]
     features += [_feature("add", _world(graph, line)) for line in drawn]
-    features += [{"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [ring]}}
-                 for ring in areas]
+    features += [
+        {
+            "type": "Feature",
+            "properties": {"action": "complete"},
+            "geometry": {"type": "Polygon", "coordinates": [ring]},
+        }
+        for ring in areas
+    ]
     return features
 
 
@@ -101,8 +124,12 @@ def _feature(action: str, coordinates: list[list[float]], **properties) -> dict:
     return {"type": "Feature", "properties": {"action": action, **properties}, "geometry": geometry}
 
 
-def boundary_layer_edits(graph: BoundaryGraph, rows: list[tuple[list[int] | None, np.ndarray, bool]],
-                         areas: list[list[list[float]]] = (), held_back: frozenset[tuple[int, ...]] = frozenset()) -> list[dict]:
+def boundary_layer_edits(
+    graph: BoundaryGraph,
+    rows: list[tuple[list[int] | None, np.ndarray, bool]],
+    areas: list[list[list[float]]] = (),
+    held_back: frozenset[tuple[int, ...]] = frozenset(),
+) -> list[dict]:
     """The review page's edit features equivalent to edited boundary layers (``review --gpkg``):
     ``rows`` are their features as (edge ids of the boundary, None for a drawn feature; (N, 2)
     world coordinates; True when the feature lies in the layer of the review draft, False in the
@@ -133,8 +160,10 @@ def boundary_layer_edits(graph: BoundaryGraph, rows: list[tuple[list[int] | None
             continue
         key = tuple(sorted(edge_ids))
         if key not in boundaries:
-            raise EditError(f"feature {number} of the boundaries layers: edges {';'.join(map(str, edge_ids))} are not one boundary of "
-                            "graph.json: the layer was written for another prediction")
+            raise EditError(
+                f"feature {number} of the boundaries layers: edges {';'.join(map(str, edge_ids))} are not one boundary of "
+                "graph.json: the layer was written for another prediction"
+            )
         by_edges.setdefault(key, []).append((coords, in_draft))
     edge_rows: list[tuple[int | None, int | None, int | None, np.ndarray]] = []
     accepted: list[int] = []
@@ -147,8 +176,12 @@ def boundary_layer_edits(graph: BoundaryGraph, rows: list[tuple[list[int] | None
         before = boundary.polyline
         distinct = [features[0]]
         for coords, in_draft in features[1:]:  # a copy of a line (copied into the other layer) is the same feature
-            same = [d for d in distinct
-                    if len(d[0]) == len(coords) and min(np.abs(d[0] - coords).max(), np.abs(d[0][::-1] - coords).max()) <= 1e-9]
+            same = [
+                d
+                for d in distinct
+                if len(d[0]) == len(coords)
+                and min(np.abs(d[0] - coords).max(), np.abs(d[0][::-1] - coords).max()) <= 1e-9
+            ]
             if same:
                 distinct[distinct.index(same[0])] = (same[0][0], same[0][1] or in_draft)
             else:
@@ -156,13 +189,21 @@ def boundary_layer_edits(graph: BoundaryGraph, rows: list[tuple[list[int] | None
         features = distinct
         if len(features) == 1:
             line = _pixels(graph, features[0][0])
-            if len(line) == len(before) and np.abs(line[[0, -1]] - before[[-1, 0]]).max() <= SAME_PX \
-                    and np.abs(line - before[::-1]).max() > SAME_PX >= np.abs(line[::-1] - before).max():
+            if (
+                len(line) == len(before)
+                and np.abs(line[[0, -1]] - before[[-1, 0]]).max() <= SAME_PX
+                and np.abs(line - before[::-1]).max() > SAME_PX >= np.abs(line[::-1] - before).max()
+            ):
                 line = line[::-1]  # reversed in the GIS: the same boundary
             if len(line) == len(before) and np.abs(line[1:-1] - before[1:-1]).max(initial=0.0) <= SAME_PX:
-                ends = {int(v): new for v, old, new in ((_end(graph, boundary, 0), before[0], line[0]),
-                                                        (_end(graph, boundary, -1), before[-1], line[-1]))
-                        if np.abs(new - old).max() > SAME_PX}
+                ends = {
+                    int(v): new
+                    for v, old, new in (
+                        (_end(graph, boundary, 0), before[0], line[0]),
+                        (_end(graph, boundary, -1), before[-1], line[-1]),
+                    )
+                    if np.abs(new - old).max() > SAME_PX
+                }
                 for k, piece in lines.items():
                     piece = piece.copy()
                     u, v = (int(x) for x in graph.edges[k])

@@ -41,7 +41,9 @@ def _cut_points(keys: list[list[tuple[int, int]]]) -> set[tuple[int, int]]:
     """The points of the polylines (point keys) where edges meet rather than run together: a
     point on two or more edges where they do not all pass from the same point to the same point
     (an overlap starts or ends, lines cross, or one of them ends there)."""
-    ways: dict[tuple[int, int], set] = defaultdict(set)  # point -> the (unordered) neighbours each edge passes it between
+    ways: dict[tuple[int, int], set] = defaultdict(
+        set
+    )  # point -> the (unordered) neighbours each edge passes it between
     count: dict[tuple[int, int], int] = defaultdict(int)
     for line_keys in keys:
         for k, key in enumerate(line_keys):
@@ -118,20 +120,31 @@ def node_shared_points(graph: BoundaryGraph) -> BoundaryGraph:
                 ids.append(vertex_of[key])
             if ids[0] == ids[1] and stop - start < 2:
                 continue
-            span = tuple(keys[e][start:stop + 1])
+            span = tuple(keys[e][start : stop + 1])
             canonical = min(span, span[::-1])
-            piece = {"u": ids[0], "v": ids[1], "line": line[start:stop + 1], "shaped": graph.edge_polylines is not None
-                     and graph.edge_polylines[e] is not None, "kind": edge_kinds[e], "score": scores[e],
-                     "patch": None if graph.edge_patches is None else graph.edge_patches[e]}
+            piece = {
+                "u": ids[0],
+                "v": ids[1],
+                "line": line[start : stop + 1],
+                "shaped": graph.edge_polylines is not None and graph.edge_polylines[e] is not None,
+                "kind": edge_kinds[e],
+                "score": scores[e],
+                "patch": None if graph.edge_patches is None else graph.edge_patches[e],
+            }
             old = pieces.get(canonical)
             if old is None or better_edge(piece["kind"], piece["score"], old["kind"], old["score"]):
                 pieces[canonical] = piece
     kept = list(pieces.values())
     return BoundaryGraph(
-        np.array(points, float).reshape(-1, 2), np.array([[p["u"], p["v"]] for p in kept], np.int64).reshape(-1, 2),
-        vertex_kinds=kinds, edge_kinds=[p["kind"] for p in kept],
+        np.array(points, float).reshape(-1, 2),
+        np.array([[p["u"], p["v"]] for p in kept], np.int64).reshape(-1, 2),
+        vertex_kinds=kinds,
+        edge_kinds=[p["kind"] for p in kept],
         edge_polylines=[np.array(p["line"], float) if p["shaped"] else None for p in kept],
         edge_scores=np.array([p["score"] for p in kept], float),
-        edge_patches=None if graph.edge_patches is None else np.array([p["patch"] for p in kept], np.int64).reshape(-1, 2),
-        transform=graph.transform, crs=graph.crs,
+        edge_patches=None
+        if graph.edge_patches is None
+        else np.array([p["patch"] for p in kept], np.int64).reshape(-1, 2),
+        transform=graph.transform,
+        crs=graph.crs,
     )

@@ -76,10 +76,24 @@ class OutlineConfig:
         return self.sure > 0
 
     def __post_init__(self) -> None:
-        if not (0 <= self.sure <= 1 and 0 < self.level < 1 and self.sigma_px >= 0 and self.min_piece_px >= 0 and self.side_px >= 1
-                and 0 <= self.support <= 1 and self.support_px >= 0 and self.clear_px >= 0 and 0 <= self.max_unsure <= 1
-                and self.bridge_px >= 0 and self.min_length_px >= 0 and self.cover_px >= 0
-                and self.keep_px >= 0 and self.place_px >= 0 and self.simplify_px >= 0 and self.snap_px >= 0):
+        if not (
+            0 <= self.sure <= 1
+            and 0 < self.level < 1
+            and self.sigma_px >= 0
+            and self.min_piece_px >= 0
+            and self.side_px >= 1
+            and 0 <= self.support <= 1
+            and self.support_px >= 0
+            and self.clear_px >= 0
+            and 0 <= self.max_unsure <= 1
+            and self.bridge_px >= 0
+            and self.min_length_px >= 0
+            and self.cover_px >= 0
+            and self.keep_px >= 0
+            and self.place_px >= 0
+            and self.simplify_px >= 0
+            and self.snap_px >= 0
+        ):
             raise ValueError(f"outline settings out of range: {self}")
 
 
@@ -100,8 +114,11 @@ def kept_outline(surface: np.ndarray, boundary: np.ndarray, config: OutlineConfi
     outline = road & (cv2.erode(road8, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE) == 0)
     side = max(int(round(config.side_px)), 1)
     sure = (disc_max(smooth, side) >= config.sure) & (disc_min(smooth, side) <= 1.0 - config.sure)
-    supported = disc_max(np.asarray(boundary, np.float32), max(int(round(config.support_px)), 0)) >= config.support \
-        if config.support_px >= 1 else np.asarray(boundary) >= config.support
+    supported = (
+        disc_max(np.asarray(boundary, np.float32), max(int(round(config.support_px)), 0)) >= config.support
+        if config.support_px >= 1
+        else np.asarray(boundary) >= config.support
+    )
     return bridged(outline, outline & sure & supported & clear_surface(smooth, config), config.bridge_px)
 
 
@@ -161,7 +178,7 @@ def cut_along(graph: BoundaryGraph, mask: np.ndarray, config: OutlineConfig) -> 
         changed = True
         bounds = np.flatnonzero(np.diff(np.r_[0, free.astype(np.int8), 0]))
         for i0, i1 in zip(bounds[::2], bounds[1::2] - 1):
-            piece = points[i0:i1 + 1]
+            piece = points[i0 : i1 + 1]
             if len(piece) < 2 or polyline_length(piece) < config.keep_px:
                 continue
             ends = []
@@ -176,9 +193,16 @@ def cut_along(graph: BoundaryGraph, mask: np.ndarray, config: OutlineConfig) -> 
             edges.append(tuple(ends)), edge_kinds.append(kinds[k]), lines.append(simple), edge_scores.append(scores[k])
     if not changed:
         return graph
-    return BoundaryGraph(np.array(vertices, float).reshape(-1, 2), np.array(edges, np.int64).reshape(-1, 2), vertex_kinds=vertex_kinds,
-                         edge_kinds=edge_kinds, edge_polylines=lines, edge_scores=np.array(edge_scores, float),
-                         transform=graph.transform, crs=graph.crs)
+    return BoundaryGraph(
+        np.array(vertices, float).reshape(-1, 2),
+        np.array(edges, np.int64).reshape(-1, 2),
+        vertex_kinds=vertex_kinds,
+        edge_kinds=edge_kinds,
+        edge_polylines=lines,
+        edge_scores=np.array(edge_scores, float),
+        transform=graph.transform,
+        crs=graph.crs,
+    )
 
 
 def placed_on_ridge(line: np.ndarray, boundary: np.ndarray, config: OutlineConfig) -> np.ndarray:
@@ -230,7 +254,11 @@ def clipped_to_box(found: BoundaryGraph, box: tuple[float, float, float, float])
     for k in range(found.n_edges):
         line = found.edge_polyline(k)
         inside = LineString(line).intersection(frame)
-        parts = [g for g in getattr(inside, "geoms", [inside]) if g.geom_type == "LineString" and not g.is_empty and g.length > 0]
+        parts = [
+            g
+            for g in getattr(inside, "geoms", [inside])
+            if g.geom_type == "LineString" and not g.is_empty and g.length > 0
+        ]
         for part in parts:
             piece = np.asarray(part.coords, float)
             ends = []
@@ -239,13 +267,23 @@ def clipped_to_box(found: BoundaryGraph, box: tuple[float, float, float, float])
                 ends.append(vertex(p, not own))
             edges.append(ends)
             lines.append(piece)
-    graph = BoundaryGraph(np.array(points, float).reshape(-1, 2), np.array(edges, np.int64).reshape(-1, 2),
-                          edge_kinds=[OUTLINE] * len(edges), edge_polylines=lines, edge_scores=np.ones(len(edges)))
+    graph = BoundaryGraph(
+        np.array(points, float).reshape(-1, 2),
+        np.array(edges, np.int64).reshape(-1, 2),
+        edge_kinds=[OUTLINE] * len(edges),
+        edge_polylines=lines,
+        edge_scores=np.ones(len(edges)),
+    )
     return graph, np.array(cut, bool)
 
 
-def fused_with_outline(graph: BoundaryGraph, maps_surface: np.ndarray, boundary: np.ndarray, config: OutlineConfig,
-                       region: tuple[int, int, int, int] | None = None) -> BoundaryGraph:
+def fused_with_outline(
+    graph: BoundaryGraph,
+    maps_surface: np.ndarray,
+    boundary: np.ndarray,
+    config: OutlineConfig,
+    region: tuple[int, int, int, int] | None = None,
+) -> BoundaryGraph:
     """``graph`` with the roadway's sure outline in place of the edges along it (see the module
     docstring). ``region`` (row0, row1, col0, col1: a window's core and one pixel beyond) limits
     the added lines to the core, cut exactly where they cross its sides; edges are cut wherever
@@ -256,7 +294,9 @@ def fused_with_outline(graph: BoundaryGraph, maps_surface: np.ndarray, boundary:
     if not kept.any():
         return graph
     base = cut_along(graph, kept, config)
-    found = stretch_graph(kept, 0.0)  # traced on the whole window, so two windows trace the same pixels across their seam
+    found = stretch_graph(
+        kept, 0.0
+    )  # traced on the whole window, so two windows trace the same pixels across their seam
     made_by_cut = np.zeros(found.n_vertices, bool)
     if region is not None:
         r0, r1, c0, c1 = region

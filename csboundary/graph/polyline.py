@@ -43,7 +43,7 @@ def split_polyline(points: np.ndarray, k: int, at: np.ndarray) -> tuple[np.ndarr
     and at + points[k + 1:]. A point equal to the cut is not repeated."""
     points = np.asarray(points, float).reshape(-1, 2)
     at = np.asarray(at, float).reshape(1, 2)
-    head, tail = points[: k + 1], points[k + 1:]
+    head, tail = points[: k + 1], points[k + 1 :]
     if np.array_equal(head[-1:], at):
         head = head[:-1]
     if np.array_equal(tail[:1], at):

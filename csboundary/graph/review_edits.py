@@ -53,29 +53,44 @@ class ReviewRecord:
     complete_areas: list[list[list[float]]] = field(default_factory=list)  # closed rings in the graph's CRS
 
     def to_dict(self) -> dict:
-        return {"deleted_edges": self.deleted, "accepted_edges": self.accepted, "moved_vertices": self.moved, "added_edges": self.added,
-                "edge_index_map": {str(k): v for k, v in self.kept.items()}, "complete_areas": self.complete_areas}
+        return {
+            "deleted_edges": self.deleted,
+            "accepted_edges": self.accepted,
+            "moved_vertices": self.moved,
+            "added_edges": self.added,
+            "edge_index_map": {str(k): v for k, v in self.kept.items()},
+            "complete_areas": self.complete_areas,
+        }
 
 
 EXTENT_MARGIN_PX = 100.0  # edits may reach this far beyond the imagery
 
 
-def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0, extent: tuple[float, float, float, float] | None = None,
-                match_px: float = 1.0) -> tuple[BoundaryGraph, ReviewRecord]:
+def apply_edits(
+    graph: BoundaryGraph,
+    features: list[dict],
+    snap_px: float = 1.0,
+    extent: tuple[float, float, float, float] | None = None,
+    match_px: float = 1.0,
+) -> tuple[BoundaryGraph, ReviewRecord]:
     """``graph`` with the edits of ``features`` (GeoJSON features in the graph's CRS).
     ``extent`` (col0, row0, col1, row1 in graph pixels; default: the graph's vertices, 1000 px
     around) is where edits may lie, :data:`EXTENT_MARGIN_PX` beyond it."""
     if graph.transform is None:
         raise EditError("the graph has no transform: world coordinates of the edits cannot be placed")
     if extent is None:
-        low, high = (graph.vertices.min(axis=0), graph.vertices.max(axis=0)) if graph.n_vertices else (np.zeros(2), np.zeros(2))
+        low, high = (
+            (graph.vertices.min(axis=0), graph.vertices.max(axis=0)) if graph.n_vertices else (np.zeros(2), np.zeros(2))
+        )
         extent = (low[0] - 1000, low[1] - 1000, high[0] + 1000, high[1] + 1000)
     vertices = graph.vertices.copy()
     n_edges = graph.n_edges
     kinds = list(graph.edge_kinds or ["normal"] * n_edges)
     polylines = list(graph.edge_polylines or [None] * n_edges)
     scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(n_edges, np.nan), float).copy()
-    patches = np.asarray(graph.edge_patches if graph.edge_patches is not None else np.full((n_edges, 2), -1), np.int64).copy()
+    patches = np.asarray(
+        graph.edge_patches if graph.edge_patches is not None else np.full((n_edges, 2), -1), np.int64
+    ).copy()
     vertex_kinds = list(graph.vertex_kinds or ["vertex"] * graph.n_vertices)
     edges = [tuple(int(x) for x in e) for e in graph.edges]
     deleted, accepted, moved = set(), set(), []
@@ -88,7 +103,9 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
         try:
             if not isinstance(rows, list) or not all(isinstance(p, list) and len(p) >= 2 for p in rows):
                 raise ValueError
-            xy = np.array([[float(p[0]), float(p[1])] for p in rows if not any(isinstance(v, bool) for v in p[:2])], float)
+            xy = np.array(
+                [[float(p[0]), float(p[1])] for p in rows if not any(isinstance(v, bool) for v in p[:2])], float
+            )
             if len(xy) != len(rows):
                 raise ValueError
         except (TypeError, ValueError):
@@ -98,7 +115,12 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
         cols, rows_px = world_to_pixel(graph.transform, xy[:, 0], xy[:, 1])
         px = np.stack([np.asarray(cols, float), np.asarray(rows_px, float)], axis=-1)
         m = EXTENT_MARGIN_PX
-        inside = (px[:, 0] >= extent[0] - m) & (px[:, 0] <= extent[2] + m) & (px[:, 1] >= extent[1] - m) & (px[:, 1] <= extent[3] + m)
+        inside = (
+            (px[:, 0] >= extent[0] - m)
+            & (px[:, 0] <= extent[2] + m)
+            & (px[:, 1] >= extent[1] - m)
+            & (px[:, 1] <= extent[3] + m)
+        )
         if not (np.isfinite(px).all() and inside.all()):
             crs = f" ({graph.crs})" if graph.crs else ""
             raise EditError(f"{what}: coordinates lie outside the imagery: are they in the prediction's CRS{crs}?")
@@ -109,15 +131,19 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
         if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < n_edges:
             raise EditError(f"{what}: edge {k!r} is not an edge of the graph (0..{n_edges - 1})")
         if geometry.get("type") != "LineString":
-            raise EditError(f"{what}: no geometry of edge {k} to check it against (export the edits from the review page)")
+            raise EditError(
+                f"{what}: no geometry of edge {k} to check it against (export the edits from the review page)"
+            )
         line = pixels(geometry.get("coordinates"), what)
         if len(line) < 2:
             raise EditError(f"{what}: the geometry of edge {k} needs at least 2 positions")
         ends = edge_line(graph, k)[[0, -1]]
         gap = min(np.abs(line[[0, -1]] - ends).max(), np.abs(line[[-1, 0]] - ends).max())
         if gap > match_px:
-            raise EditError(f"{what}: its geometry does not match edge {k} (ends {gap:.1f} px apart): "
-                            "the edits were made on another graph")
+            raise EditError(
+                f"{what}: its geometry does not match edge {k} (ends {gap:.1f} px apart): "
+                "the edits were made on another graph"
+            )
         return k
 
     for number, feature in enumerate(features):
@@ -196,9 +222,17 @@ def apply_edits(graph: BoundaryGraph, features: list[dict], snap_px: float = 1.0
         new_scores.append(1.0)
         new_patches.append(np.array([-1, -1]))
 
-    result = BoundaryGraph(vertices, np.array(new_edges, np.int64).reshape(-1, 2), vertex_kinds=vertex_kinds, edge_kinds=new_kinds,
-                           edge_polylines=new_lines, edge_scores=np.array(new_scores, float),
-                           edge_patches=np.array(new_patches, np.int64).reshape(-1, 2), transform=graph.transform, crs=graph.crs)
+    result = BoundaryGraph(
+        vertices,
+        np.array(new_edges, np.int64).reshape(-1, 2),
+        vertex_kinds=vertex_kinds,
+        edge_kinds=new_kinds,
+        edge_polylines=new_lines,
+        edge_scores=np.array(new_scores, float),
+        edge_patches=np.array(new_patches, np.int64).reshape(-1, 2),
+        transform=graph.transform,
+        crs=graph.crs,
+    )
     return result, record
 
 
@@ -211,7 +245,9 @@ def _complete_ring(geometry: dict, what: str, pixels, extent: tuple[float, float
         raise EditError(f"{what}: needs a Polygon geometry")
     ring = pixels(rings[0], what)
     if len(ring) < 3 or not Polygon(ring).is_valid or Polygon(ring).area < 1.0:
-        raise EditError(f"{what}: the polygon needs 3 corners around an area of at least one pixel, without crossing itself")
+        raise EditError(
+            f"{what}: the polygon needs 3 corners around an area of at least one pixel, without crossing itself"
+        )
     if Polygon(ring).intersection(box(*extent)).area < 1.0:
         raise EditError(f"{what}: the polygon covers no pixel of the imagery, only the margin around it")
     world = [[float(x), float(y)] for x, y in (p[:2] for p in rings[0])]

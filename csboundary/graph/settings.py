@@ -27,32 +27,77 @@ from csboundary.graph.surface_gate import SurfaceGateConfig
 from csboundary.graph.vertex_extraction import VertexConfig
 
 # name -> (smallest, largest, integer) of each inference setting a bundle may carry
-INFERENCE_SETTINGS = {"edge_threshold": (0.0, 1.0, False), "max_degree": (0, 64, True), "min_support": (0.0, 1.0, False),
-                      "max_length_px": (0.0, 1e6, False), "radius_px": (0.0, 100.0, False), "crossing_spacing_px": (0, 100000, True),
-                      "min_fragment_px": (0.0, 1e6, False), "vertex_threshold": (0.01, 1.0, False), "max_gap_px": (0.0, 1e6, False),
-                      "gap_level": (0.0, 1.0, False), "fill_min_length_px": (0.0, 1e6, False), "join_max_px": (0.0, 1e6, False),
-                      "join_attach_px": (0.0, 1e6, False), "attach_max_px": (0.0, 1e6, False),
-                      "surface_strong": (0.0, 1.0, False), "surface_weak": (0.0, 1.0, False), "surface_offset_px": (0.0, 100.0, False),
-                      "surface_both_sides": (0.0, 1.0, False), "surface_gate_px": (0.0, 200.0, False),
-                      "surface_gate_full": (0.01, 1.0, False), "surface_gate_min_piece_px": (0, 10**8, True),
-                      "outline_sure": (0.0, 1.0, False), "outline_support": (0.0, 1.0, False), "outline_min_length_px": (0.0, 1e6, False),
-                      "outline_max_unsure": (0.0, 1.0, False)}
-SUPPORT_SETTINGS = ("min_support", "max_length_px", "radius_px", "max_gap_px", "gap_level")  # bundle key = EdgeSupportConfig field
-SURFACE_SETTINGS = {"surface_strong": "strong", "surface_weak": "weak", "surface_offset_px": "offset_px",
-                    "surface_both_sides": "both_sides"}  # bundle key -> SurfaceCheckConfig field
-GATE_SETTINGS = {"surface_gate_px": ("radius_px", float), "surface_gate_full": ("full_change", float),
-                 "surface_gate_min_piece_px": ("min_piece_px", int)}  # bundle key -> SurfaceGateConfig field and type
-OUTLINE_SETTINGS = {"outline_sure": "sure", "outline_support": "support", "outline_min_length_px": "min_length_px",
-                    "outline_max_unsure": "max_unsure"}  # bundle key -> OutlineConfig field
+INFERENCE_SETTINGS = {
+    "edge_threshold": (0.0, 1.0, False),
+    "max_degree": (0, 64, True),
+    "min_support": (0.0, 1.0, False),
+    "max_length_px": (0.0, 1e6, False),
+    "radius_px": (0.0, 100.0, False),
+    "crossing_spacing_px": (0, 100000, True),
+    "min_fragment_px": (0.0, 1e6, False),
+    "vertex_threshold": (0.01, 1.0, False),
+    "max_gap_px": (0.0, 1e6, False),
+    "gap_level": (0.0, 1.0, False),
+    "fill_min_length_px": (0.0, 1e6, False),
+    "join_max_px": (0.0, 1e6, False),
+    "join_attach_px": (0.0, 1e6, False),
+    "attach_max_px": (0.0, 1e6, False),
+    "surface_strong": (0.0, 1.0, False),
+    "surface_weak": (0.0, 1.0, False),
+    "surface_offset_px": (0.0, 100.0, False),
+    "surface_both_sides": (0.0, 1.0, False),
+    "surface_gate_px": (0.0, 200.0, False),
+    "surface_gate_full": (0.01, 1.0, False),
+    "surface_gate_min_piece_px": (0, 10**8, True),
+    "outline_sure": (0.0, 1.0, False),
+    "outline_support": (0.0, 1.0, False),
+    "outline_min_length_px": (0.0, 1e6, False),
+    "outline_max_unsure": (0.0, 1.0, False),
+}
+SUPPORT_SETTINGS = (
+    "min_support",
+    "max_length_px",
+    "radius_px",
+    "max_gap_px",
+    "gap_level",
+)  # bundle key = EdgeSupportConfig field
+SURFACE_SETTINGS = {
+    "surface_strong": "strong",
+    "surface_weak": "weak",
+    "surface_offset_px": "offset_px",
+    "surface_both_sides": "both_sides",
+}  # bundle key -> SurfaceCheckConfig field
+GATE_SETTINGS = {
+    "surface_gate_px": ("radius_px", float),
+    "surface_gate_full": ("full_change", float),
+    "surface_gate_min_piece_px": ("min_piece_px", int),
+}  # bundle key -> SurfaceGateConfig field and type
+OUTLINE_SETTINGS = {
+    "outline_sure": "sure",
+    "outline_support": "support",
+    "outline_min_length_px": "min_length_px",
+    "outline_max_unsure": "max_unsure",
+}  # bundle key -> OutlineConfig field
 
 
 # each graph option's range (low, high; None: no upper bound), checked by GraphOverrides for the
 # command line and the Python API alike; the command line declares the same bounds from it
-GRAPH_OVERRIDE_RANGES = {"edge_threshold": (0.0, 1.0), "min_edge_support": (0.0, 1.0), "max_edge_length": (0.0, None),
-                         "max_edge_gap": (0.0, None), "fill_min_length": (0.0, None), "join_ends": (0.0, None),
-                         "attach_ends": (0.0, None), "attach_backed": (0.0, None), "surface_check": (0.0, 1.0),
-                         "surface_gate": (0.0, 200.0), "roadway_outline": (0.0, 1.0), "max_degree": (0, None),
-                         "min_fragment_length": (0.0, None), "min_confidence": (0.0, 1.0)}
+GRAPH_OVERRIDE_RANGES = {
+    "edge_threshold": (0.0, 1.0),
+    "min_edge_support": (0.0, 1.0),
+    "max_edge_length": (0.0, None),
+    "max_edge_gap": (0.0, None),
+    "fill_min_length": (0.0, None),
+    "join_ends": (0.0, None),
+    "attach_ends": (0.0, None),
+    "attach_backed": (0.0, None),
+    "surface_check": (0.0, 1.0),
+    "surface_gate": (0.0, 200.0),
+    "roadway_outline": (0.0, 1.0),
+    "max_degree": (0, None),
+    "min_fragment_length": (0.0, None),
+    "min_confidence": (0.0, 1.0),
+}
 
 
 @dataclass(frozen=True)
@@ -90,8 +135,12 @@ class GraphOverrides:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise InputError(flag, f"must be a finite number, got {value!r}")
             if value < low or (high is not None and value > high):
-                raise InputError(flag, f"must be from {low:g} to {high:g}, got {value:g}" if high is not None else
-                                 f"must be >= {low:g}, got {value:g}")
+                raise InputError(
+                    flag,
+                    f"must be from {low:g} to {high:g}, got {value:g}"
+                    if high is not None
+                    else f"must be >= {low:g}, got {value:g}",
+                )
 
 
 @dataclass(frozen=True)
@@ -133,32 +182,59 @@ class GraphSettings:
         settings = checked_inference_settings(settings, path)
         return cls(
             vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
-            edge_threshold=settings.get("edge_threshold", 0.5), max_degree=settings.get("max_degree", 2),
+            edge_threshold=settings.get("edge_threshold", 0.5),
+            max_degree=settings.get("max_degree", 2),
             support=EdgeSupportConfig(**{k: settings[k] for k in SUPPORT_SETTINGS if k in settings}),
             crossings=CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0))),
             fill=FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0))),
-            surface=SurfaceCheckConfig(**{name: float(settings[key]) for key, name in SURFACE_SETTINGS.items() if key in settings}),
-            join=EndJoinConfig(max_px=float(settings.get("join_max_px", 0.0)), attach_px=float(settings.get("join_attach_px", 0.0))),
-            gate=SurfaceGateConfig(**{name: kind(settings[key]) for key, (name, kind) in GATE_SETTINGS.items() if key in settings}),
-            outline=OutlineConfig(**{name: float(settings[key]) for key, name in OUTLINE_SETTINGS.items() if key in settings}),
-            min_fragment_px=float(settings.get("min_fragment_px", 0.0)), attach_px=float(settings.get("attach_max_px", 0.0)),
+            surface=SurfaceCheckConfig(
+                **{name: float(settings[key]) for key, name in SURFACE_SETTINGS.items() if key in settings}
+            ),
+            join=EndJoinConfig(
+                max_px=float(settings.get("join_max_px", 0.0)), attach_px=float(settings.get("join_attach_px", 0.0))
+            ),
+            gate=SurfaceGateConfig(
+                **{name: kind(settings[key]) for key, (name, kind) in GATE_SETTINGS.items() if key in settings}
+            ),
+            outline=OutlineConfig(
+                **{name: float(settings[key]) for key, name in OUTLINE_SETTINGS.items() if key in settings}
+            ),
+            min_fragment_px=float(settings.get("min_fragment_px", 0.0)),
+            attach_px=float(settings.get("attach_max_px", 0.0)),
         )
 
     def overridden(self, options: GraphOverrides) -> "GraphSettings":
         """These settings with the command line's ``options`` in place of the bundle's."""
         replace = dataclasses.replace
-        options = replace(options, **{f.name: float(getattr(options, f.name)) for f in dataclasses.fields(options)
-                                       if f.name != "max_degree" and getattr(options, f.name) is not None})
+        options = replace(
+            options,
+            **{
+                f.name: float(getattr(options, f.name))
+                for f in dataclasses.fields(options)
+                if f.name != "max_degree" and getattr(options, f.name) is not None
+            },
+        )
         settings = self
         if options.edge_threshold is not None:
             settings = replace(settings, edge_threshold=options.edge_threshold)
-        support = {name: value for name, value in (("min_support", options.min_edge_support), ("max_length_px", options.max_edge_length),
-                                                  ("max_gap_px", options.max_edge_gap)) if value is not None}
+        support = {
+            name: value
+            for name, value in (
+                ("min_support", options.min_edge_support),
+                ("max_length_px", options.max_edge_length),
+                ("max_gap_px", options.max_edge_gap),
+            )
+            if value is not None
+        }
         if support:
             settings = replace(settings, support=replace(settings.support, **support))
         if options.fill_min_length is not None:
             settings = replace(settings, fill=replace(settings.fill, min_length_px=options.fill_min_length))
-        join = {name: value for name, value in (("max_px", options.join_ends), ("attach_px", options.attach_backed)) if value is not None}
+        join = {
+            name: value
+            for name, value in (("max_px", options.join_ends), ("attach_px", options.attach_backed))
+            if value is not None
+        }
         if join:
             settings = replace(settings, join=replace(settings.join, **join))
         if options.attach_ends is not None:
@@ -189,7 +265,12 @@ def checked_inference_settings(settings, path: str | Path) -> dict:
         low, high, integer = INFERENCE_SETTINGS[key]
         if key == "max_degree" and value is None:
             continue
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and low <= value <= high
+        ok = (
+            isinstance(value, (int, float))
+            and not isinstance(value, bool)
+            and math.isfinite(value)
+            and low <= value <= high
+        )
         if not ok or (integer and int(value) != value):
             kind = "an integer" if integer else "a number"
             raise InputError(path, f"inference setting {key} = {value!r} must be {kind} from {low:g} to {high:g}")

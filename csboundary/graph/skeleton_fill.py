@@ -49,9 +49,17 @@ class FillConfig:
         return self.min_length_px > 0
 
     def __post_init__(self) -> None:
-        if not (self.min_length_px >= 0 and 0 < self.threshold <= 1 and self.cover_px >= 0 and self.snap_px >= 0
-                and self.simplify_px >= 0 and self.split_px >= 0):
-            raise ValueError(f"need min_length_px, cover_px, snap_px, simplify_px, split_px >= 0 and 0 < threshold <= 1; got {self}")
+        if not (
+            self.min_length_px >= 0
+            and 0 < self.threshold <= 1
+            and self.cover_px >= 0
+            and self.snap_px >= 0
+            and self.simplify_px >= 0
+            and self.split_px >= 0
+        ):
+            raise ValueError(
+                f"need min_length_px, cover_px, snap_px, simplify_px, split_px >= 0 and 0 < threshold <= 1; got {self}"
+            )
 
 
 def uncovered_skeleton(boundary: np.ndarray, graph: BoundaryGraph, config: FillConfig) -> np.ndarray:
@@ -79,8 +87,9 @@ def long_stretches(mask: np.ndarray, min_length_px: float) -> np.ndarray:
     return out
 
 
-def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillConfig,
-                       region: tuple[int, int, int, int] | None = None) -> BoundaryGraph:
+def fill_from_skeleton(
+    graph: BoundaryGraph, boundary: np.ndarray, config: FillConfig, region: tuple[int, int, int, int] | None = None
+) -> BoundaryGraph:
     """``graph`` plus the uncovered skeleton stretches of ``boundary`` as ``skeleton`` edges (see
     the module docstring). ``region`` (row0, row1, col0, col1) limits the filled pixels to that
     block (a window's core and one pixel beyond). Returns ``graph`` itself when nothing is filled."""
@@ -90,7 +99,7 @@ def fill_from_skeleton(graph: BoundaryGraph, boundary: np.ndarray, config: FillC
     if region is not None:
         r0, r1, c0, c1 = region
         inside = np.zeros_like(mask)
-        inside[max(r0, 0):r1, max(c0, 0):c1] = True
+        inside[max(r0, 0) : r1, max(c0, 0) : c1] = True
         mask &= inside
     if not mask.any():
         return graph
@@ -106,12 +115,19 @@ def stretch_graph(mask: np.ndarray, simplify_px: float) -> BoundaryGraph:
     stretches' bounding box, not the whole window."""
     rows, cols = nonzero_pixels(mask)
     r0, c0 = rows.min(), cols.min()
-    box = mask[r0:rows.max() + 1, c0:cols.max() + 1]
-    found = skeleton_graph(np.pad(box, 1).astype(np.float32), SkeletonConfig(threshold=0.5, simplify_px=simplify_px, spur_px=0.0,
-                                                                             min_length_px=0.0))
+    box = mask[r0 : rows.max() + 1, c0 : cols.max() + 1]
+    found = skeleton_graph(
+        np.pad(box, 1).astype(np.float32),
+        SkeletonConfig(threshold=0.5, simplify_px=simplify_px, spur_px=0.0, min_length_px=0.0),
+    )
     shift = np.array([c0 - 1, r0 - 1], float)
-    return BoundaryGraph(found.vertices + shift, found.edges, edge_kinds=found.edge_kinds,
-                         edge_polylines=[line + shift for line in found.edge_polylines], edge_scores=found.edge_scores)
+    return BoundaryGraph(
+        found.vertices + shift,
+        found.edges,
+        edge_kinds=found.edge_kinds,
+        edge_polylines=[line + shift for line in found.edge_polylines],
+        edge_scores=found.edge_scores,
+    )
 
 
 def snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) -> np.ndarray:
@@ -127,8 +143,14 @@ def snap_targets(found: BoundaryGraph, graph: BoundaryGraph, snap_px: float) -> 
     return target
 
 
-def merged_stretches(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndarray, boundary: np.ndarray, split_px: float,
-                     kind: str = SKELETON) -> BoundaryGraph:
+def merged_stretches(
+    graph: BoundaryGraph,
+    found: BoundaryGraph,
+    target: np.ndarray,
+    boundary: np.ndarray,
+    split_px: float,
+    kind: str = SKELETON,
+) -> BoundaryGraph:
     """One graph: ``graph``'s vertices and edges, then the filled ones of kind ``kind`` (free ends
     joined to their targets, the polyline extended to the target vertex), each cut into pieces
     (see :func:`pieces`) and scored by the mean of ``boundary`` along it."""
@@ -164,17 +186,18 @@ def merged_stretches(graph: BoundaryGraph, found: BoundaryGraph, target: np.ndar
         edge_kinds=list(graph.edge_kinds or ["normal"] * n_old) + [kind] * len(edges),
         edge_polylines=list(graph.edge_polylines or [None] * n_old) + lines,
         edge_scores=np.concatenate([graph.edge_scores if graph.edge_scores is not None else np.ones(n_old), scores]),
-        transform=graph.transform, crs=graph.crs,
+        transform=graph.transform,
+        crs=graph.crs,
     )
 
 
 def pieces(line: np.ndarray, split_px: float, closed: bool = False) -> list[np.ndarray]:
     """A polyline cut into pieces about ``split_px`` long (equal arc lengths; the cut points
-    interpolated on it), at least three for a closed line (its two ends one vertex), so no two
-    of its edges join the same pair of vertices. Why cut at all: the city's stitching keeps one
-    edge per pair of end vertices, and two windows can fill the two halves of a loop between the
-    same two cut ends; edges with inner vertices of their own never collide. A line of length 0
-gives no piece."""
+        interpolated on it), at least three for a closed line (its two ends one vertex), so no two
+        of its edges join the same pair of vertices. Why cut at all: the city's stitching keeps one
+        edge per pair of end vertices, and two windows can fill the two halves of a loop between the
+        same two cut ends; edges with inner vertices of their own never collide. A line of length 0
+    gives no piece."""
     along = arc_lengths(line)
     if along[-1] == 0:
         return []

@@ -53,8 +53,13 @@ def skeleton_graph(probability: np.ndarray, config: SkeletonConfig = SkeletonCon
     xy = np.zeros((len(vertices), 2))
     for pixel, k in vertices.items():
         xy[k] = points[pixel]
-    return BoundaryGraph(xy, np.array(edges, dtype=np.int64).reshape(-1, 2), edge_kinds=["normal"] * len(edges),
-                         edge_polylines=polylines, edge_scores=np.ones(len(edges)))
+    return BoundaryGraph(
+        xy,
+        np.array(edges, dtype=np.int64).reshape(-1, 2),
+        edge_kinds=["normal"] * len(edges),
+        edge_polylines=polylines,
+        edge_scores=np.ones(len(edges)),
+    )
 
 
 def _prune(lines: list[np.ndarray], ends: list[tuple[int, int]], config: SkeletonConfig):

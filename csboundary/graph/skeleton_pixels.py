@@ -19,7 +19,9 @@ from csboundary.graph.pixel_index import nonzero_pixels
 _STEPS = ((0, 1, 1.0), (1, 0, 1.0), (1, 1, np.sqrt(2.0)), (1, -1, np.sqrt(2.0)))
 
 
-def skeleton_pixel_links(skeleton: np.ndarray, corner_diagonals: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def skeleton_pixel_links(
+    skeleton: np.ndarray, corner_diagonals: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 2) pixel (row, col) of the skeleton's pixels in raster order, (E, 2) node pairs of
     8-neighbours (each pair once, grouped by step and in raster order of the first pixel), and
     (E,) their distances in px. Works on the pixel list (a binary search per neighbour), so the

@@ -80,9 +80,20 @@ class StitchConfig:
 def to_mosaic(graph: BoundaryGraph, patch: Patch) -> BoundaryGraph:
     """A patch graph (pixels of ``patch.expanded``) moved to mosaic pixels."""
     offset = np.array([patch.expanded.col_off, patch.expanded.row_off], float)
-    lines = None if graph.edge_polylines is None else [None if p is None else np.asarray(p, float) + offset for p in graph.edge_polylines]
-    return BoundaryGraph(graph.vertices + offset, graph.edges, vertex_kinds=graph.vertex_kinds, edge_kinds=graph.edge_kinds,
-                         edge_polylines=lines, edge_scores=graph.edge_scores, crs=graph.crs)
+    lines = (
+        None
+        if graph.edge_polylines is None
+        else [None if p is None else np.asarray(p, float) + offset for p in graph.edge_polylines]
+    )
+    return BoundaryGraph(
+        graph.vertices + offset,
+        graph.edges,
+        vertex_kinds=graph.vertex_kinds,
+        edge_kinds=graph.edge_kinds,
+        edge_polylines=lines,
+        edge_scores=graph.edge_scores,
+        crs=graph.crs,
+    )
 
 
 def owner_bounds(patch: Patch, grid: PatchGrid) -> tuple[float, float, float, float]:
@@ -200,8 +211,12 @@ class _Candidate:
     in_view: bool = True  # both ends at least ``border_px`` from its window's inner border (not cut points)
 
 
-def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig = StitchConfig(),
-                        crs: str | None = None) -> BoundaryGraph:
+def stitch_patch_graphs(
+    graphs: Mapping[Index, BoundaryGraph],
+    grid: PatchGrid,
+    config: StitchConfig = StitchConfig(),
+    crs: str | None = None,
+) -> BoundaryGraph:
     """One city graph from per-patch graphs given in mosaic pixels (see :func:`to_mosaic`)."""
     candidates = _candidates(graphs, grid, config)
     registry = _VertexRegistry(config.merge_px)
@@ -236,7 +251,9 @@ def stitch_patch_graphs(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, 
         crs=crs,
     )
     if config.mend_px > 0:
-        graph = attach_ends(graph, seam_ends(graph, grid, config.border_px), config.mend_px, SEAM, merge_px=config.merge_px)
+        graph = attach_ends(
+            graph, seam_ends(graph, grid, config.border_px), config.mend_px, SEAM, merge_px=config.merge_px
+        )
     return graph
 
 
@@ -246,7 +263,10 @@ def seam_ends(graph: BoundaryGraph, grid: PatchGrid, border_px: float) -> np.nda
     ends, edges, _ = dangling_ends(graph)
     if graph.edge_patches is None:
         return ends[:0]
-    near = [border_distance(graph.vertices[x:x + 1], grid.patch(*graph.edge_patches[e]), grid)[0] < border_px for x, e in zip(ends, edges)]
+    near = [
+        border_distance(graph.vertices[x : x + 1], grid.patch(*graph.edge_patches[e]), grid)[0] < border_px
+        for x, e in zip(ends, edges)
+    ]
     return ends[np.array(near, bool)]
 
 
@@ -267,12 +287,19 @@ def _candidates(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: 
             line = np.array(graph.edge_polyline(k), float)
             mx, my = polyline_midpoint(line)
             line[0], line[-1] = positions[u], positions[v]
-            out.append(_Candidate(
-                line, kinds[u], kinds[v],
-                graph.edge_kinds[k] if graph.edge_kinds is not None else "normal",
-                float(graph.edge_scores[k]) if graph.edge_scores is not None else np.nan,
-                shaped, index, bool(x0 <= mx < x1 and y0 <= my < y1), bool(away[u] and away[v]),
-            ))
+            out.append(
+                _Candidate(
+                    line,
+                    kinds[u],
+                    kinds[v],
+                    graph.edge_kinds[k] if graph.edge_kinds is not None else "normal",
+                    float(graph.edge_scores[k]) if graph.edge_scores is not None else np.nan,
+                    shaped,
+                    index,
+                    bool(x0 <= mx < x1 and y0 <= my < y1),
+                    bool(away[u] and away[v]),
+                )
+            )
     return out
 
 
@@ -310,7 +337,9 @@ def _better(new: dict, old: dict) -> bool:
     return better_edge(new["kind"], new["score"], old["kind"], old["score"])
 
 
-def _safe_vertices(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig) -> dict[Index, np.ndarray]:
+def _safe_vertices(
+    graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, config: StitchConfig
+) -> dict[Index, np.ndarray]:
     """Per patch, its vertices that lie at least ``border_px`` from its window's inner border."""
     out = {}
     for index, graph in graphs.items():
@@ -319,7 +348,9 @@ def _safe_vertices(graphs: Mapping[Index, BoundaryGraph], grid: PatchGrid, confi
     return out
 
 
-def _snapped(graph: BoundaryGraph, patch: Patch, grid: PatchGrid, safe: Mapping[Index, np.ndarray], config: StitchConfig) -> np.ndarray:
+def _snapped(
+    graph: BoundaryGraph, patch: Patch, grid: PatchGrid, safe: Mapping[Index, np.ndarray], config: StitchConfig
+) -> np.ndarray:
     """Vertex positions with the ones near the window border moved onto a neighbour's vertex."""
     positions = graph.vertices.copy()
     fragile = np.flatnonzero(border_distance(positions, patch, grid) < config.border_px)

@@ -94,7 +94,7 @@ def straighten(graph: BoundaryGraph, config: StraightenConfig | None = Straighte
         starts = np.concatenate([[0], np.cumsum(sizes - 1)])
         line = straightened_line(chain.polyline, config)
         for j, k in enumerate(chain.edges.tolist()):
-            piece = line[starts[j]:starts[j + 1] + 1]
+            piece = line[starts[j] : starts[j + 1] + 1]
             if chain.reversed[j]:
                 piece = piece[::-1]
             polylines[k] = piece
@@ -109,6 +109,8 @@ def straighten(graph: BoundaryGraph, config: StraightenConfig | None = Straighte
         piece = piece.copy()
         piece[0], piece[-1] = vertices[u], vertices[v]
         if len(piece) > 2 and config.simplify_px > 0:
-            piece = shapely.get_coordinates(shapely.simplify(shapely.LineString(piece), config.simplify_px, preserve_topology=False))
+            piece = shapely.get_coordinates(
+                shapely.simplify(shapely.LineString(piece), config.simplify_px, preserve_topology=False)
+            )
         out.append(piece)
     return dataclasses.replace(graph, vertices=vertices, edge_polylines=out)

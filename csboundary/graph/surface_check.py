@@ -37,7 +37,9 @@ class SurfaceCheckConfig:
     strong: float = 0.0  # an edge this sure of roadway beside it anchors its component; 0 = no check
     weak: float = 0.2  # edges below this are dropped; those above stay if connected to a strong one
     offset_px: float = 8.0  # how far beside the edge the surface is read (1.2 m at 0.152 m/px)
-    both_sides: float = 0.0  # edges with at least this much roadway on their poorer side lie inside the roadway and go; 0 = off
+    both_sides: float = (
+        0.0  # edges with at least this much roadway on their poorer side lie inside the roadway and go; 0 = off
+    )
 
     @property
     def active(self) -> bool:
@@ -74,7 +76,9 @@ def side_surface(graph: BoundaryGraph, surface: np.ndarray, offset_px: float, po
     return np.divide(sums, counts, out=np.zeros(n), where=counts > 0)
 
 
-def kept_by_hysteresis(edges: np.ndarray, n_vertices: int, scores: np.ndarray, strong: float, weak: float) -> np.ndarray:
+def kept_by_hysteresis(
+    edges: np.ndarray, n_vertices: int, scores: np.ndarray, strong: float, weak: float
+) -> np.ndarray:
     """(E,) bool: edges scoring at least ``weak`` whose component, in the graph of such edges,
     holds an edge scoring at least ``strong``."""
     edges = np.asarray(edges, np.int64).reshape(-1, 2)

@@ -38,8 +38,12 @@ class SurfaceGateConfig:
     full_change: float = 0.6  # a surface range this large or larger leaves the maps unchanged
     min_piece_px: int = 20000  # roadway pieces smaller than this, away from the window's border, are not roadway
     level: float = 0.5  # surface probability that counts as roadway when finding pieces
-    outline: float = 0.0  # the roadway's outline enters the boundary map at this probability where the gated map is weak; 0 = off
-    mode: str = "range"  # range: gate = local range of the surface; sides: no-roadway-near x not-inside-roadway (softer)
+    outline: float = (
+        0.0  # the roadway's outline enters the boundary map at this probability where the gated map is weak; 0 = off
+    )
+    mode: str = (
+        "range"  # range: gate = local range of the surface; sides: no-roadway-near x not-inside-roadway (softer)
+    )
     far_px: float = 40.0  # sides: roadway is looked for this far
     far_level: float = 0.3  # sides: roadway this sure within far_px keeps the maps
     inside_level: float = 0.3  # sides: 1 - smallest surface within radius_px this large keeps the maps
@@ -71,7 +75,9 @@ def surface_change(surface: np.ndarray, config: SurfaceGateConfig) -> np.ndarray
     to be part of the network read as 0 first."""
     surface = np.asarray(surface, np.float32)
     if config.min_piece_px > 0:
-        dropped = ((surface >= config.level) & ~roadway_pieces_kept(surface, config.level, config.min_piece_px)).astype(np.uint8)
+        dropped = ((surface >= config.level) & ~roadway_pieces_kept(surface, config.level, config.min_piece_px)).astype(
+            np.uint8
+        )
         if dropped.any():  # the piece and its soft fringe read as no roadway
             fringe = cv2.dilate(dropped, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9)))
             surface = np.where(fringe > 0, np.float32(0), surface)
@@ -79,7 +85,9 @@ def surface_change(surface: np.ndarray, config: SurfaceGateConfig) -> np.ndarray
     if config.mode == "sides":
         near_road = disc_max(surface, max(int(round(config.far_px)), 1))
         not_inside = 1.0 - disc_min(surface, r)
-        return np.clip(near_road / np.float32(config.far_level), 0, 1) * np.clip(not_inside / np.float32(config.inside_level), 0, 1)
+        return np.clip(near_road / np.float32(config.far_level), 0, 1) * np.clip(
+            not_inside / np.float32(config.inside_level), 0, 1
+        )
     spread = disc_max(surface, r) - disc_min(surface, r)
     return np.clip(spread / np.float32(config.full_change), 0.0, 1.0)
 
@@ -121,7 +129,9 @@ def gated_maps(maps: np.ndarray, surface_channel: int, config: SurfaceGateConfig
     out[0] *= gate
     out[1] *= gate
     if config.outline > 0:
-        near = disc_max(out[1], max(int(round(config.radius_px)), 1))  # what OpenCV's dilate gives with its default border
+        near = disc_max(
+            out[1], max(int(round(config.radius_px)), 1)
+        )  # what OpenCV's dilate gives with its default border
         add = roadway_outline(maps[surface_channel], config) & (near < 0.5)
         out[1] = np.where(add, np.maximum(out[1], np.float32(config.outline)), out[1])
     return out

@@ -84,7 +84,9 @@ def extract_vertices(keypoint_prob: np.ndarray, config: VertexConfig = VertexCon
     return graph
 
 
-def extract_vertices_with_scores(keypoint_prob: np.ndarray, config: VertexConfig = VertexConfig()) -> tuple[BoundaryGraph, np.ndarray]:
+def extract_vertices_with_scores(
+    keypoint_prob: np.ndarray, config: VertexConfig = VertexConfig()
+) -> tuple[BoundaryGraph, np.ndarray]:
     """:func:`extract_vertices` plus (N,) scores: each vertex's highest probability in its piece.
 
     The graph's ``edge_scores`` hold, for each corner edge, the mean probability along its

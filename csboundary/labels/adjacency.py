@@ -18,8 +18,9 @@ from csboundary.labels.boundaries import Boundary
 from csboundary.labels.select import inside, near_window
 
 
-def snap_to_boundaries(vertices: np.ndarray, boundaries: list[Boundary], candidates: np.ndarray, tolerance: float) -> tuple[np.ndarray,
-                                                                                                                            np.ndarray]:
+def snap_to_boundaries(
+    vertices: np.ndarray, boundaries: list[Boundary], candidates: np.ndarray, tolerance: float
+) -> tuple[np.ndarray, np.ndarray]:
     """For each vertex: index of the nearest boundary within ``tolerance`` (-1 if none) and the
     arc length of its projection on that boundary."""
     m = len(vertices)
@@ -36,8 +37,9 @@ def snap_to_boundaries(vertices: np.ndarray, boundaries: list[Boundary], candida
     return which, where
 
 
-def adjacency_label(vertices: np.ndarray, boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow,
-                    tolerance: float = 10.0) -> np.ndarray:
+def adjacency_label(
+    vertices: np.ndarray, boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, tolerance: float = 10.0
+) -> np.ndarray:
     """(M, M) uint8 symmetric adjacency of ``vertices`` (global pixels) inside ``window``."""
     vertices = np.asarray(vertices, dtype=float).reshape(-1, 2)
     m = len(vertices)

@@ -102,7 +102,9 @@ def _at_least_three(s: np.ndarray, kinds: list[str], length: float) -> tuple[np.
     return np.array(s, dtype=float), kinds
 
 
-def _merge(candidates: list[tuple[float, str]], separation: float, ring_length: float | None) -> tuple[np.ndarray, list[str]]:
+def _merge(
+    candidates: list[tuple[float, str]], separation: float, ring_length: float | None
+) -> tuple[np.ndarray, list[str]]:
     """Keypoints closer than ``separation`` along the boundary are one; the higher kind wins."""
     if ring_length is not None:
         candidates = [(s % ring_length, k) for s, k in candidates]
@@ -176,7 +178,9 @@ def _true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
 
 
-def curvature_keypoints(boundary: Boundary, config: LabelConfig = LabelConfig()) -> tuple[list[tuple[float, float]], list[float]]:
+def curvature_keypoints(
+    boundary: Boundary, config: LabelConfig = LabelConfig()
+) -> tuple[list[tuple[float, float]], list[float]]:
     """Gathered runs (start, end arc lengths) and isolated curvature keypoints (arc lengths).
 
     Paper: "pixels whose orientation has large enough differences with adjacent pixels" are

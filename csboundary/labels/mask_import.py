@@ -42,8 +42,8 @@ from shapely.geometry import LineString
 from tqdm import tqdm
 
 from csboundary.data.atomic import atomic_path
+from csboundary.data.city import begin_city, ground_truth_path, tile_name, tiles_dir, write_meta
 from csboundary.data.folder_lock import locked_folder
-from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, tile_name, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
 from csboundary.data.units import GroundUnits, geometric_mean, ground_units, pixel_size_m
@@ -99,8 +99,9 @@ def read_picture(path: str | Path) -> tuple[np.ndarray, Affine | None, str | Non
 GSD_AGREEMENT = 0.02  # a --gsd within 2 % of a georeferenced image's own pixel size is the same size, rounded
 
 
-def source_pixel_m(image_path: str | Path, transform: Affine | None, crs: str | None, units: GroundUnits,
-                   gsd: float | None) -> tuple[float, float]:
+def source_pixel_m(
+    image_path: str | Path, transform: Affine | None, crs: str | None, units: GroundUnits, gsd: float | None
+) -> tuple[float, float]:
     """(east, north) metres per pixel of an image: its georeference's when it has one (a ``gsd``
     that disagrees is refused, neither silently applied nor silently ignored), else ``gsd``."""
     if transform is None:
@@ -109,11 +110,16 @@ def source_pixel_m(image_path: str | Path, transform: Affine | None, crs: str | 
         return gsd, gsd
     own = pixel_size_m(units, transform)
     if not all(np.isfinite(v) and v > 0 for v in own):
-        raise InputError(image_path, f"its georeference gives no pixel size ({transform.a:g} x {transform.e:g}: rotated?)")
+        raise InputError(
+            image_path, f"its georeference gives no pixel size ({transform.a:g} x {transform.e:g}: rotated?)"
+        )
     if gsd is not None and max(abs(v / gsd - 1) for v in own) > GSD_AGREEMENT:
         size = f"{own[0]:.4g} m" if abs(own[0] / own[1] - 1) <= GSD_AGREEMENT else f"{own[0]:.4g} x {own[1]:.4g} m"
-        raise InputError(image_path, f"--gsd {gsd:g} m disagrees with the {size} pixel its CRS {crs} gives: leave --gsd out "
-                                     "(it is for images without a georeference) or fix the georeference")
+        raise InputError(
+            image_path,
+            f"--gsd {gsd:g} m disagrees with the {size} pixel its CRS {crs} gives: leave --gsd out "
+            "(it is for images without a georeference) or fix the georeference",
+        )
     return own
 
 
@@ -172,8 +178,16 @@ class ImportedCity:
     source_m: float  # metres per pixel of the image as given (its georeference's, or --gsd)
 
 
-def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float | None, rule: MaskRule,
-                target_gsd: float = MODEL_GSD, name: str | None = None) -> ImportedCity:
+def import_pair(
+    image_path: Path,
+    mask_path: Path,
+    city_dir: Path,
+    *,
+    gsd: float | None,
+    rule: MaskRule,
+    target_gsd: float = MODEL_GSD,
+    name: str | None = None,
+) -> ImportedCity:
     """One (image, mask) pair -> one city directory at ``target_gsd``."""
     image, transform, crs = read_picture(image_path)
     if image.dtype != np.uint8:
@@ -182,8 +196,10 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
         raise InputError(image_path, f"{len(image)} band(s); expected RGB or R, G, B, NIR")
     picture, _, _ = read_picture(mask_path)
     if picture.shape[1:] != image.shape[1:]:
-        raise InputError(mask_path,
-                         f"is {picture.shape[2]}x{picture.shape[1]} px; its image {image_path.name} is {image.shape[2]}x{image.shape[1]}")
+        raise InputError(
+            mask_path,
+            f"is {picture.shape[2]}x{picture.shape[1]} px; its image {image_path.name} is {image.shape[2]}x{image.shape[1]}",
+        )
     out_crs = crs or PLACEHOLDER_CRS
     centre = transform @ (image.shape[2] / 2, image.shape[1] / 2) if transform is not None else None
     units = ground_units(out_crs, centre)  # the CRS's units may be feet or degrees: pixel sizes compare in metres
@@ -192,14 +208,18 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
     lines = mask_polylines(label_mask(picture, rule, mask_path), rule)
     out_image = resample(image, factor) if max(abs(f - 1) for f in factor) > 1e-6 else image
     origin = (transform.c, transform.f) if transform is not None else (0.0, 0.0)
-    out_transform = Affine(target_gsd / units.metres_per_unit[0], 0, origin[0], 0, -target_gsd / units.metres_per_unit[1], origin[1])
+    out_transform = Affine(
+        target_gsd / units.metres_per_unit[0], 0, origin[0], 0, -target_gsd / units.metres_per_unit[1], origin[1]
+    )
     world = []
     for line in lines:
         xs, ys = pixel_to_world(out_transform, line[:, 0] * factor[0], line[:, 1] * factor[1])
         world.append(LineString(np.column_stack([xs, ys])))
     city_dir = begin_city(city_dir)
     write_geotiff(tiles_dir(city_dir) / tile_name(0, 0), out_image, out_transform, out_crs, tags={"source": SOURCE})
-    frame = gpd.GeoDataFrame({"kind": ["road_edge"] * len(world)}, geometry=gpd.GeoSeries(world, crs=out_crs), crs=out_crs)
+    frame = gpd.GeoDataFrame(
+        {"kind": ["road_edge"] * len(world)}, geometry=gpd.GeoSeries(world, crs=out_crs), crs=out_crs
+    )
     write_ground_truth(ground_truth_path(city_dir), frame)
     meta: dict[str, Any] = {
         "source": SOURCE,
@@ -217,12 +237,21 @@ def import_pair(image_path: Path, mask_path: Path, city_dir: Path, *, gsd: float
         "bands": int(len(out_image)),
         "tiles": [tile_name(0, 0)],
         "boundaries": len(world),
-        "notes": "Imported from an image and a label mask by csboundary import-masks." + (
-            "" if transform is not None else f" Not georeferenced: placed at (0, 0) of {out_crs} with the given pixel size."),
+        "notes": "Imported from an image and a label mask by csboundary import-masks."
+        + (
+            ""
+            if transform is not None
+            else f" Not georeferenced: placed at (0, 0) of {out_crs} with the given pixel size."
+        ),
     }
     write_meta(city_dir, meta)
-    return ImportedCity(name or city_dir.name, city_dir, len(world), (int(out_image.shape[2]), int(out_image.shape[1])),
-                        geometric_mean(source_m))
+    return ImportedCity(
+        name or city_dir.name,
+        city_dir,
+        len(world),
+        (int(out_image.shape[2]), int(out_image.shape[1])),
+        geometric_mean(source_m),
+    )
 
 
 def find_pairs(source: Path, image_pattern: str, mask_pattern: str) -> list[tuple[str, Path, Path]]:
@@ -234,16 +263,25 @@ def find_pairs(source: Path, image_pattern: str, mask_pattern: str) -> list[tupl
     pairs = []
     for image in sorted(source.glob(image_pattern.replace("{id}", "*"))):
         name = image.name
-        ident = name[len(prefix): len(name) - len(suffix) if suffix else None]
+        ident = name[len(prefix) : len(name) - len(suffix) if suffix else None]
         mask = source / mask_pattern.replace("{id}", ident)
         if mask.exists():
             pairs.append((ident, image, mask))
     return pairs
 
 
-def import_masks(source: str | Path, out_dir: str | Path, *, gsd: float | None, rule: MaskRule = MaskRule(),
-                 image_pattern: str = "{id}_image.png", mask_pattern: str = "{id}_edge.png",
-                 target_gsd: float = MODEL_GSD, ids: list[str] | None = None, progress: bool = True) -> dict[str, Any]:
+def import_masks(
+    source: str | Path,
+    out_dir: str | Path,
+    *,
+    gsd: float | None,
+    rule: MaskRule = MaskRule(),
+    image_pattern: str = "{id}_image.png",
+    mask_pattern: str = "{id}_edge.png",
+    target_gsd: float = MODEL_GSD,
+    ids: list[str] | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
     """Import every (image, mask) pair under ``source`` (only ``ids`` when given) as
     ``out_dir/<id>/`` and list them in ``out_dir/set.json`` (written last: the set a later
     ``evaluate-set`` reads). Cities already listed there stay, so pairs that need another mask
@@ -264,11 +302,23 @@ def import_masks(source: str | Path, out_dir: str | Path, *, gsd: float | None, 
     with locked_folder(out_dir):  # two imports into one set at once would each list only their own cities
         cities = []
         for ident, image, mask in tqdm(pairs, desc="import masks", unit="image", disable=not progress):
-            cities.append(import_pair(image, mask, out_dir / ident, gsd=gsd, rule=rule, target_gsd=target_gsd, name=ident))
+            cities.append(
+                import_pair(image, mask, out_dir / ident, gsd=gsd, rule=rule, target_gsd=target_gsd, name=ident)
+            )
         listing = out_dir / SET_FILE
         earlier = json.loads(listing.read_text()).get("cities", []) if listing.exists() else []
-        new = [{"name": c.name, "dir": c.city_dir.name, "boundaries": c.boundaries, "size": list(c.size), "source": str(source),
-                "source_gsd": c.source_m, "mask_rule": asdict(rule)} for c in cities]
+        new = [
+            {
+                "name": c.name,
+                "dir": c.city_dir.name,
+                "boundaries": c.boundaries,
+                "size": list(c.size),
+                "source": str(source),
+                "source_gsd": c.source_m,
+                "mask_rule": asdict(rule),
+            }
+            for c in cities
+        ]
         names = {c["dir"] for c in new}
         report = {"target_gsd": target_gsd, "cities": [c for c in earlier if c.get("dir") not in names] + new}
         with atomic_path(listing) as tmp:

@@ -16,8 +16,9 @@ NORMAL_EDGE = "normal"
 CORNER_EDGE = "corner"
 
 
-def window_graph(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window: PixelWindow) -> tuple[BoundaryGraph, list[tuple[int,
-                                                                                                                                 int]]]:
+def window_graph(
+    keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window: PixelWindow
+) -> tuple[BoundaryGraph, list[tuple[int, int]]]:
     """Graph of the keypoints inside ``window`` (closed), in the window's local pixels.
 
     An edge joins consecutive keypoints of a boundary when the boundary between them stays in
@@ -72,7 +73,9 @@ def window_graph(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window:
     return graph, order
 
 
-def patch_graph(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, patch: Patch, crs: str | None = None) -> BoundaryGraph:
+def patch_graph(
+    keypoints: list[BoundaryKeypoints], bounds: np.ndarray, patch: Patch, crs: str | None = None
+) -> BoundaryGraph:
     """The ground-truth graph of ``patch``'s expanded window, georeferenced by the patch."""
     graph, _ = window_graph(keypoints, bounds, patch.expanded)
     graph.transform = patch.transform

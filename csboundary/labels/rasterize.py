@@ -42,7 +42,9 @@ def _widen(image: np.ndarray, width: int) -> np.ndarray:
     return cv2.dilate(image, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (width, width)))
 
 
-def segmentation_label(boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, width: int = 3) -> np.ndarray:
+def segmentation_label(
+    boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, width: int = 3
+) -> np.ndarray:
     """(h, w) uint8, 1 on boundary pixels: boundaries drawn ``width`` px wide."""
     pad = width
     big = _grown(window, pad)
@@ -53,8 +55,9 @@ def segmentation_label(boundaries: list[Boundary], bounds: np.ndarray, window: P
     return _widen(out, width)[pad:-pad, pad:-pad]
 
 
-def orientation_label(boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, width: int = 3,
-                      bins: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def orientation_label(
+    boundaries: list[Boundary], bounds: np.ndarray, window: PixelWindow, width: int = 3, bins: int = 64
+) -> tuple[np.ndarray, np.ndarray]:
     """Boundary direction on boundary pixels (Batra et al. 2019).
 
     Returns (2, h, w) float32 unit vectors (d col, d row), 0 off the boundary, and (h, w) uint8
@@ -85,7 +88,9 @@ def orientation_label(boundaries: list[Boundary], bounds: np.ndarray, window: Pi
     return vectors, codes[index]
 
 
-def keypoint_heat(keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window: PixelWindow, sigma: float = 3.0) -> np.ndarray:
+def keypoint_heat(
+    keypoints: list[BoundaryKeypoints], bounds: np.ndarray, window: PixelWindow, sigma: float = 3.0
+) -> np.ndarray:
     """(h, w) float32 in [0, 1]: exp(-d^2 / 2 sigma^2), d = distance from the pixel to the nearest
     keypoint pixel or gathered-run pixel ("keypoint map", paper IV-B). Seeds up to 4 sigma
     outside the window count too."""

@@ -57,7 +57,9 @@ class CityLabels:
     def patch_arrays(self, patch: Patch) -> dict[str, np.ndarray]:
         c = self.config
         window = patch.expanded
-        vectors, codes = orientation_label(self.boundaries, self.bounds, window, c.segmentation_width, c.orientation_bins)
+        vectors, codes = orientation_label(
+            self.boundaries, self.bounds, window, c.segmentation_width, c.orientation_bins
+        )
         return {
             "segmentation": segmentation_label(self.boundaries, self.bounds, window, c.segmentation_width),
             "orientation": vectors,
@@ -109,7 +111,9 @@ def load_patch_arrays(path: str | Path) -> dict[str, np.ndarray]:
         raise InputError(path, f"not a patch label file ({exc})") from exc
 
 
-def write_city_labels(city_dir: str | Path, out_dir: str | Path, config: LabelConfig = LabelConfig(), progress: bool = True) -> dict:
+def write_city_labels(
+    city_dir: str | Path, out_dir: str | Path, config: LabelConfig = LabelConfig(), progress: bool = True
+) -> dict:
     """Compute and write the labels of every patch of ``city_dir``; returns the manifest."""
     city_dir, out_dir = Path(city_dir), Path(out_dir)
     layout.read_meta(city_dir)  # fails clearly if this is not a city

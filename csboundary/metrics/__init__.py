@@ -23,8 +23,8 @@ from csboundary.metrics.apls import (
     paper_pairs,
     symmetric_apls,
 )
-from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.confidence import confidence_report, edge_truth
+from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.graph_clip import clip_graph, grown
 from csboundary.metrics.pixel import rasterize, relaxed_scores
 from csboundary.metrics.review_time import ReviewCosts, review_report
@@ -59,17 +59,23 @@ def _segments(pred: BoundaryGraph, gt: BoundaryGraph) -> tuple[Segments, Segment
     return pred_seg.shifted(origin), gt_seg.shifted(origin)
 
 
-def pixel_scores(pred: BoundaryGraph, gt: BoundaryGraph, taus=MetricConfig().taus) -> dict[float, tuple[float, float, float]]:
+def pixel_scores(
+    pred: BoundaryGraph, gt: BoundaryGraph, taus=MetricConfig().taus
+) -> dict[float, tuple[float, float, float]]:
     """``{tau: (precision, recall, f1)}`` of the rasterised graphs."""
     pred_seg, gt_seg = _segments(pred, gt)
     return relaxed_scores(rasterize(pred_seg), rasterize(gt_seg), taus)
 
 
-def apls_paper_pairs(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> PairLengths:
+def apls_paper_pairs(
+    pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()
+) -> PairLengths:
     """The paper's sampled ground-truth pairs and what ``pred`` makes of them (seeded): what
     :func:`apls_paper` averages, kept for diagnosis (experiments/scripts/apls_failures.py)."""
     pred_seg, gt_seg = _segments(pred, gt)
-    return paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
+    return paper_pairs(
+        resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config
+    )
 
 
 def apls_paper(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> float:
@@ -77,14 +83,18 @@ def apls_paper(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: Me
     return apls_from_pairs(apls_paper_pairs(pred, gt, seed, config))
 
 
-def apls_symmetric(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> SymmetricApls:
+def apls_symmetric(
+    pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()
+) -> SymmetricApls:
     """SpaceNet-style APLS: both directions and their harmonic mean."""
     pred_seg, gt_seg = _segments(pred, gt)
     rng = np.random.default_rng(seed)
     return symmetric_apls(resample(gt_seg, config.sym_spacing), resample(pred_seg, config.sym_spacing), rng, config)
 
 
-def apls(pred: BoundaryGraph, gt: BoundaryGraph, variant: str = "paper", seed: int = 0, config: MetricConfig = MetricConfig()) -> float:
+def apls(
+    pred: BoundaryGraph, gt: BoundaryGraph, variant: str = "paper", seed: int = 0, config: MetricConfig = MetricConfig()
+) -> float:
     """APLS of the named variant (``paper`` or ``symmetric``)."""
     if variant == "paper":
         return apls_paper(pred, gt, seed, config)
@@ -96,13 +106,25 @@ def apls(pred: BoundaryGraph, gt: BoundaryGraph, variant: str = "paper", seed: i
 def tlts(pred: BoundaryGraph, gt: BoundaryGraph, seed: int = 0, config: MetricConfig = MetricConfig()) -> TltsResult:
     """TLTS on the paper's pairs (the same pairs :func:`apls_paper` draws for the same seed)."""
     pred_seg, gt_seg = _segments(pred, gt)
-    pairs = paper_pairs(resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config)
+    pairs = paper_pairs(
+        resample(gt_seg, config.spacing), resample(pred_seg, config.spacing), np.random.default_rng(seed), config
+    )
     return tlts_from_pairs(pairs, config.phi)
 
 
-def evaluate(pred: BoundaryGraph, gt: BoundaryGraph, *, scale: str = "city", grid=None, apls: str = "paper", seed: int = 0,
-             config: MetricConfig = MetricConfig(), extent: tuple[float, float, float, float] | None = None,
-             review: ReviewCosts | None = ReviewCosts(), metres_per_px: float | None = None) -> dict:
+def evaluate(
+    pred: BoundaryGraph,
+    gt: BoundaryGraph,
+    *,
+    scale: str = "city",
+    grid=None,
+    apls: str = "paper",
+    seed: int = 0,
+    config: MetricConfig = MetricConfig(),
+    extent: tuple[float, float, float, float] | None = None,
+    review: ReviewCosts | None = ReviewCosts(),
+    metres_per_px: float | None = None,
+) -> dict:
     """Every metric at ``scale`` ``city`` or ``patch`` (the latter needs the city's ``grid``).
     ``extent`` (the imagery's pixel rectangle) first cuts both graphs to it grown by
     :data:`~csboundary.metrics.graph_clip.MARGIN_PX` (so a line far outside the imagery costs

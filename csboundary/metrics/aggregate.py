@@ -43,8 +43,15 @@ def metric_names(config: MetricConfig = MetricConfig(), apls: str = "paper") -> 
     return names + ["tlts", "tlts_too_long", "tlts_too_short", "tlts_infeasible"]
 
 
-def score_segments(pred: Segments, gt: Segments, pred_px: np.ndarray, gt_px: np.ndarray, rng: np.random.Generator,
-                   apls: str = "paper", config: MetricConfig = MetricConfig()) -> tuple[dict, dict]:
+def score_segments(
+    pred: Segments,
+    gt: Segments,
+    pred_px: np.ndarray,
+    gt_px: np.ndarray,
+    rng: np.random.Generator,
+    apls: str = "paper",
+    config: MetricConfig = MetricConfig(),
+) -> tuple[dict, dict]:
     """Every metric of one evaluation unit (a city or a patch): ``(metrics, counts)``.
 
     The paper pairs are drawn first (they serve paper APLS and TLTS), then the symmetric ones,
@@ -57,23 +64,40 @@ def score_segments(pred: Segments, gt: Segments, pred_px: np.ndarray, gt_px: np.
         metrics[f"precision@{tau:g}"], metrics[f"recall@{tau:g}"], metrics[f"f1@{tau:g}"] = p, r, f
     gt_s, pred_s = resample(gt, config.spacing), resample(pred, config.spacing)
     pairs = paper_pairs(gt_s, pred_s, rng, config)
-    counts = {"gt_pixels": len(gt_px), "pred_pixels": len(pred_px), "gt_samples": gt_s.n_vertices,
-              "pred_samples": pred_s.n_vertices, "pairs": pairs.n_pairs, "matched_pairs": int(pairs.matched.sum())}
+    counts = {
+        "gt_pixels": len(gt_px),
+        "pred_pixels": len(pred_px),
+        "gt_samples": gt_s.n_vertices,
+        "pred_samples": pred_s.n_vertices,
+        "pairs": pairs.n_pairs,
+        "matched_pairs": int(pairs.matched.sum()),
+    }
     if apls == "paper":
         metrics["apls"] = apls_from_pairs(pairs)
     else:
         if config.sym_spacing != config.spacing:
             gt_s, pred_s = resample(gt, config.sym_spacing), resample(pred, config.sym_spacing)
         sym = symmetric_apls(gt_s, pred_s, rng, config)
-        metrics["apls"], metrics["apls_gt_to_pred"], metrics["apls_pred_to_gt"] = sym.score, sym.gt_to_pred, sym.pred_to_gt
+        metrics["apls"], metrics["apls_gt_to_pred"], metrics["apls_pred_to_gt"] = (
+            sym.score,
+            sym.gt_to_pred,
+            sym.pred_to_gt,
+        )
         counts["symmetric_pairs_gt"], counts["symmetric_pairs_pred"] = sym.n_pairs_gt, sym.n_pairs_pred
     t = tlts_from_pairs(pairs, config.phi)
     metrics.update(tlts=t.score, tlts_too_long=t.too_long, tlts_too_short=t.too_short, tlts_infeasible=t.infeasible)
     return metrics, counts
 
 
-def evaluate_city(pred: BoundaryGraph, gt: BoundaryGraph, *, apls: str = "paper", seed: int = 0, config: MetricConfig = MetricConfig(),
-                  extent: tuple[float, float, float, float] | None = None) -> dict:
+def evaluate_city(
+    pred: BoundaryGraph,
+    gt: BoundaryGraph,
+    *,
+    apls: str = "paper",
+    seed: int = 0,
+    config: MetricConfig = MetricConfig(),
+    extent: tuple[float, float, float, float] | None = None,
+) -> dict:
     """City scale: the whole prediction against the whole ground truth (same pixel frame); with
     ``extent`` (x0, y0, x1, y1: the imagery's pixels) both are first clipped to it."""
     pred_seg, gt_seg = flatten(pred), flatten(gt)
@@ -81,12 +105,29 @@ def evaluate_city(pred: BoundaryGraph, gt: BoundaryGraph, *, apls: str = "paper"
         pred_seg, gt_seg = clip(pred_seg, *extent), clip(gt_seg, *extent)
     origin = common_origin(pred_seg, gt_seg)  # whole pixels: rasters and results are translation-invariant
     pred_seg, gt_seg = pred_seg.shifted(origin), gt_seg.shifted(origin)
-    metrics, counts = score_segments(pred_seg, gt_seg, rasterize(pred_seg), rasterize(gt_seg), np.random.default_rng(seed), apls, config)
-    return {"scale": "city", "apls_variant": apls, "seed": seed, "config": config.to_dict(), "metrics": metrics, "counts": counts}
+    metrics, counts = score_segments(
+        pred_seg, gt_seg, rasterize(pred_seg), rasterize(gt_seg), np.random.default_rng(seed), apls, config
+    )
+    return {
+        "scale": "city",
+        "apls_variant": apls,
+        "seed": seed,
+        "config": config.to_dict(),
+        "metrics": metrics,
+        "counts": counts,
+    }
 
 
-def evaluate_patches(pred: BoundaryGraph, gt: BoundaryGraph, grid: PatchGrid, *, apls: str = "paper", seed: int = 0,
-                     config: MetricConfig = MetricConfig(), per_patch: bool = True) -> dict:
+def evaluate_patches(
+    pred: BoundaryGraph,
+    gt: BoundaryGraph,
+    grid: PatchGrid,
+    *,
+    apls: str = "paper",
+    seed: int = 0,
+    config: MetricConfig = MetricConfig(),
+    per_patch: bool = True,
+) -> dict:
     """Patch scale: every core of ``grid`` scored on its own, then averaged (rules: module doc)."""
     pred_seg, gt_seg = flatten(pred), flatten(gt)
     core = grid.config.core
@@ -167,7 +208,9 @@ class _PatchBuckets:
     def patch(self, patch) -> tuple[Segments, np.ndarray]:
         cell = patch.row * self.n_cols + patch.col
         px = self.px[np.searchsorted(self.px_cell, cell) : np.searchsorted(self.px_cell, cell, side="right")]
-        edges = self.seg_edges[np.searchsorted(self.seg_cell, cell) : np.searchsorted(self.seg_cell, cell, side="right")]
+        edges = self.seg_edges[
+            np.searchsorted(self.seg_cell, cell) : np.searchsorted(self.seg_cell, cell, side="right")
+        ]
         lonely = self.lonely[self.lonely_cell == cell]
         ids = np.unique(np.concatenate([self.seg.edges[edges].ravel(), lonely]))
         if len(ids) == 0:

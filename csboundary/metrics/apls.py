@@ -22,8 +22,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from csboundary.metrics.config import MetricConfig
-from csboundary.metrics.paths import location_distances, pair_distances
 from csboundary.metrics.pairs import boundary_pairs, component_pairs
+from csboundary.metrics.paths import location_distances, pair_distances
 from csboundary.metrics.sampled_graph import SampledGraph
 
 VARIANTS = ("paper", "symmetric")
@@ -50,7 +50,9 @@ class PairLengths:
         return len(self.gt_length)
 
 
-def paper_pairs(gt: SampledGraph, pred: SampledGraph, rng: np.random.Generator, config: MetricConfig = MetricConfig()) -> PairLengths:
+def paper_pairs(
+    gt: SampledGraph, pred: SampledGraph, rng: np.random.Generator, config: MetricConfig = MetricConfig()
+) -> PairLengths:
     """Draw the paper's pairs on the ground truth and measure them in both graphs."""
     src, dst = boundary_pairs(gt, rng, config.min_vertices, config.pairs_divisor, config.exhaustive_pairs)
     gt_length = pair_distances(gt, src, dst)
@@ -66,7 +68,9 @@ def paper_pairs(gt: SampledGraph, pred: SampledGraph, rng: np.random.Generator, 
         d_dst, p_dst = tree.query(gt.points[dst], k=1)
         matched = (d_src < config.snap_radius) & (d_dst < config.snap_radius)
         connected = matched & (pred.labels[p_src] == pred.labels[p_dst])
-        pred_length[connected] = pair_distances(pred, p_src[connected], p_dst[connected], limit=2.0 * gt_length[connected])
+        pred_length[connected] = pair_distances(
+            pred, p_src[connected], p_dst[connected], limit=2.0 * gt_length[connected]
+        )
     return PairLengths(src, dst, gt_length, matched, connected, pred_length)
 
 
@@ -95,7 +99,9 @@ class SymmetricApls:
     n_pairs_pred: int
 
 
-def symmetric_apls(gt: SampledGraph, pred: SampledGraph, rng: np.random.Generator, config: MetricConfig = MetricConfig()) -> SymmetricApls:
+def symmetric_apls(
+    gt: SampledGraph, pred: SampledGraph, rng: np.random.Generator, config: MetricConfig = MetricConfig()
+) -> SymmetricApls:
     """Both directions and their harmonic mean. A direction whose source graph has no pair is
     undefined; with the other direction defined, the total is 0 (one graph has edges, the other
     none); both undefined gives nan."""
@@ -110,7 +116,9 @@ def symmetric_apls(gt: SampledGraph, pred: SampledGraph, rng: np.random.Generato
     return SymmetricApls(float(total), forward, backward, n_forward, n_backward)
 
 
-def _direction(source: SampledGraph, target: SampledGraph, rng: np.random.Generator, config: MetricConfig) -> tuple[float, int]:
+def _direction(
+    source: SampledGraph, target: SampledGraph, rng: np.random.Generator, config: MetricConfig
+) -> tuple[float, int]:
     """Score of ``source``'s pairs re-measured in ``target`` after projecting onto its edges."""
     a, b = component_pairs(source, rng, config.sym_max_pairs, config.sym_sources)
     length = pair_distances(source, a, b)

@@ -33,7 +33,9 @@ REVIEW_SHARES = (0.1, 0.2, 0.5)
 ECE_BINS = 10
 
 
-def edge_truth(pred: BoundaryGraph, gt: BoundaryGraph, within_px: float = TRUE_WITHIN_PX, step_px: float = 1.0) -> np.ndarray:
+def edge_truth(
+    pred: BoundaryGraph, gt: BoundaryGraph, within_px: float = TRUE_WITHIN_PX, step_px: float = 1.0
+) -> np.ndarray:
     """Share of each predicted edge's length within ``within_px`` of ``gt``'s lines (both graphs
     in one pixel frame). Points are taken every ``step_px`` along the edge, at the middle of
     equal pieces, so the share of points is the share of length."""
@@ -81,7 +83,9 @@ def expected_calibration_error(confidence: np.ndarray, positive: np.ndarray, bin
     return float(gap.sum() / count.sum())
 
 
-def review_effort(confidence: np.ndarray, positive: np.ndarray, length: np.ndarray, shares=REVIEW_SHARES) -> dict[str, dict[str, float]]:
+def review_effort(
+    confidence: np.ndarray, positive: np.ndarray, length: np.ndarray, shares=REVIEW_SHARES
+) -> dict[str, dict[str, float]]:
     """After reviewing the least sure ``share`` of edges (by count, rounded up), for each share:
     the share of all false edges and of all false length seen (``false_edges``,
     ``false_length``), and the share of what any order could have put there
@@ -97,10 +101,12 @@ def review_effort(confidence: np.ndarray, positive: np.ndarray, length: np.ndarr
     for share in shares:
         k = math.ceil(share * len(order) - 1e-9)
         best_edges, best_length = min(int(false.sum()), k), float(longest_false[:k].sum())
-        out[f"{share:g}"] = {"false_edges": float(false[:k].sum() / false.sum()) if false.any() else float("nan"),
-                             "false_length": float(false_len[:k].sum() / false_len.sum()) if false_len.sum() > 0 else float("nan"),
-                             "false_edges_of_attainable": float(false[:k].sum() / best_edges) if best_edges else float("nan"),
-                             "false_length_of_attainable": float(false_len[:k].sum() / best_length) if best_length > 0 else float("nan")}
+        out[f"{share:g}"] = {
+            "false_edges": float(false[:k].sum() / false.sum()) if false.any() else float("nan"),
+            "false_length": float(false_len[:k].sum() / false_len.sum()) if false_len.sum() > 0 else float("nan"),
+            "false_edges_of_attainable": float(false[:k].sum() / best_edges) if best_edges else float("nan"),
+            "false_length_of_attainable": float(false_len[:k].sum() / best_length) if best_length > 0 else float("nan"),
+        }
     return out
 
 
@@ -112,14 +118,22 @@ def confidence_report(confidence: np.ndarray, truth_share: np.ndarray, length: n
     known = np.isfinite(confidence)
     positive = np.asarray(truth_share, float)[known] >= TRUE_SHARE
     c, length = confidence[known], np.asarray(length, float)[known]
-    return {"edges": int(known.sum()), "edges_without_confidence": int((~known).sum()),
-            "share_true": float(positive.mean()) if len(c) else float("nan"),
-            "auc": roc_auc(c, positive), "ece": expected_calibration_error(c, positive),
-            "review": review_effort(c, positive, length)}
+    return {
+        "edges": int(known.sum()),
+        "edges_without_confidence": int((~known).sum()),
+        "share_true": float(positive.mean()) if len(c) else float("nan"),
+        "auc": roc_auc(c, positive),
+        "ece": expected_calibration_error(c, positive),
+        "review": review_effort(c, positive, length),
+    }
 
 
-def precision_recall_by_threshold(confidence: np.ndarray, truth_share: np.ndarray, length: np.ndarray,
-                                  thresholds=(0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)) -> list[dict[str, float]]:
+def precision_recall_by_threshold(
+    confidence: np.ndarray,
+    truth_share: np.ndarray,
+    length: np.ndarray,
+    thresholds=(0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9),
+) -> list[dict[str, float]]:
     """For each threshold P, the edges kept by ``--min-confidence P``: their share of the
     prediction's length, and the length precision (true length share) of what is kept. A
     cheap stand-in for re-running the metrics at every P (edges only, by the edge definition)."""
@@ -129,7 +143,12 @@ def precision_recall_by_threshold(confidence: np.ndarray, truth_share: np.ndarra
     for p in thresholds:
         keep = ~(confidence < p)  # NaN (manual) edges are kept
         kept = float(length[keep].sum())
-        rows.append({"min_confidence": float(p), "kept_length": kept / max(float(length.sum()), 1e-9),
-                     "precision": float(on_truth[keep].sum() / kept) if kept > 0 else float("nan"),
-                     "true_length_kept": float(on_truth[keep].sum() / max(float(on_truth.sum()), 1e-9))})
+        rows.append(
+            {
+                "min_confidence": float(p),
+                "kept_length": kept / max(float(length.sum()), 1e-9),
+                "precision": float(on_truth[keep].sum() / kept) if kept > 0 else float("nan"),
+                "true_length_kept": float(on_truth[keep].sum() / max(float(on_truth.sum()), 1e-9)),
+            }
+        )
     return rows

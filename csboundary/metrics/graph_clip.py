@@ -100,13 +100,17 @@ def clip_graph(graph: BoundaryGraph, window: tuple[float, float, float, float]) 
     renumber = np.cumsum(used) - 1
     kinds = graph.vertex_kinds
     return BoundaryGraph(
-        points[used], renumber[edges],
-        vertex_kinds=None if kinds is None else [kinds[i] if i < len(kinds) else "" for i in np.flatnonzero(used).tolist()],
+        points[used],
+        renumber[edges],
+        vertex_kinds=None
+        if kinds is None
+        else [kinds[i] if i < len(kinds) else "" for i in np.flatnonzero(used).tolist()],
         edge_kinds=None if graph.edge_kinds is None else [graph.edge_kinds[k] for k in source.tolist()],
         edge_polylines=None if graph.edge_polylines is None else [polylines[i] for i in order.tolist()],
         edge_scores=None if graph.edge_scores is None else np.asarray(graph.edge_scores, float)[source],
         edge_patches=None if graph.edge_patches is None else graph.edge_patches[source],
-        transform=graph.transform, crs=graph.crs,
+        transform=graph.transform,
+        crs=graph.crs,
     )
 
 

@@ -15,7 +15,6 @@ Every problem is an :class:`~csboundary.errors.InputError` naming the file.
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import math
 from dataclasses import dataclass
@@ -83,8 +82,11 @@ def read_source(path: str | Path) -> Source:
             return Source(path, lines=read_ground_truth(layout.ground_truth_path(path)))
         if (path / "graph.json").is_file():  # a prediction folder: its graph
             return read_source(path / "graph.json")
-        raise InputError(path, "is a directory but neither a city directory with ground_truth.gpkg nor a prediction folder with "
-                               "graph.json")
+        raise InputError(
+            path,
+            "is a directory but neither a city directory with ground_truth.gpkg nor a prediction folder with "
+            "graph.json",
+        )
     if path.suffix.lower() == ".json":
         try:
             data = json.loads(path.read_text())
@@ -105,8 +107,11 @@ def check_degrees(lines, path) -> None:
     x0, y0, x1, y1 = lines.total_bounds
     if not (np.isfinite([x0, y0, x1, y1]).all() and -90 <= y0 and y1 <= 90 and -180 <= x0 and x1 <= 360):
         worst = y1 if abs(y1) > 90 else (y0 if abs(y0) > 90 else (x1 if abs(x1) > 180 else x0))
-        raise InputError(path, f"coordinates out of range for {lines.crs.to_string()} (degrees; {worst:g} found): pixels need "
-                               "--pixels, projected coordinates need the file's CRS")
+        raise InputError(
+            path,
+            f"coordinates out of range for {lines.crs.to_string()} (degrees; {worst:g} found): pixels need "
+            "--pixels, projected coordinates need the file's CRS",
+        )
 
 
 def frame_from_raster(path: str | Path) -> Frame:
@@ -122,7 +127,9 @@ def frame_from_raster(path: str | Path) -> Frame:
         return Frame(transform, crs, mosaic.width, mosaic.height, str(path), parts)
 
 
-def resolve_frame(pred: Source, gt: Source, raster: str | Path | None = None, gsd: float | None = None, pixels: bool = False) -> Frame:
+def resolve_frame(
+    pred: Source, gt: Source, raster: str | Path | None = None, gsd: float | None = None, pixels: bool = False
+) -> Frame:
     """Pick the common pixel frame (order: module doc)."""
     if pixels:
         if raster is not None:  # the coordinates are the raster's pixels: it still gives the imagery's extent
@@ -146,21 +153,30 @@ def resolve_frame(pred: Source, gt: Source, raster: str | Path | None = None, gs
         if not boxes:
             raise InputError(gt.path, "--gsd needs world coordinates, but no input holds lines")
         minx, maxy = min(b[0] for b in boxes), max(b[3] for b in boxes)
-        return Frame(Affine(gsd, 0.0, math.floor(minx), 0.0, -gsd, math.ceil(maxy)), crs.to_string() if crs is not None else None,
-                     source=f"--gsd {gsd:g}")
+        return Frame(
+            Affine(gsd, 0.0, math.floor(minx), 0.0, -gsd, math.ceil(maxy)),
+            crs.to_string() if crs is not None else None,
+            source=f"--gsd {gsd:g}",
+        )
     if crs is None:
         return Frame(None, None, source="pixels (no CRS in the inputs)")
     blame = next(s for s in vectors if s.crs is not None)
-    raise InputError(blame.path,
-                     f"holds world coordinates ({crs.to_string()}): give --raster or --gsd to convert them to pixels, or --pixels if they "
-                     f"are pixels")
+    raise InputError(
+        blame.path,
+        f"holds world coordinates ({crs.to_string()}): give --raster or --gsd to convert them to pixels, or --pixels if they "
+        f"are pixels",
+    )
 
 
 def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
     """The input as a BoundaryGraph in the frame's pixels."""
     if src.graph is not None:
         graph = src.graph
-        if frame.transform is None or graph.transform is None or (graph.transform == frame.transform and _same_crs(graph.crs, frame.crs)):
+        if (
+            frame.transform is None
+            or graph.transform is None
+            or (graph.transform == frame.transform and _same_crs(graph.crs, frame.crs))
+        ):
             return dataclasses.replace(graph, transform=frame.transform, crs=frame.crs)
         project = _projector(src, graph.crs, frame)
 
@@ -173,20 +189,32 @@ def to_frame(src: Source, frame: Frame) -> BoundaryGraph:
         polylines = None
         if graph.edge_polylines is not None:
             polylines = [move(np.asarray(p, dtype=float)) if p is not None else None for p in graph.edge_polylines]
-        return dataclasses.replace(graph, vertices=move(graph.vertices), edge_polylines=polylines, transform=frame.transform, crs=frame.crs)
+        return dataclasses.replace(
+            graph, vertices=move(graph.vertices), edge_polylines=polylines, transform=frame.transform, crs=frame.crs
+        )
     table = src.lines
-    if frame.transform is not None and frame.crs is not None and src.crs is not None and not _same_crs(src.crs, frame.crs):
+    if (
+        frame.transform is not None
+        and frame.crs is not None
+        and src.crs is not None
+        and not _same_crs(src.crs, frame.crs)
+    ):
         try:
             table = table.to_crs(frame.crs)
         except Exception as exc:  # pyproj raises several types
-            raise InputError(src.path, f"cannot reproject from {src.crs} to {frame.crs} ({exc})".splitlines()[0]) from exc
+            raise InputError(
+                src.path, f"cannot reproject from {src.crs} to {frame.crs} ({exc})".splitlines()[0]
+            ) from exc
     lines, scores = line_parts(table)
     if frame.transform is None:
         return BoundaryGraph.from_polylines([np.asarray(line.coords)[:, :2] for line in lines], scores=scores)
     return BoundaryGraph.from_world_lines(lines, frame.transform, crs=frame.crs, scores=scores)
 
 
-SCORE_COLUMNS = ("confidence_mean", "confidence")  # a boundary's confidence (road_boundaries), else an edge's (edges layer)
+SCORE_COLUMNS = (
+    "confidence_mean",
+    "confidence",
+)  # a boundary's confidence (road_boundaries), else an edge's (edges layer)
 
 
 def line_parts(table) -> tuple[list, list[float] | None]:
@@ -213,8 +241,9 @@ def _number(value) -> float:
     return number if math.isfinite(number) else float("nan")
 
 
-def load_pair(pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False) -> tuple[BoundaryGraph, BoundaryGraph,
-                                                                                                        Frame]:
+def load_pair(
+    pred_path, gt_path, raster=None, gsd: float | None = None, pixels: bool = False
+) -> tuple[BoundaryGraph, BoundaryGraph, Frame]:
     """Read both inputs, put them in one frame and check that they can be compared."""
     pred_src, gt_src = read_source(pred_path), read_source(gt_path)
     if not pixels:
@@ -236,8 +265,11 @@ def check_spaces(pred: Source, gt: Source, frame: Frame) -> None:
     (a prediction of a picture without a CRS is in its pixels, a labelled city in metres): taking
     one to be in the other's CRS scores near 0 without a word. Inputs in different CRSs are fine
     (they are reprojected); graphs without a transform are the frame's pixels by definition."""
-    placed = [(s.path, s.crs, "graph" if s.graph is not None else "lines")
-              for s in (pred, gt) if s.graph is None or s.graph.transform is not None]
+    placed = [
+        (s.path, s.crs, "graph" if s.graph is not None else "lines")
+        for s in (pred, gt)
+        if s.graph is None or s.graph.transform is not None
+    ]
     if frame.width is not None:  # a raster gives the frame: it is placed too
         placed.append((frame.source, frame.crs, "raster"))
     known = next(((path, crs) for path, crs, _ in placed if crs is not None), None)
@@ -248,10 +280,15 @@ def check_spaces(pred: Source, gt: Source, frame: Frame) -> None:
 
     crs = CRS.from_user_input(known[1]).to_string()
     problem = f"has no CRS but {known[0]} is in {crs}, so the two cannot be aligned (scores would be meaningless)"
-    predicted = ("a prediction of a picture without a CRS is scored by predicting the labelled city itself "
-                 "(evaluate-model CITY, evaluate-set SET)")
-    advice = {"graph": predicted, "lines": f"if its coordinates are in {crs}, set that CRS (e.g. ogr2ogr -a_srs {crs}); {predicted}",
-              "raster": "give a georeferenced raster, or leave --raster out"}[unknown[1]]
+    predicted = (
+        "a prediction of a picture without a CRS is scored by predicting the labelled city itself "
+        "(evaluate-model CITY, evaluate-set SET)"
+    )
+    advice = {
+        "graph": predicted,
+        "lines": f"if its coordinates are in {crs}, set that CRS (e.g. ogr2ogr -a_srs {crs}); {predicted}",
+        "raster": "give a georeferenced raster, or leave --raster out",
+    }[unknown[1]]
     raise InputError(unknown[0], f"{problem}: {advice}")
 
 
@@ -261,8 +298,11 @@ def check_finite(graph: BoundaryGraph, path, frame: Frame) -> None:
     parts = [graph.vertices] + [np.asarray(p, dtype=float) for p in (graph.edge_polylines or []) if p is not None]
     bad = sum(int((~np.isfinite(np.asarray(p, dtype=float).reshape(-1, 2))).any(axis=1).sum()) for p in parts)
     if bad:
-        raise InputError(path, f"{bad} point(s) have no finite position in the evaluation frame ({frame.source}): "
-                               "NaN or infinite coordinates, or coordinates the frame's CRS cannot hold")
+        raise InputError(
+            path,
+            f"{bad} point(s) have no finite position in the evaluation frame ({frame.source}): "
+            "NaN or infinite coordinates, or coordinates the frame's CRS cannot hold",
+        )
 
 
 def check_overlap(pred: BoundaryGraph, gt: BoundaryGraph, frame: Frame, pred_path, gt_path) -> None:
@@ -289,14 +329,18 @@ def graph_bounds(graph: BoundaryGraph) -> np.ndarray | None:
 def grid_for(frame: Frame, pred: BoundaryGraph, gt: BoundaryGraph) -> PatchGrid:
     """The patch grid of the frame: the raster's, or one from pixel (0, 0) covering both graphs."""
     if frame.width is not None:
-        return PatchGrid(frame.width, frame.height, frame.transform or Affine.identity(), footprint=list(frame.footprint) or None)
+        return PatchGrid(
+            frame.width, frame.height, frame.transform or Affine.identity(), footprint=list(frame.footprint) or None
+        )
     boxes = [b for b in (graph_bounds(pred), graph_bounds(gt)) if b is not None]
     width = math.ceil(max([b[2] for b in boxes], default=0))
     height = math.ceil(max([b[3] for b in boxes], default=0))
     if width <= 0 or height <= 0:
         raise InputError("<inputs>", "no boundary lies at positive pixel coordinates: nothing to cut into patches")
     if width * height > MAX_FRAME_PIXELS:
-        raise InputError("<inputs>", f"the boundaries span {width}x{height} px: give --raster so the patches are the imagery's")
+        raise InputError(
+            "<inputs>", f"the boundaries span {width}x{height} px: give --raster so the patches are the imagery's"
+        )
     return PatchGrid(width, height, frame.transform or Affine.identity())
 
 

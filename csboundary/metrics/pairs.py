@@ -12,8 +12,9 @@ import numpy as np
 from csboundary.metrics.sampled_graph import SampledGraph
 
 
-def boundary_pairs(graph: SampledGraph, rng: np.random.Generator, min_vertices: int = 5, divisor: int = 3,
-                   exhaustive: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def boundary_pairs(
+    graph: SampledGraph, rng: np.random.Generator, min_vertices: int = 5, divisor: int = 3, exhaustive: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """The paper's pairs: for every boundary (connected component) with more than ``min_vertices``
     sampled vertices, ``n // divisor`` pairs of two distinct vertices drawn uniformly at random.
 
@@ -31,7 +32,9 @@ def boundary_pairs(graph: SampledGraph, rng: np.random.Generator, min_vertices: 
     return _distinct_pairs(graph.starts[comp], size, rng)
 
 
-def component_pairs(graph: SampledGraph, rng: np.random.Generator, max_pairs: int, sources: int = 500) -> tuple[np.ndarray, np.ndarray]:
+def component_pairs(
+    graph: SampledGraph, rng: np.random.Generator, max_pairs: int, sources: int = 500
+) -> tuple[np.ndarray, np.ndarray]:
     """SpaceNet-style pairs: every unordered pair of distinct vertices in one component when there
     are at most ``max_pairs``; otherwise a seeded sample of ``max_pairs`` pairs, each uniform over
     that set, drawn as ``sources`` source vertices (chosen with probability proportional to their

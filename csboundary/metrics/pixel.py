@@ -50,7 +50,9 @@ def rasterize(seg: Segments, within: tuple[float, float, float, float] | None = 
     return np.stack([key % width + low[0], key // width + low[1]], axis=1)
 
 
-def relaxed_scores(pred_px: np.ndarray, gt_px: np.ndarray, taus=DEFAULT_TAUS) -> dict[float, tuple[float, float, float]]:
+def relaxed_scores(
+    pred_px: np.ndarray, gt_px: np.ndarray, taus=DEFAULT_TAUS
+) -> dict[float, tuple[float, float, float]]:
     """``{tau: (precision, recall, f1)}`` of predicted against ground-truth pixels.
 
     Empty sets: an empty prediction scores precision 0 (not skipped, unlike the original code);

@@ -25,8 +25,10 @@ def format_table(result: dict) -> str:
     """A readable summary of :func:`csboundary.metrics.evaluate`'s result."""
     m, c = result["metrics"], result["counts"]
     taus = result["config"]["taus"]
-    head = (f"{result['inputs']['pred']} vs {result['inputs']['gt']}: {result['scale']} scale, APLS {result['apls_variant']}, "
-            f"seed {result['seed']}")
+    head = (
+        f"{result['inputs']['pred']} vs {result['inputs']['gt']}: {result['scale']} scale, APLS {result['apls_variant']}, "
+        f"seed {result['seed']}"
+    )
     if result["scale"] == "patch":
         head += f"\n{c['patches_scored']} of {c['patches']} patches scored ({c['patches_with_gt']} with ground truth); per-patch means"
     lines = [head, f"{'':12s}" + "".join(f"{'tau=' + format(t, 'g'):>10s}" for t in taus)]
@@ -36,9 +38,13 @@ def format_table(result: dict) -> str:
     if result["apls_variant"] == "symmetric":
         apls_line += f": gt->pred {_num(m['apls_gt_to_pred'])}, pred->gt {_num(m['apls_pred_to_gt'])}"
     lines.append(apls_line)
-    lines.append(f"{'TLTS':12s}{_num(m['tlts']):>10s}   too long {_num(m['tlts_too_long'])}, too short {_num(m['tlts_too_short'])}, "
-                 f"infeasible {_num(m['tlts_infeasible'])}")
-    lines.append(f"{c['pairs']} sampled pairs (phi {result['config']['phi']:g}, snap < {result['config']['snap_radius']:g} px)")
+    lines.append(
+        f"{'TLTS':12s}{_num(m['tlts']):>10s}   too long {_num(m['tlts_too_long'])}, too short {_num(m['tlts_too_short'])}, "
+        f"infeasible {_num(m['tlts_infeasible'])}"
+    )
+    lines.append(
+        f"{c['pairs']} sampled pairs (phi {result['config']['phi']:g}, snap < {result['config']['snap_radius']:g} px)"
+    )
     if "confidence" in result:
         lines.append(format_confidence(result["confidence"]))
     if "review_effort" in result:
@@ -52,31 +58,43 @@ def format_review(report: dict) -> str:
     scale, unit = (1 / km, "min/km") if km else (1.0, "min")
     target = report["costs"]["target_f1"]
     held = report["held_back_boundaries"]
-    lines = [f"review effort ({report['boundaries']} boundaries, {report['draft_boundaries']} in the review draft"
-             + (f", {held} held back" if held else "") + f"; {report['false_boundaries']} false, {report['cut_pieces']} pieces cut out; "
-             + (f"{km:.3f} km of true boundary" if km else f"{report['true_boundary_px']:.0f} px of true boundary") + "):",
-             f"  from scratch {_num(report['scratch_minutes'] * scale, 1)} {unit} ({report['scratch_clicks']} clicks)"]
+    lines = [
+        f"review effort ({report['boundaries']} boundaries, {report['draft_boundaries']} in the review draft"
+        + (f", {held} held back" if held else "")
+        + f"; {report['false_boundaries']} false, {report['cut_pieces']} pieces cut out; "
+        + (f"{km:.3f} km of true boundary" if km else f"{report['true_boundary_px']:.0f} px of true boundary")
+        + "):",
+        f"  from scratch {_num(report['scratch_minutes'] * scale, 1)} {unit} ({report['scratch_clicks']} clicks)",
+    ]
     for name, o in report["orders"].items():
         ratio = o["minutes"] / report["scratch_minutes"] if report["scratch_minutes"] else float("nan")
-        lines.append(f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} = {_num(ratio, 2)}x scratch (look "
-                     f"{_num(o['look_minutes'] * scale, 1)}, "
-                     f"draw {_num(o['draw_minutes'] * scale, 1)}); F1@5 {_num(o['start_f1'], 3)} -> {_num(o['end_f1'], 3)}; "
-                     f"to F1@5 {target:g}: {_num(o['minutes_to_target_f1'] * scale, 1)} {unit}")
+        lines.append(
+            f"  {name + ' order':17s} corrected map {_num(o['minutes'] * scale, 1)} {unit} = {_num(ratio, 2)}x scratch (look "
+            f"{_num(o['look_minutes'] * scale, 1)}, "
+            f"draw {_num(o['draw_minutes'] * scale, 1)}); F1@5 {_num(o['start_f1'], 3)} -> {_num(o['end_f1'], 3)}; "
+            f"to F1@5 {target:g}: {_num(o['minutes_to_target_f1'] * scale, 1)} {unit}"
+        )
     if "note" in report:
         lines.append(f"  ({report['note']})")
     if report.get("metres_per_px_assumed"):
-        lines.append(f"  (lengths priced at an assumed {report['metres_per_px']:g} m per pixel: the frame has no ground size)")
+        lines.append(
+            f"  (lengths priced at an assumed {report['metres_per_px']:g} m per pixel: the frame has no ground size)"
+        )
     return "\n".join(lines)
 
 
 def format_confidence(report: dict) -> str:
     """:func:`csboundary.metrics.confidence.confidence_report` in two lines."""
-    review = ", ".join(f"{float(share):.0%} -> {_num(r['false_length'], 2)} of false length ({_num(r['false_edges'], 2)} of false edges; "
-                       f"of what any order could show: {_num(r.get('false_length_of_attainable'), 2)} by length, "
-                       f"{_num(r.get('false_edges_of_attainable'), 2)} by edges)"
-                       for share, r in report["review"].items())
-    return (f"confidence: {report['edges']} edges ({_num(report['share_true'], 2)} true), AUC {_num(report['auc'], 3)}, "
-            f"ECE {_num(report['ece'], 3)}\nreviewing the least sure {review}")
+    review = ", ".join(
+        f"{float(share):.0%} -> {_num(r['false_length'], 2)} of false length ({_num(r['false_edges'], 2)} of false edges; "
+        f"of what any order could show: {_num(r.get('false_length_of_attainable'), 2)} by length, "
+        f"{_num(r.get('false_edges_of_attainable'), 2)} by edges)"
+        for share, r in report["review"].items()
+    )
+    return (
+        f"confidence: {report['edges']} edges ({_num(report['share_true'], 2)} true), AUC {_num(report['auc'], 3)}, "
+        f"ECE {_num(report['ece'], 3)}\nreviewing the least sure {review}"
+    )
 
 
 def format_rows(results: dict[str, dict]) -> str:

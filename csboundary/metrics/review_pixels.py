@@ -51,7 +51,9 @@ class PixelState:
         owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
         keys, pixel_of_row = np.unique(_keys(rows), return_inverse=True)
         self.pixel_of_row, self.owner = pixel_of_row.ravel(), owner
-        self.rows_of_edge = np.split(np.argsort(owner, kind="stable"), np.cumsum(np.bincount(owner, minlength=len(piece_pixels)))[:-1])
+        self.rows_of_edge = np.split(
+            np.argsort(owner, kind="stable"), np.cumsum(np.bincount(owner, minlength=len(piece_pixels)))[:-1]
+        )
         self.keys = set(keys.tolist())
         self.unique_keys = keys
         unique_px = _pixels(keys)
@@ -62,7 +64,9 @@ class PixelState:
         self.cover = np.zeros(self.gt_count, np.int64)
         self.pairs_of_pixel: list[np.ndarray] = [np.zeros(0, np.int64)] * len(keys)
         if self.gt_tree is not None and len(keys):
-            pairs = cKDTree(unique_px).sparse_distance_matrix(self.gt_tree, np.nextafter(within_px, 0), output_type="ndarray")
+            pairs = cKDTree(unique_px).sparse_distance_matrix(
+                self.gt_tree, np.nextafter(within_px, 0), output_type="ndarray"
+            )
             p, g = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
             order = np.argsort(p, kind="stable")
             p, g = p[order], g[order]
@@ -129,8 +133,6 @@ class PixelState:
                 g = np.asarray(g, np.int64)
                 self.covered += int(np.count_nonzero(self.cover[g] == 0))
                 self.cover[g] += 1
-
-
 
 
 def piece_pixels(line: np.ndarray, pieces: list[np.ndarray]) -> list[np.ndarray]:

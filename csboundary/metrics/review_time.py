@@ -43,8 +43,8 @@ import shapely
 from scipy.spatial import cKDTree
 
 from csboundary.config import Config
-from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.boundaries import Boundary, graph_boundaries
+from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import merge_chains
 from csboundary.graph.polyline import points_along, polyline_between, polyline_length
 from csboundary.metrics.confidence import TRUE_SHARE, TRUE_WITHIN_PX
@@ -59,10 +59,13 @@ STOPS = 40  # stopping points searched for the cheapest plan to a target F1
 @dataclass(frozen=True)
 class ReviewCosts(Config):
     """Seconds per action and the drawing tolerance (defaults argued in docs/metrics.md)."""
+
     config_name = "review costs"
 
     look_s: float = 1.5  # glance at a whole boundary and judge it against the image (a yes/no verification)
-    look_s_per_20m: float = 0.5  # eye travel and panning along a line, per 20 m: when looking at a boundary and when tracing one
+    look_s_per_20m: float = (
+        0.5  # eye travel and panning along a line, per 20 m: when looking at a boundary and when tracing one
+    )
     delete_s: float = 1.0  # delete a boundary or a cut-out piece judged false (one more key)
     vertex_s: float = 1.75  # one click: a vertex drawn or moved, a cut (extreme clicking: 7 s for 4 clicks)
     find_s: float = 2.0  # find where a missing boundary starts before tracing it
@@ -74,9 +77,15 @@ class ReviewCosts(Config):
 
     def __post_init__(self) -> None:
         values = (self.look_s, self.look_s_per_20m, self.delete_s, self.vertex_s, self.find_s, self.fix_px, self.cut_px)
-        if not all(np.isfinite(v) and v >= 0 for v in values) or not self.trace_tolerance_px > 0 \
-                or not 0 < self.target_f1 <= 1 or not self.assumed_metres_per_px > 0:
-            raise ValueError("review costs must be >= 0, the tolerance and the pixel size > 0 and the target F1 in (0, 1]")
+        if (
+            not all(np.isfinite(v) and v >= 0 for v in values)
+            or not self.trace_tolerance_px > 0
+            or not 0 < self.target_f1 <= 1
+            or not self.assumed_metres_per_px > 0
+        ):
+            raise ValueError(
+                "review costs must be >= 0, the tolerance and the pixel size > 0 and the target F1 in (0, 1]"
+            )
 
     def travel_s(self, length_px: float, metres_per_px: float) -> float:
         """Eye travel along ``length_px`` of line."""
@@ -139,7 +148,10 @@ def missing_runs(samples: list[np.ndarray], kept_pixels: np.ndarray, within_px: 
         return []
     sizes = [len(pts) for pts in samples]
     if len(kept_pixels):
-        far_all = cKDTree(kept_pixels).query(np.floor(np.concatenate(samples)), k=1, distance_upper_bound=within_px)[0] >= within_px
+        far_all = (
+            cKDTree(kept_pixels).query(np.floor(np.concatenate(samples)), k=1, distance_upper_bound=within_px)[0]
+            >= within_px
+        )
     else:
         far_all = np.ones(sum(sizes), bool)
     runs = []
@@ -163,14 +175,19 @@ class BoundaryPlan:
     false: bool  # deleted as a whole
 
 
-def plan_boundary(line: np.ndarray, near: cKDTree | None, costs: ReviewCosts, metres_per_px: float,
-                  within_px: float = TRUE_WITHIN_PX) -> BoundaryPlan:
+def plan_boundary(
+    line: np.ndarray, near: cKDTree | None, costs: ReviewCosts, metres_per_px: float, within_px: float = TRUE_WITHIN_PX
+) -> BoundaryPlan:
     """The actions on one boundary (module docstring, step 2): its points every 1 px are on the
     truth when within ``within_px`` of a point of ``near`` (the ground truth's samples)."""
     length = polyline_length(line)
     look = costs.look_seconds(length, metres_per_px)
     pts = points_along(line, 1.0)[0]
-    on = near.query(pts, k=1, distance_upper_bound=within_px)[0] < within_px if near is not None else np.zeros(len(pts), bool)
+    on = (
+        near.query(pts, k=1, distance_upper_bound=within_px)[0] < within_px
+        if near is not None
+        else np.zeros(len(pts), bool)
+    )
     if length <= 0 or on.mean() < TRUE_SHARE:
         return BoundaryPlan([line], ["delete"], look + costs.delete_s, True)
     step = length / len(pts)
@@ -211,15 +228,25 @@ class ReviewTrace:
         return self.total_s - self.look_s
 
 
-def _draw(state: PixelState, samples: list[np.ndarray], seconds: list[float], f1: list[float], costs: ReviewCosts, within_px: float,
-          metres_per_px: float, until: float = np.inf) -> ReviewTrace:
+def _draw(
+    state: PixelState,
+    samples: list[np.ndarray],
+    seconds: list[float],
+    f1: list[float],
+    costs: ReviewCosts,
+    within_px: float,
+    metres_per_px: float,
+    until: float = np.inf,
+) -> ReviewTrace:
     """Trace the missing runs into ``state`` (changed in place), longest first, extending the
     ``seconds`` and ``f1`` of the look pass; stop once F1@5 reaches ``until``."""
     look_s, clicks = seconds[-1], 0
     for run, snapped in sorted(missing_runs(samples, state.kept_pixels(), within_px), key=lambda r: -len(r[0])):
         if f1[-1] >= until:
             break
-        if snapped and polyline_length(run) < costs.fix_px + 2:  # a gap or stub within the eye's tolerance, as a stray shorter than fix_px
+        if (
+            snapped and polyline_length(run) < costs.fix_px + 2
+        ):  # a gap or stub within the eye's tolerance, as a stray shorter than fix_px
             continue
         clicks += max(1, clicks_to_trace(run, costs.trace_tolerance_px) - snapped)
         state.draw(line_pixels(run))
@@ -228,8 +255,17 @@ def _draw(state: PixelState, samples: list[np.ndarray], seconds: list[float], f1
     return ReviewTrace(np.asarray(seconds), np.asarray(f1), look_s, clicks)
 
 
-def simulate_review(state: PixelState, plans: list[BoundaryPlan], first_piece: np.ndarray, samples: list[np.ndarray], order: np.ndarray,
-                    costs: ReviewCosts, within_px: float, metres_per_px: float, stops: int = STOPS) -> tuple[ReviewTrace, float]:
+def simulate_review(
+    state: PixelState,
+    plans: list[BoundaryPlan],
+    first_piece: np.ndarray,
+    samples: list[np.ndarray],
+    order: np.ndarray,
+    costs: ReviewCosts,
+    within_px: float,
+    metres_per_px: float,
+    stops: int = STOPS,
+) -> tuple[ReviewTrace, float]:
     """Look at every boundary of ``order`` and act on it (``plans``; its pieces are ``state``'s
     pieces from ``first_piece``), then draw: the full review's trace; and the seconds of the
     cheapest plan "look at the first k boundaries, then draw runs until F1@5 reaches the target",
@@ -242,7 +278,9 @@ def simulate_review(state: PixelState, plans: list[BoundaryPlan], first_piece: n
     for i in range(len(order) + 1):
         if f1[-1] >= target:
             best = min(best, seconds[-1])
-        elif i in stop_at and i < len(order) and seconds[-1] < best:  # a later stop has looked longer: it can only win by drawing less
+        elif (
+            i in stop_at and i < len(order) and seconds[-1] < best
+        ):  # a later stop has looked longer: it can only win by drawing less
             trace = _draw(state.copy(), samples, list(seconds), list(f1), costs, within_px, metres_per_px, until=target)
             hit = np.flatnonzero(trace.f1 >= target)
             best = min(best, float(trace.seconds[hit[0]])) if len(hit) else best
@@ -275,8 +313,15 @@ def review_order(confidence: np.ndarray, order: str, seed: int = 0) -> np.ndarra
     raise ValueError(f"review order must be one of {ORDERS}, got {order!r}")
 
 
-def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float | None = None, costs: ReviewCosts = ReviewCosts(),
-                  seed: int = 0, within_px: float = TRUE_WITHIN_PX, curve_points: int = 21) -> dict:
+def review_report(
+    pred: BoundaryGraph,
+    gt: BoundaryGraph,
+    metres_per_px: float | None = None,
+    costs: ReviewCosts = ReviewCosts(),
+    seed: int = 0,
+    within_px: float = TRUE_WITHIN_PX,
+    curve_points: int = 21,
+) -> dict:
     """The simulated review of ``pred``'s review draft against ``gt`` (one pixel frame).
 
     Returns minutes to a fully corrected map and from scratch, minutes to reach
@@ -299,28 +344,50 @@ def review_report(pred: BoundaryGraph, gt: BoundaryGraph, metres_per_px: float |
     gt_length_px = float(gt.edge_lengths().sum()) if gt.n_edges else 0.0
     scratch_s = sum(costs.draw_seconds(pts, mpp) for pts in samples)
     km = gt_length_px * metres_per_px / 1000 if metres_per_px else None
-    out = {"costs": costs.to_dict(), "metres_per_px": mpp, "metres_per_px_assumed": not metres_per_px,
-           "boundaries": len(units), "draft_boundaries": len(draft), "held_back_boundaries": len(units) - len(draft),
-           "held_back_px": float(sum(b.length_px for b, keep in zip(units, shown) if not keep)),
-           "false_boundaries": int(sum(p.false for p in plans)),
-           "cut_pieces": int(sum(p.actions.count("delete") for p in plans if not p.false)),
-           "true_boundary_px": gt_length_px, "true_boundary_km": km,
-           "scratch_minutes": scratch_s / 60, "scratch_clicks": sum(clicks_to_trace(pts, costs.trace_tolerance_px) for pts in samples),
-           "orders": {}}
+    out = {
+        "costs": costs.to_dict(),
+        "metres_per_px": mpp,
+        "metres_per_px_assumed": not metres_per_px,
+        "boundaries": len(units),
+        "draft_boundaries": len(draft),
+        "held_back_boundaries": len(units) - len(draft),
+        "held_back_px": float(sum(b.length_px for b, keep in zip(units, shown) if not keep)),
+        "false_boundaries": int(sum(p.false for p in plans)),
+        "cut_pieces": int(sum(p.actions.count("delete") for p in plans if not p.false)),
+        "true_boundary_px": gt_length_px,
+        "true_boundary_km": km,
+        "scratch_minutes": scratch_s / 60,
+        "scratch_clicks": sum(clicks_to_trace(pts, costs.trace_tolerance_px) for pts in samples),
+        "orders": {},
+    }
     if not scored:
-        out["note"] = "no boundary has a confidence: the draft is the whole prediction, and only the random order is reported"
+        out["note"] = (
+            "no boundary has a confidence: the draft is the whole prediction, and only the random order is reported"
+        )
     # rasterised once; each order works on a copy
-    draft_state = PixelState([px for b, p in zip(draft, plans) for px in piece_pixels(b.polyline, p.pieces)], gt_pixels, within_px)
+    draft_state = PixelState(
+        [px for b, p in zip(draft, plans) for px in piece_pixels(b.polyline, p.pieces)], gt_pixels, within_px
+    )
     for name in ORDERS if scored else ("random",):
         order = review_order(confidence[shown], name, seed)
-        trace, to_target = simulate_review(draft_state.copy(), plans, first_piece, samples, order, costs, within_px, mpp)
+        trace, to_target = simulate_review(
+            draft_state.copy(), plans, first_piece, samples, order, costs, within_px, mpp
+        )
         pick = np.unique(np.linspace(0, len(trace.seconds) - 1, curve_points).round().astype(int))
-        out["orders"][name] = {"minutes": trace.total_s / 60, "look_minutes": trace.look_s / 60, "draw_minutes": trace.draw_s / 60,
-                               "clicks": trace.clicks, "start_f1": float(trace.f1[0]), "end_f1": float(trace.f1[-1]),
-                               "minutes_to_target_f1": to_target / 60,
-                               "curve": {"minutes": (trace.seconds[pick] / 60).tolist(), "f1": trace.f1[pick].tolist()}}
+        out["orders"][name] = {
+            "minutes": trace.total_s / 60,
+            "look_minutes": trace.look_s / 60,
+            "draw_minutes": trace.draw_s / 60,
+            "clicks": trace.clicks,
+            "start_f1": float(trace.f1[0]),
+            "end_f1": float(trace.f1[-1]),
+            "minutes_to_target_f1": to_target / 60,
+            "curve": {"minutes": (trace.seconds[pick] / 60).tolist(), "f1": trace.f1[pick].tolist()},
+        }
     if km:
-        out["per_km"] = {"scratch_minutes": out["scratch_minutes"] / km,
-                         **{f"{name}_minutes": o["minutes"] / km for name, o in out["orders"].items()},
-                         **{f"{name}_minutes_to_target_f1": o["minutes_to_target_f1"] / km for name, o in out["orders"].items()}}
+        out["per_km"] = {
+            "scratch_minutes": out["scratch_minutes"] / km,
+            **{f"{name}_minutes": o["minutes"] / km for name, o in out["orders"].items()},
+            **{f"{name}_minutes_to_target_f1": o["minutes_to_target_f1"] / km for name, o in out["orders"].items()},
+        }
     return out

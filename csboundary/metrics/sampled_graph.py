@@ -95,13 +95,17 @@ class SampledGraph:
         ids = np.asarray(ids, dtype=np.int64)
         key, chain, arc = self.vertex_key[ids], self.vertex_chain[ids], self.vertex_arc[ids]
         if len(self.chain_start) == 0:  # only isolated vertices
-            return Locations(np.stack([key, key], axis=1), np.zeros((len(ids), 2)), np.full(len(ids), -1), np.zeros(len(ids)))
+            return Locations(
+                np.stack([key, key], axis=1), np.zeros((len(ids), 2)), np.full(len(ids), -1), np.zeros(len(ids))
+            )
         on_chain = key < 0
         c = np.where(on_chain, chain, 0)
         ends = np.stack([self.chain_start[c], self.chain_end[c]], axis=1)
         exit_key = np.where(on_chain[:, None], ends, key[:, None])
         exit_off = np.where(on_chain[:, None], np.stack([arc, self.chain_length[c] - arc], axis=1), 0.0)
-        return Locations(exit_key.astype(np.int64), exit_off, np.where(on_chain, chain, -1), np.where(on_chain, arc, 0.0))
+        return Locations(
+            exit_key.astype(np.int64), exit_off, np.where(on_chain, chain, -1), np.where(on_chain, arc, 0.0)
+        )
 
     def locate(self, query: np.ndarray, buffer: float) -> tuple[np.ndarray, Locations]:
         """Project each query point onto the nearest segment within ``buffer`` (inclusive).
@@ -119,7 +123,9 @@ class SampledGraph:
 
         if self._tree is None:
             self._tree = shapely.STRtree(shapely.linestrings(np.stack([self.seg_a, self.seg_b], axis=1)))
-        (qi, si), _ = self._tree.query_nearest(shapely.points(query), max_distance=buffer, return_distance=True, all_matches=False)
+        (qi, si), _ = self._tree.query_nearest(
+            shapely.points(query), max_distance=buffer, return_distance=True, all_matches=False
+        )
         a, d = self.seg_a[si], self.seg_b[si] - self.seg_a[si]
         length2 = (d**2).sum(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -162,7 +168,9 @@ def resample(seg: Segments, spacing: float) -> SampledGraph:
         chain_length = np.bincount(seg_chain, weights=seg_len, minlength=n_chains)
         pieces = np.maximum(1, np.ceil(chain_length / spacing - 1e-9)).astype(np.int64)
         if pieces.sum() > MAX_SAMPLES:
-            raise RasterTooLarge(f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points)")
+            raise RasterTooLarge(
+                f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points)"
+            )
         step = chain_length / pieces
         # interior samples j * step, j = 1 .. pieces - 1, located on their segment
         n_inner = pieces - 1

@@ -79,8 +79,9 @@ def common_origin(*parts: Segments) -> np.ndarray:
     return np.floor(np.concatenate(points).min(axis=0))
 
 
-def clip_parameters(a: np.ndarray, d: np.ndarray, x0: float, y0: float, x1: float, y1: float) -> tuple[np.ndarray, np.ndarray,
-                                                                                                       np.ndarray]:
+def clip_parameters(
+    a: np.ndarray, d: np.ndarray, x0: float, y0: float, x1: float, y1: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Liang-Barsky for the (S, 2) segments ``a -> a + d``: the parameters ``t0 < t1`` in [0, 1]
     of the part of each inside [x0, x1] x [y0, y1], and which segments have such a part."""
     t0 = np.zeros(len(a))

@@ -118,7 +118,9 @@ class AfANet(nn.Module):
         self.global_encoder = ConvEncoder(c.in_channels, c.encoder_widths, c.feature) if c.use_global else None
         self.local_encoder = ConvEncoder(c.in_channels, c.encoder_widths, c.feature) if c.use_local else None
         self.project = nn.Linear(c.embedding, c.dim)
-        self.position = nn.Sequential(nn.Linear(2 + 4 * c.position_frequencies, c.dim), nn.GELU(), nn.Linear(c.dim, c.dim))
+        self.position = nn.Sequential(
+            nn.Linear(2 + 4 * c.position_frequencies, c.dim), nn.GELU(), nn.Linear(c.dim, c.dim)
+        )
         self.register_buffer("frequencies", (2.0 ** torch.arange(c.position_frequencies)) * torch.pi, persistent=False)
         self.blocks = nn.ModuleList(AttentionModule(c.dim) for _ in range(c.layers))
         self.afa = AfAModule(c.dim)
@@ -135,7 +137,9 @@ class AfANet(nn.Module):
         height, width = tensor.shape[-2:]
         m = vertices.shape[0]
         if self.global_encoder is not None:
-            small = F.interpolate(tensor[None], size=(c.global_size, c.global_size), mode="bilinear", align_corners=False)
+            small = F.interpolate(
+                tensor[None], size=(c.global_size, c.global_size), mode="bilinear", align_corners=False
+            )
         else:
             small = tensor.new_zeros((1, tensor.shape[0], 0, 0))
         if self.local_encoder is not None and m:
@@ -210,7 +214,9 @@ def crop_rois(tensor: torch.Tensor, vertices: torch.Tensor, size: int) -> torch.
     beyond the edges (works on any device)."""
     c, height, width = tensor.shape
     m = vertices.shape[0]
-    offsets = torch.arange(size, device=tensor.device, dtype=tensor.dtype) - (size - 1) / 2  # symmetric about the vertex
+    offsets = (
+        torch.arange(size, device=tensor.device, dtype=tensor.dtype) - (size - 1) / 2
+    )  # symmetric about the vertex
     cols = vertices[:, 0, None].to(tensor.dtype) + offsets[None, :]  # (M, size)
     rows = vertices[:, 1, None].to(tensor.dtype) + offsets[None, :]
     gx = (cols / width) * 2 - 1  # align_corners=False: pixel centre (c + 0.5) <-> ((c + 0.5)/W)*2-1

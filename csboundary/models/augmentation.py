@@ -23,6 +23,7 @@ from csboundary.config import Config
 @dataclass(frozen=True)
 class AugmentConfig(Config):
     """Ranges of every random change; ``enabled = False`` keeps only flips and 90-degree turns."""
+
     config_name = "augment"
 
     enabled: bool = True
@@ -71,8 +72,12 @@ def warp(array: np.ndarray, angle: float, scale: float, crop: int, nearest: bool
     matrix[:, 2] += (crop - side) / 2
     flags = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR
     planes = array.reshape(-1, side, side)
-    out = [cv2.warpAffine(np.ascontiguousarray(p), matrix, (crop, crop), flags=flags, borderMode=cv2.BORDER_CONSTANT,
-                          borderValue=0) for p in planes]
+    out = [
+        cv2.warpAffine(
+            np.ascontiguousarray(p), matrix, (crop, crop), flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0
+        )
+        for p in planes
+    ]
     return np.stack(out).reshape(*array.shape[:-2], crop, crop)
 
 
@@ -122,11 +127,14 @@ def _rotate_hue(rgb: np.ndarray, turns: float) -> np.ndarray:
     c, s = math.cos(theta), math.sin(theta)
     k = 1 / 3
     sq = math.sqrt(k)
-    m = np.array([
-        [c + (1 - c) * k, k * (1 - c) - sq * s, k * (1 - c) + sq * s],
-        [k * (1 - c) + sq * s, c + k * (1 - c), k * (1 - c) - sq * s],
-        [k * (1 - c) - sq * s, k * (1 - c) + sq * s, c + k * (1 - c)],
-    ], np.float32)
+    m = np.array(
+        [
+            [c + (1 - c) * k, k * (1 - c) - sq * s, k * (1 - c) + sq * s],
+            [k * (1 - c) + sq * s, c + k * (1 - c), k * (1 - c) - sq * s],
+            [k * (1 - c) - sq * s, k * (1 - c) + sq * s, c + k * (1 - c)],
+        ],
+        np.float32,
+    )
     return np.einsum("ij,jhw->ihw", m, rgb)
 
 
@@ -140,8 +148,9 @@ def _jpeg(x: np.ndarray, quality: int) -> np.ndarray:
     return x
 
 
-def paint_surface_negatives(rng: np.random.Generator, image: np.ndarray, target: np.ndarray, valid: np.ndarray,
-                            config: AugmentConfig) -> np.ndarray:
+def paint_surface_negatives(
+    rng: np.random.Generator, image: np.ndarray, target: np.ndarray, valid: np.ndarray, config: AugmentConfig
+) -> np.ndarray:
     """With probability ``config.surface_negatives``, ``image`` (bands, s, s) with part of its
     non-road area repainted with :func:`dead_leaves` clutter; else ``image`` itself (no random
     draw when the option is 0, so runs without it are unchanged). ``target`` is the FPN target
@@ -180,8 +189,13 @@ def paint_surface_negatives(rng: np.random.Generator, image: np.ndarray, target:
     return out
 
 
-def dead_leaves(rng: np.random.Generator, size: int, shapes: tuple[int, int] = (300, 900),
-                radius_px: tuple[float, float] = (3.0, 80.0), grey_share: float = 0.5) -> np.ndarray:
+def dead_leaves(
+    rng: np.random.Generator,
+    size: int,
+    shapes: tuple[int, int] = (300, 900),
+    radius_px: tuple[float, float] = (3.0, 80.0),
+    grey_share: float = 0.5,
+) -> np.ndarray:
     """(3, size, size) float32 in [0, 1]: a dead-leaves picture (discs, rotated rectangles and
     polygons over each other, the large ones beneath; radii log-uniform, so that the plane is
     covered several times over and every scale from 0.5 to 12 m shows), half of the shapes grey
@@ -203,16 +217,22 @@ def dead_leaves(rng: np.random.Generator, size: int, shapes: tuple[int, int] = (
             cv2.circle(canvas, (int(centre[0]), int(centre[1])), max(int(r), 1), colour.tolist(), -1)
         else:
             if kind == 1:
-                points = cv2.boxPoints(((centre[0], centre[1]), (2 * r, 2 * r * rng.uniform(0.15, 1.0)), rng.uniform(0, 180)))
+                points = cv2.boxPoints(
+                    ((centre[0], centre[1]), (2 * r, 2 * r * rng.uniform(0.15, 1.0)), rng.uniform(0, 180))
+                )
             else:
                 points = cv2.convexHull((centre + rng.uniform(-r, r, (int(rng.integers(3, 8)), 2))).astype(np.float32))
             cv2.fillConvexPoly(canvas, np.round(points).astype(np.int32).reshape(-1, 2), colour.tolist())
     out = np.moveaxis(canvas, -1, 0)
     shape = (size, size)
-    texture = 0.6 * _smooth_noise(rng, shape, float(rng.uniform(1, 3))) + 0.4 * _smooth_noise(rng, shape, float(rng.uniform(4, 16)))
+    texture = 0.6 * _smooth_noise(rng, shape, float(rng.uniform(1, 3))) + 0.4 * _smooth_noise(
+        rng, shape, float(rng.uniform(4, 16))
+    )
     out = out * (1 + float(rng.uniform(0.0, 0.2)) * texture)
     if rng.random() < 0.5:
-        shade = cv2.GaussianBlur((_smooth_noise(rng, shape, float(rng.uniform(20, 60))) > 0.6).astype(np.float32), (0, 0), 2.0)
+        shade = cv2.GaussianBlur(
+            (_smooth_noise(rng, shape, float(rng.uniform(20, 60))) > 0.6).astype(np.float32), (0, 0), 2.0
+        )
         out = out * (1 - float(rng.uniform(0.3, 0.6)) * shade)
     sigma = float(rng.uniform(0.0, 1.0))
     if sigma > 0.3:

@@ -27,10 +27,15 @@ def code_version() -> str:
     """Package version plus the git commit when running from a checkout."""
     try:
         root = Path(__file__).resolve().parents[2]
-        sha = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                             timeout=5).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True,
-                               timeout=5).stdout.strip()
+        sha = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+        ).stdout.strip()
         return f"{__version__}+{sha}{'.dirty' if dirty else ''}" if sha else __version__
     except (OSError, subprocess.SubprocessError):
         return __version__
@@ -100,7 +105,11 @@ def restore_model(path: str | Path, name: str, payload: dict, build):
         if key not in payload:
             raise InputError(path, f"damaged weights file: no {key!r} entry")
     config, state = payload[f"{name}_config"], payload[name]
-    if not isinstance(config, dict) or not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+    if (
+        not isinstance(config, dict)
+        or not isinstance(state, dict)
+        or not all(isinstance(v, torch.Tensor) for v in state.values())
+    ):
         raise InputError(path, f"damaged weights file: {name!r} is not a model config and a dict of tensors")
     try:
         model = build(config)
@@ -110,7 +119,9 @@ def restore_model(path: str | Path, name: str, payload: dict, build):
         model.load_state_dict(state)
     except RuntimeError as exc:
         problem = " ".join(str(exc).split())
-        raise InputError(path, f"damaged weights file: the {name} tensors do not fit its config ({problem[:160]})") from exc
+        raise InputError(
+            path, f"damaged weights file: the {name} tensors do not fit its config ({problem[:160]})"
+        ) from exc
     return model
 
 
@@ -139,8 +150,10 @@ def load_checkpoint(path: str | Path, kinds: tuple[str, ...], map_location="cpu"
             payload = torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
         if "GLOBAL" in str(exc) or "global" in str(exc):  # the safe unpickler met a class or function
-            raise InputError(path,
-                             "refused: the file holds Python objects, not only tensors and plain data (loading it could run code)") from exc
+            raise InputError(
+                path,
+                "refused: the file holds Python objects, not only tensors and plain data (loading it could run code)",
+            ) from exc
         raise InputError(path, f"not a readable weights file ({type(exc).__name__})") from exc
     except Exception as exc:  # torch raises many types for foreign or damaged files
         raise InputError(path, f"not a readable weights file ({type(exc).__name__})") from exc

@@ -74,14 +74,18 @@ class EdgeConfidence:
         """(E,) calibrated probability that each edge is true."""
         raw = self.raw(evidence)
         p = np.interp(raw, self.iso_x, self.iso_y)
-        return np.clip(p + TIE_BREAK * 0.5 * np.tanh(raw / 2), 0.0, 1.0)  # tanh: the logistic's centred form, free of overflow
+        return np.clip(
+            p + TIE_BREAK * 0.5 * np.tanh(raw / 2), 0.0, 1.0
+        )  # tanh: the logistic's centred form, free of overflow
 
     def columns(self, evidence: np.ndarray) -> np.ndarray:
         """The model's features out of the full evidence table; NaN (a map it lacks) is refused."""
         x = np.asarray(evidence, float)[:, [FEATURES.index(f) for f in self.features]]
         if not np.isfinite(x).all():
             missing = [f for f, ok in zip(self.features, np.isfinite(x).all(axis=0)) if not ok]
-            raise ValueError(f"edge evidence lacks {', '.join(missing)} (the confidence needs the FPN's maps, with the surface)")
+            raise ValueError(
+                f"edge evidence lacks {', '.join(missing)} (the confidence needs the FPN's maps, with the surface)"
+            )
         return x
 
     @property
@@ -90,16 +94,26 @@ class EdgeConfidence:
 
     def to_dict(self) -> dict:
         """Plain numbers and strings, for a weights bundle."""
-        return {"version": VERSION, "features": list(self.features), "learning_rate": float(self.learning_rate),
-                "tree_starts": self.tree_starts.astype(int).tolist(), "feature": self.feature.astype(int).tolist(),
-                "threshold": self.threshold.astype(float).tolist(), "left": self.left.astype(int).tolist(),
-                "right": self.right.astype(int).tolist(), "value": self.value.astype(float).tolist(),
-                "iso_x": self.iso_x.astype(float).tolist(), "iso_y": self.iso_y.astype(float).tolist(), "provenance": self.provenance}
+        return {
+            "version": VERSION,
+            "features": list(self.features),
+            "learning_rate": float(self.learning_rate),
+            "tree_starts": self.tree_starts.astype(int).tolist(),
+            "feature": self.feature.astype(int).tolist(),
+            "threshold": self.threshold.astype(float).tolist(),
+            "left": self.left.astype(int).tolist(),
+            "right": self.right.astype(int).tolist(),
+            "value": self.value.astype(float).tolist(),
+            "iso_x": self.iso_x.astype(float).tolist(),
+            "iso_y": self.iso_y.astype(float).tolist(),
+            "provenance": self.provenance,
+        }
 
     @classmethod
     def from_dict(cls, data, source: str | Path = "<bundle>") -> "EdgeConfidence":
         """Checked: a damaged table (unknown feature, a child that points back up, NaN) is an
         InputError naming ``source``, never a wrong or endless computation."""
+
         def bad(problem: str) -> InputError:
             return InputError(source, f"damaged weights file: confidence {problem}")
 
@@ -107,8 +121,10 @@ class EdgeConfidence:
             raise bad(f"is not a version-{VERSION} table")
         try:
             features = tuple(str(f) for f in data["features"])
-            arrays = {k: np.asarray(data[k], float) for k in ("tree_starts", "feature", "threshold", "left", "right", "value", "iso_x",
-                                                              "iso_y")}
+            arrays = {
+                k: np.asarray(data[k], float)
+                for k in ("tree_starts", "feature", "threshold", "left", "right", "value", "iso_x", "iso_y")
+            }
             rate = float(data["learning_rate"])
         except (KeyError, TypeError, ValueError) as exc:
             raise bad(f"table is incomplete or not numbers ({type(exc).__name__})") from exc
@@ -132,22 +148,52 @@ class EdgeConfidence:
         local = np.arange(n) - np.repeat(starts[:-1], np.diff(starts))
         split = left >= 0
         # children lie after their parent within the tree: every walk down ends
-        if ((split & ((left <= local) | (right <= local) | (left >= size) | (right >= size))).any()
-                or (split & ((feature < 0) | (feature >= len(features)))).any() or ((~split) & (right >= 0)).any()):
+        if (
+            (split & ((left <= local) | (right <= local) | (left >= size) | (right >= size))).any()
+            or (split & ((feature < 0) | (feature >= len(features)))).any()
+            or ((~split) & (right >= 0)).any()
+        ):
             raise bad("trees are not well formed")
         iso_x, iso_y = arrays["iso_x"], arrays["iso_y"]
-        if len(iso_x) < 2 or len(iso_x) != len(iso_y) or (np.diff(iso_x) < 0).any() or (iso_y < 0).any() or (iso_y > 1).any():
+        if (
+            len(iso_x) < 2
+            or len(iso_x) != len(iso_y)
+            or (np.diff(iso_x) < 0).any()
+            or (iso_y < 0).any()
+            or (iso_y > 1).any()
+        ):
             raise bad("isotonic map is not increasing breakpoints to probabilities")
         if (np.diff(iso_y) < 0).any():  # a decreasing map would rank the surest edges as the most doubtful
             raise bad("isotonic map decreases (a higher raw score must never mean a lower probability)")
         provenance = data.get("provenance") if isinstance(data.get("provenance"), dict) else {}
-        return cls(features, rate, starts, feature, arrays["threshold"], left, right, arrays["value"],
-                   arrays["iso_x"], arrays["iso_y"], provenance)
+        return cls(
+            features,
+            rate,
+            starts,
+            feature,
+            arrays["threshold"],
+            left,
+            right,
+            arrays["value"],
+            arrays["iso_x"],
+            arrays["iso_y"],
+            provenance,
+        )
 
 
-def fit_edge_confidence(evidence: np.ndarray, positive: np.ndarray, groups: np.ndarray, features: tuple[str, ...] = FEATURES,
-                        n_trees: int = 200, depth: int = 2, learning_rate: float = 0.05, folds: int = 5, seed: int = 0,
-                        provenance: dict | None = None, tree_positive: np.ndarray | None = None) -> EdgeConfidence:
+def fit_edge_confidence(
+    evidence: np.ndarray,
+    positive: np.ndarray,
+    groups: np.ndarray,
+    features: tuple[str, ...] = FEATURES,
+    n_trees: int = 200,
+    depth: int = 2,
+    learning_rate: float = 0.05,
+    folds: int = 5,
+    seed: int = 0,
+    provenance: dict | None = None,
+    tree_positive: np.ndarray | None = None,
+) -> EdgeConfidence:
     """Fit trees on all edges and the isotonic map on out-of-fold raw outputs, with the groups
     (cities) held out together so that calibration sees edges of cities the trees never saw.
     The isotonic map always targets ``positive``; the trees target ``tree_positive`` when given
@@ -165,17 +211,36 @@ def fit_edge_confidence(evidence: np.ndarray, positive: np.ndarray, groups: np.n
     groups = np.asarray(groups)
 
     def trees() -> GradientBoostingClassifier:
-        return GradientBoostingClassifier(n_estimators=n_trees, max_depth=depth, learning_rate=learning_rate, subsample=0.8,
-                                          init="zero", random_state=seed)
+        return GradientBoostingClassifier(
+            n_estimators=n_trees,
+            max_depth=depth,
+            learning_rate=learning_rate,
+            subsample=0.8,
+            init="zero",
+            random_state=seed,
+        )
 
     out_of_fold = np.zeros(len(y))
     for train, test in GroupKFold(n_splits=min(folds, len(np.unique(groups)))).split(x, y, groups):
         out_of_fold[test] = trees().fit(x[train], target[train]).decision_function(x[test])
     iso = IsotonicRegression(y_min=0.0, y_max=1.0, out_of_bounds="clip").fit(out_of_fold, y)
     model = trees().fit(x, target)
-    return from_sklearn(model, features, iso.X_thresholds_, iso.y_thresholds_,
-                        dict(provenance or {}, edges=int(len(y)), share_true=float(y.mean()), n_trees=n_trees, depth=depth,
-                             learning_rate=learning_rate, seed=seed, folds=folds))
+    return from_sklearn(
+        model,
+        features,
+        iso.X_thresholds_,
+        iso.y_thresholds_,
+        dict(
+            provenance or {},
+            edges=int(len(y)),
+            share_true=float(y.mean()),
+            n_trees=n_trees,
+            depth=depth,
+            learning_rate=learning_rate,
+            seed=seed,
+            folds=folds,
+        ),
+    )
 
 
 def from_sklearn(model, features: tuple[str, ...], iso_x, iso_y, provenance: dict | None = None) -> EdgeConfidence:
@@ -190,6 +255,16 @@ def from_sklearn(model, features: tuple[str, ...], iso_x, iso_y, provenance: dic
         parts["value"].append(tree.value[:, 0, 0])
         starts.append(starts[-1] + tree.node_count)
     cat = {k: np.concatenate(v) for k, v in parts.items()}
-    return EdgeConfidence(tuple(features), float(model.learning_rate), np.array(starts), cat["feature"].astype(np.int64),
-                          cat["threshold"].astype(float), cat["left"].astype(np.int64), cat["right"].astype(np.int64),
-                          cat["value"].astype(float), np.asarray(iso_x, float), np.asarray(iso_y, float), provenance or {})
+    return EdgeConfidence(
+        tuple(features),
+        float(model.learning_rate),
+        np.array(starts),
+        cat["feature"].astype(np.int64),
+        cat["threshold"].astype(float),
+        cat["left"].astype(np.int64),
+        cat["right"].astype(np.int64),
+        cat["value"].astype(float),
+        np.asarray(iso_x, float),
+        np.asarray(iso_y, float),
+        provenance or {},
+    )

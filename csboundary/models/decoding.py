@@ -24,7 +24,9 @@ def _smooth(polyline: np.ndarray | None) -> np.ndarray | None:
     return np.asarray(LineString(polyline).simplify(CORNER_SIMPLIFY_PX).coords)
 
 
-def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: float, max_degree: int | None) -> BoundaryGraph:
+def graph_from_adjacency(
+    found: BoundaryGraph, probs: np.ndarray, threshold: float, max_degree: int | None
+) -> BoundaryGraph:
     """Extracted vertices + an (M, M) edge probability matrix -> the patch graph.
 
     Corner edges from vertex extraction are always kept (kind ``corner``, their skeleton smoothed
@@ -32,10 +34,21 @@ def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: flo
     from ``probs`` (kind ``normal``, score = their probability).
     """
     corner = [tuple(int(x) for x in e) for e in found.edges]
-    polylines = {tuple(sorted(e)): _smooth(found.edge_polylines[k]) for k, e in enumerate(corner)} if found.edge_polylines else {}
-    corner_scores = {tuple(sorted(e)): float(found.edge_scores[k]) for k, e in enumerate(corner)} if found.edge_scores is not None else {}
-    edges = edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), threshold, max_degree,
-                                 fixed=corner) if len(probs) >= 2 else [tuple(sorted(e)) for e in corner]
+    polylines = (
+        {tuple(sorted(e)): _smooth(found.edge_polylines[k]) for k, e in enumerate(corner)}
+        if found.edge_polylines
+        else {}
+    )
+    corner_scores = (
+        {tuple(sorted(e)): float(found.edge_scores[k]) for k, e in enumerate(corner)}
+        if found.edge_scores is not None
+        else {}
+    )
+    edges = (
+        edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), threshold, max_degree, fixed=corner)
+        if len(probs) >= 2
+        else [tuple(sorted(e)) for e in corner]
+    )
     kinds, lines, scores = [], [], []
     for u, v in edges:
         line = polylines.get((u, v))
@@ -46,5 +59,11 @@ def graph_from_adjacency(found: BoundaryGraph, probs: np.ndarray, threshold: flo
         kinds.append("corner" if line is not None else "normal")
         lines.append(line)
         scores.append(corner_scores.get((u, v), 1.0) if line is not None else float(probs[u, v]))
-    return BoundaryGraph(found.vertices, np.array(edges, dtype=np.int64).reshape(-1, 2), vertex_kinds=found.vertex_kinds,
-                         edge_kinds=kinds, edge_polylines=lines, edge_scores=np.array(scores, dtype=float))
+    return BoundaryGraph(
+        found.vertices,
+        np.array(edges, dtype=np.int64).reshape(-1, 2),
+        vertex_kinds=found.vertex_kinds,
+        edge_kinds=kinds,
+        edge_polylines=lines,
+        edge_scores=np.array(scores, dtype=float),
+    )

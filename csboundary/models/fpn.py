@@ -59,11 +59,17 @@ class BasicBlock(nn.Module):
     def __init__(self, cin: int, cout: int, stride: int = 1):
         super().__init__()
         self.body = nn.Sequential(
-            nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
-            nn.Conv2d(cout, cout, 3, 1, 1, bias=False), nn.BatchNorm2d(cout),
+            nn.Conv2d(cin, cout, 3, stride, 1, bias=False),
+            nn.BatchNorm2d(cout),
+            nn.ReLU(inplace=True),
+            nn.Conv2d(cout, cout, 3, 1, 1, bias=False),
+            nn.BatchNorm2d(cout),
         )
-        self.skip = nn.Identity() if stride == 1 and cin == cout else nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False),
-                                                                                    nn.BatchNorm2d(cout))
+        self.skip = (
+            nn.Identity()
+            if stride == 1 and cin == cout
+            else nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False), nn.BatchNorm2d(cout))
+        )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return F.relu(self.body(x) + self.skip(x))
@@ -103,11 +109,15 @@ def add_head(module: nn.Module, c: FPNConfig) -> None:
     if c.head not in HEADS:
         raise ValueError(f"unknown FPN head {c.head!r}; expected one of {', '.join(HEADS)}")
     if c.head == "full":
-        module.head = nn.Sequential(conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1))
+        module.head = nn.Sequential(
+            conv_bn_relu(c.pyramid + c.stem, c.pyramid), nn.Conv2d(c.pyramid, c.out_channels, 1)
+        )
         return
     module.reduce = nn.Conv2d(c.pyramid, c.head_channels, 1)
     module.project = nn.Conv2d(c.stem, c.head_channels, 1)
-    module.head = nn.Sequential(conv_bn_relu(c.head_channels, c.head_channels), nn.Conv2d(c.head_channels, c.out_channels, 1))
+    module.head = nn.Sequential(
+        conv_bn_relu(c.head_channels, c.head_channels), nn.Conv2d(c.head_channels, c.out_channels, 1)
+    )
 
 
 def add_surface_head(module: nn.Module, c: FPNConfig, width: int = 32) -> None:
@@ -120,7 +130,9 @@ def add_surface_head(module: nn.Module, c: FPNConfig, width: int = 32) -> None:
     edges that border it (:mod:`csboundary.graph.surface_check`). Cheap: it runs at 1/8 (or 1/4)
     of the patch's resolution."""
     if c.surface:
-        module.surface_head = nn.Sequential(conv_bn_relu(c.pyramid, width), conv_bn_relu(width, width), nn.Conv2d(width, 1, 1))
+        module.surface_head = nn.Sequential(
+            conv_bn_relu(c.pyramid, width), conv_bn_relu(width, width), nn.Conv2d(width, 1, 1)
+        )
 
 
 def with_surface(module: nn.Module, logits: torch.Tensor, fused: torch.Tensor) -> torch.Tensor:
@@ -163,7 +175,9 @@ class ResNetFPN(nn.Module):
         self.stem = nn.Sequential(conv_bn_relu(c.in_channels, c.stem, 2), conv_bn_relu(c.stem, c.stem))
         stages, cin = [], c.stem
         for width, count in zip(c.widths, c.blocks):
-            stages.append(nn.Sequential(BasicBlock(cin, width, 2), *[BasicBlock(width, width) for _ in range(count - 1)]))
+            stages.append(
+                nn.Sequential(BasicBlock(cin, width, 2), *[BasicBlock(width, width) for _ in range(count - 1)])
+            )
             cin = width
         self.stages = nn.ModuleList(stages)
         self.lateral = nn.ModuleList(nn.Conv2d(w, c.pyramid, 1) for w in c.widths)
@@ -199,7 +213,9 @@ class LiteFPN(nn.Module):
             raise ValueError(f"encoder_scale must be 1, 0.5 or 0.25, got {config.encoder_scale}")
         self.config = c = config
         variant = c.backbone.removeprefix("efficientnet-")
-        self.encoder = pretrained_lite(c.in_channels, variant) if c.pretrained else EfficientNetLite(c.in_channels, variant)
+        self.encoder = (
+            pretrained_lite(c.in_channels, variant) if c.pretrained else EfficientNetLite(c.in_channels, variant)
+        )
         levels, channels = (4, 8, 16, 32), tap_channels(variant)
         self.lateral = nn.ModuleList(nn.Conv2d(channels[s], c.pyramid, 1) for s in levels)
         self.smooth = nn.ModuleList(conv_bn_relu(c.pyramid, c.pyramid) for _ in levels)

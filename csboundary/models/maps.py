@@ -44,7 +44,7 @@ def bands_and_maps(data: np.ndarray, maps: np.ndarray) -> np.ndarray:
         unit_bands(data)  # the same refusal
     out = np.empty((data.shape[0] + maps.shape[0], *data.shape[1:]), np.float32)
     np.divide(data, np.float32(255.0), out=out[: data.shape[0]], dtype=np.float32)
-    out[data.shape[0]:] = maps
+    out[data.shape[0] :] = maps
     return out
 
 
@@ -52,7 +52,9 @@ PRECISIONS = ("float32", "bfloat16", "int8")  # int8: ONNX Runtime only (models/
 
 
 @torch.no_grad()
-def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device, precision: str = "float32") -> np.ndarray:
+def predict_probabilities(
+    model: FPN, image: np.ndarray, device: torch.device, precision: str = "float32"
+) -> np.ndarray:
     """(4, h, w) uint8 -> (C, h, w) float32 probabilities (keypoint, segmentation, and the road
     surface when the FPN has that head); a batch (B, 4, h, w) -> (B, C, h, w).
 
@@ -68,7 +70,9 @@ def predict_probabilities(model: FPN, image: np.ndarray, device: torch.device, p
     return probs if batch.ndim == 4 else probs[0]
 
 
-def predict_mosaic_maps(model: FPN, mosaic: Mosaic, grid: PatchGrid, device: torch.device, progress: bool = True) -> np.ndarray:
+def predict_mosaic_maps(
+    model: FPN, mosaic: Mosaic, grid: PatchGrid, device: torch.device, progress: bool = True
+) -> np.ndarray:
     """(C, H, W) float32 probability maps of the whole mosaic, overlaps averaged (C = 2, or 3
     with a surface head).
 

@@ -51,8 +51,11 @@ def cache_dir() -> Path:
     try:
         return check_output_dir(folder, create=True)
     except InputError as exc:
-        raise InputError(folder, f"cannot hold the cached ONNX exports ({exc.problem}); set {CACHE_ENV} to a writable folder "
-                                 "or use --engine torch") from exc
+        raise InputError(
+            folder,
+            f"cannot hold the cached ONNX exports ({exc.problem}); set {CACHE_ENV} to a writable folder "
+            "or use --engine torch",
+        ) from exc
 
 
 @contextlib.contextmanager
@@ -112,8 +115,16 @@ def _export(module: torch.nn.Module, args: tuple, names: tuple[list[str], list[s
     buffer = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation and tracer warnings
-        torch.onnx.export(module, args, buffer, dynamo=False, opset_version=OPSET, input_names=names[0], output_names=names[1],
-                          dynamic_axes=dynamic)
+        torch.onnx.export(
+            module,
+            args,
+            buffer,
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=names[0],
+            output_names=names[1],
+            dynamic_axes=dynamic,
+        )
     return buffer.getvalue()
 
 
@@ -128,17 +139,32 @@ AFANET_INPUTS = ("small", "rois", "xy")
 def export_afanet(afanet) -> bytes:
     with torch.no_grad():
         example = afanet.cpu().eval().views(torch.rand(6, WINDOW, WINDOW), torch.rand(8, 2) * WINDOW)
-    return _export(_AfANetLogits(afanet), example, (list(AFANET_INPUTS), ["logits"]),
-                   {"rois": {0: "m"}, "xy": {0: "m"}, "logits": {0: "m", 1: "m"}})
+    return _export(
+        _AfANetLogits(afanet),
+        example,
+        (list(AFANET_INPUTS), ["logits"]),
+        {"rois": {0: "m"}, "xy": {0: "m"}, "logits": {0: "m", 1: "m"}},
+    )
 
 
 class OnnxNetworks:
     """The FPN and AfANet of one weights file on ONNX Runtime (CPU), and the FPN quantized to
     int8 when ``--precision int8`` asked for it (models/onnx_quantization.py)."""
 
-    def __init__(self, fpn_model: bytes, afanet_model: bytes, threads: int | None = None, levels: dict[str, str] | None = None,
-                 fpn_int8_model: bytes | None = None):
-        self.fpn_model, self.afanet_model, self.fpn_int8_model, self.threads = fpn_model, afanet_model, fpn_int8_model, threads
+    def __init__(
+        self,
+        fpn_model: bytes,
+        afanet_model: bytes,
+        threads: int | None = None,
+        levels: dict[str, str] | None = None,
+        fpn_int8_model: bytes | None = None,
+    ):
+        self.fpn_model, self.afanet_model, self.fpn_int8_model, self.threads = (
+            fpn_model,
+            afanet_model,
+            fpn_int8_model,
+            threads,
+        )
         # leave one core to the rest of the pipeline (see spare_a_core)
         self.spare_core = False
         self.levels = dict(levels or {})  # graph optimisation level per network (see onnx_tuning)
@@ -191,8 +217,11 @@ class OnnxNetworks:
             if not path.exists():
                 with exporting(path):  # another process making this file: wait for it, then read it
                     if not path.exists():
-                        print(f"csboundary: preparing the {name} network for ONNX Runtime (once per network, cached in {folder})",
-                              file=sys.stderr, flush=True)
+                        print(
+                            f"csboundary: preparing the {name} network for ONNX Runtime (once per network, cached in {folder})",
+                            file=sys.stderr,
+                            flush=True,
+                        )
                         data = make()
                         with atomic_path(path) as tmp:
                             tmp.write_bytes(data)
@@ -200,7 +229,11 @@ class OnnxNetworks:
 
         fpn_model = cached("fpn", lambda: export_fpn(fpn))
         afanet_model = cached("afanet", lambda: export_afanet(afanet))
-        int8_model = cached("fpn-int8", lambda: quantize_fpn(fpn_model), f"v{EXPORT_VERSION}q{QUANTIZATION_VERSION}") if int8 else None
+        int8_model = (
+            cached("fpn-int8", lambda: quantize_fpn(fpn_model), f"v{EXPORT_VERSION}q{QUANTIZATION_VERSION}")
+            if int8
+            else None
+        )
         # exporting moved the networks to the CPU and eval mode already; they stay usable in torch
         networks = cls(fpn_model, afanet_model, fpn_int8_model=int8_model)
         networks.tuning_path = folder / f"{key}-tuning-v{EXPORT_VERSION}.json"
@@ -247,12 +280,18 @@ class OnnxNetworks:
         """(B, 4, 1100, 1100) float32 in [0, 1] -> (B, C, 1100, 1100) logits; ``int8``: from the
         quantized FPN (made by ``for_networks(int8=True)``)."""
         if int8 and self.fpn_int8_model is None:
-            raise ValueError("no int8 FPN: it is made by for_networks(int8=True) (PatchPredictor.use_precision('int8') before use_engine)")
-        return self._session("fpn-int8" if int8 else "fpn").run(None, {"image": np.ascontiguousarray(images, np.float32)})[0]
+            raise ValueError(
+                "no int8 FPN: it is made by for_networks(int8=True) (PatchPredictor.use_precision('int8') before use_engine)"
+            )
+        return self._session("fpn-int8" if int8 else "fpn").run(
+            None, {"image": np.ascontiguousarray(images, np.float32)}
+        )[0]
 
     def afanet_logits(self, small: np.ndarray, rois: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """AfANet's views (``AfANet.views``) of M >= 2 vertices -> (M, M) logits."""
         session = self._session("afanet")
         views = dict(zip(AFANET_INPUTS, (small, rois, xy)))
         # a branch that is off (the ablations) leaves its view out of the exported graph
-        return session.run(None, {i.name: np.ascontiguousarray(views[i.name], np.float32) for i in session.get_inputs()})[0]
+        return session.run(
+            None, {i.name: np.ascontiguousarray(views[i.name], np.float32) for i in session.get_inputs()}
+        )[0]

@@ -29,7 +29,9 @@ CALIBRATION_SEED = 0  # training-split city of each style; the windows are the s
 QUANTIZATION_VERSION = 3  # in the cached file's name: bump when the calibration or the settings change
 
 
-def calibration_windows(styles: tuple[str, ...] | None = None, seed: int = CALIBRATION_SEED, real_looks: bool = True) -> list[np.ndarray]:
+def calibration_windows(
+    styles: tuple[str, ...] | None = None, seed: int = CALIBRATION_SEED, real_looks: bool = True
+) -> list[np.ndarray]:
     """One rendered (4, 1100, 1100) uint8 window of a training-split synthetic city per style
     (default: ``CALIBRATION_STYLES``); with ``real_looks``, each also with NIR := green (how RGB
     photographs are read) and re-lit (every other one of those with NIR := green). Without them
@@ -91,8 +93,16 @@ def quantize_fpn(model: bytes, windows: list[np.ndarray] | None = None) -> bytes
             source, prepared, quantized = (Path(tmp) / name for name in ("fpn.onnx", "prepared.onnx", "int8.onnx"))
             source.write_bytes(model)
             quant_pre_process(str(source), str(prepared), skip_symbolic_shape=True)  # shapes and folded constants
-            quantize_static(str(prepared), str(quantized), _Windows(windows), quant_format=QuantFormat.QDQ, per_channel=True,
-                            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, calibrate_method=CalibrationMethod.MinMax)
+            quantize_static(
+                str(prepared),
+                str(quantized),
+                _Windows(windows),
+                quant_format=QuantFormat.QDQ,
+                per_channel=True,
+                activation_type=QuantType.QUInt8,
+                weight_type=QuantType.QInt8,
+                calibrate_method=CalibrationMethod.MinMax,
+            )
             return quantized.read_bytes()
     finally:
         logging.getLogger().setLevel(previous)

@@ -48,8 +48,10 @@ def open_session(model: bytes, threads: int, level: str, name: str):
     options = ort.SessionOptions()
     options.intra_op_num_threads = threads
     options.log_severity_level = 3
-    options.graph_optimization_level = {"all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
-                                        "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED}[level]
+    options.graph_optimization_level = {
+        "all": ort.GraphOptimizationLevel.ORT_ENABLE_ALL,
+        "extended": ort.GraphOptimizationLevel.ORT_ENABLE_EXTENDED,
+    }[level]
     # idle pool threads sleep instead of spinning: the city pipeline runs vertex
     # extraction and AfANet beside the FPN, and spinning threads would take their cores
     # (measured: 0.57 -> 0.52 s/patch end to end; the FPN alone is as fast either way)
@@ -57,5 +59,8 @@ def open_session(model: bytes, threads: int, level: str, name: str):
     try:
         return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # a damaged cache file: one line, not a traceback
-        raise InputError(f"<onnx {name}>", f"ONNX Runtime cannot load the exported network ({str(exc).splitlines()[0]}); "
-                                           f"delete the cached exports in {cache_folder()} (made again on next use)") from exc
+        raise InputError(
+            f"<onnx {name}>",
+            f"ONNX Runtime cannot load the exported network ({str(exc).splitlines()[0]}); "
+            f"delete the cached exports in {cache_folder()} (made again on next use)",
+        ) from exc

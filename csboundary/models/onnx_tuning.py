@@ -48,8 +48,10 @@ def example_inputs(session) -> dict[str, np.ndarray]:
     ``TUNING_VERTICES`` vertices for AfANet's views."""
     rng = np.random.default_rng(0)
     sizes = {"batch": 1, "m": TUNING_VERTICES}
-    return {i.name: rng.random([d if isinstance(d, int) else sizes[d] for d in i.shape], dtype=np.float32)
-            for i in session.get_inputs()}
+    return {
+        i.name: rng.random([d if isinstance(d, int) else sizes[d] for d in i.shape], dtype=np.float32)
+        for i in session.get_inputs()
+    }
 
 
 def fastest_level(seconds: dict[str, float]) -> str:
@@ -57,8 +59,9 @@ def fastest_level(seconds: dict[str, float]) -> str:
     return min(LEVELS, key=lambda level: (seconds.get(level, math.inf), LEVELS.index(level)))
 
 
-def time_levels(model: bytes, name: str, threads: int, runs: int = TIMED_RUNS,
-                clock: Callable[[], float] = time.perf_counter) -> dict[str, float]:
+def time_levels(
+    model: bytes, name: str, threads: int, runs: int = TIMED_RUNS, clock: Callable[[], float] = time.perf_counter
+) -> dict[str, float]:
     """Fastest of ``runs`` timed runs of ``model`` at each level, the levels alternated so that
     a change in the machine's load falls on both."""
     sessions = {level: open_session(model, threads, level, name) for level in LEVELS}
@@ -113,8 +116,11 @@ def tuned_levels(path: Path, models: dict[str, bytes], threads: int) -> dict[str
     if not missing:
         return {name: levels[name] for name in models}
     seconds = dict(entry.get("seconds", {}))
-    print(f"csboundary: timing ONNX Runtime's optimisation levels for {', '.join(missing)} on this machine (once)", file=sys.stderr,
-          flush=True)
+    print(
+        f"csboundary: timing ONNX Runtime's optimisation levels for {', '.join(missing)} on this machine (once)",
+        file=sys.stderr,
+        flush=True,
+    )
     for name in missing:
         times = time_levels(models[name], name, threads)
         levels[name] = fastest_level(times)
@@ -124,7 +130,11 @@ def tuned_levels(path: Path, models: dict[str, bytes], threads: int) -> dict[str
         record = record if isinstance(record, dict) else {}
     except (OSError, ValueError):
         record = {}  # none yet, or damaged: timed again and replaced
-    record[key] = {"levels": levels, "seconds": seconds, "measured": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    record[key] = {
+        "levels": levels,
+        "seconds": seconds,
+        "measured": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
     try:
         with atomic_path(path) as tmp:
             tmp.write_text(json.dumps(record, indent=1) + "\n")

@@ -18,7 +18,9 @@ from csboundary.errors import InputError
 from csboundary.models.checkpoint import file_sha256, load_checkpoint, save_checkpoint
 
 
-def interpolate_state_dicts(start: dict[str, torch.Tensor], tuned: dict[str, torch.Tensor], alpha: float) -> dict[str, torch.Tensor]:
+def interpolate_state_dicts(
+    start: dict[str, torch.Tensor], tuned: dict[str, torch.Tensor], alpha: float
+) -> dict[str, torch.Tensor]:
     """``(1 - alpha) * start + alpha * tuned`` for every floating-point tensor (batch-norm
     statistics included); integer tensors (batch counts) are ``tuned``'s. Both must hold the same
     names and shapes."""
@@ -42,12 +44,23 @@ def interpolate_fpn(start_path: str | Path, tuned_path: str | Path, alpha: float
     start = load_checkpoint(start_path, ("bundle", "fpn"))
     tuned = load_checkpoint(tuned_path, ("fpn",))
     if start["fpn_config"] != tuned["fpn_config"]:
-        raise InputError(tuned_path, f"its FPN is not built like {start_path}'s: interpolate only a fine-tune with its start")
+        raise InputError(
+            tuned_path, f"its FPN is not built like {start_path}'s: interpolate only a fine-tune with its start"
+        )
     try:
         weights = interpolate_state_dicts(start["fpn"], tuned["fpn"], alpha)
     except ValueError as exc:
         raise InputError(tuned_path, str(exc)) from exc
-    record = {"start": str(start_path), "start_sha256": file_sha256(start_path), "tuned": str(tuned_path),
-              "tuned_sha256": file_sha256(tuned_path), "alpha": alpha}
-    kept = {k: tuned[k] for k in ("code_version", "code_version_at_start", "train_config", "step", "validation") if k in tuned}
+    record = {
+        "start": str(start_path),
+        "start_sha256": file_sha256(start_path),
+        "tuned": str(tuned_path),
+        "tuned_sha256": file_sha256(tuned_path),
+        "alpha": alpha,
+    }
+    kept = {
+        k: tuned[k]
+        for k in ("code_version", "code_version_at_start", "train_config", "step", "validation")
+        if k in tuned
+    }
     return save_checkpoint(out, "fpn", fpn=weights, fpn_config=tuned["fpn_config"], interpolation=record, **kept)

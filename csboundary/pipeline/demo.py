@@ -25,11 +25,17 @@ def run_demo(out: str | Path, predictor: PatchPredictor, seed: int = 0) -> dict:
     city_dir = out / "city"
     meta = synthesize_city(city_dir, seed, "test", TILES, SynthConfig(tile_size=TILE_SIZE))
     mosaic, lines = open_imagery([city_dir])
-    settings = {"weights": "shipped", "edge_threshold": predictor.settings.edge_threshold, "device": str(predictor.device),
-                "engine": predictor.engine}
+    settings = {
+        "weights": "shipped",
+        "edge_threshold": predictor.settings.edge_threshold,
+        "device": str(predictor.device),
+        "engine": predictor.engine,
+    }
     if predictor.precision != "float32":  # recorded only then, as in predict
         settings["precision"] = predictor.precision
-    settings["precision_choice"] = predictor.precision_choice or predictor.precision  # --precision auto: what it chose, and why
+    settings["precision_choice"] = (
+        predictor.precision_choice or predictor.precision
+    )  # --precision auto: what it chose, and why
     with mosaic:
         result, summary = run_prediction(mosaic, predictor, out / "prediction", settings=settings, ground_truth=lines)
     scores = evaluate_run(result, lines, seed=0)

@@ -69,8 +69,16 @@ def render_window(
     if grid is not None:
         for patch in grid:
             for w, c in ((patch.expanded, GRID_EXPANDED), (patch.core, GRID_CORE)):
-                corners = np.array([[w.col_off, w.row_off], [w.col_end, w.row_off], [w.col_end, w.row_end], [w.col_off, w.row_end],
-                                    [w.col_off, w.row_off]], float)
+                corners = np.array(
+                    [
+                        [w.col_off, w.row_off],
+                        [w.col_end, w.row_off],
+                        [w.col_end, w.row_end],
+                        [w.col_off, w.row_end],
+                        [w.col_off, w.row_off],
+                    ],
+                    float,
+                )
                 draw_lines(rgb, [(corners - [window.col_off, window.row_off]) * scale], c, 1)
     draw_world_lines(rgb, mosaic, window, boundaries, colour, max_size)
     for lines_world, layer_colour in layers:
@@ -78,8 +86,14 @@ def render_window(
     return rgb
 
 
-def draw_world_lines(rgb: np.ndarray, mosaic: Mosaic, window: PixelWindow, lines_world: Iterable[LineString], colour,
-                     max_size: int | None = None) -> None:
+def draw_world_lines(
+    rgb: np.ndarray,
+    mosaic: Mosaic,
+    window: PixelWindow,
+    lines_world: Iterable[LineString],
+    colour,
+    max_size: int | None = None,
+) -> None:
     """Draw world LineStrings onto a picture :func:`render_window` made of ``window`` (same
     ``max_size``), in place; lines off the window are skipped."""
     scale = overview_scale(window, max_size)

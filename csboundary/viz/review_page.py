@@ -58,8 +58,11 @@ def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
     for r, c in made:
         win = PixelWindow(c * TILE, r * TILE, min(TILE, width - c * TILE), min(TILE, height - r * TILE))
         read = mosaic.read(win)
-        cv2.imwrite(str(folder / "0" / f"{r}_{c}.jpg"), to_display(read.data, read.valid)[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY,
-                                                                                                        JPEG_QUALITY])
+        cv2.imwrite(
+            str(folder / "0" / f"{r}_{c}.jpg"),
+            to_display(read.data, read.valid)[:, :, ::-1],
+            [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY],
+        )
         bar.update(1)
     bar.close()
     heights = [min(TILE, height - r * TILE) for r in range(math.ceil(height / TILE))]  # px of each tile row and column
@@ -70,20 +73,26 @@ def write_pyramid(mosaic: Mosaic, folder: Path, progress: bool = True) -> int:
         for r, c in made:
             rows = heights[2 * r : 2 * r + 2]
             cols = widths[2 * c : 2 * c + 2]
-            image = np.zeros((sum(rows), sum(cols), 3), np.uint8)  # a child without imagery stays black, as no-data does
+            image = np.zeros(
+                (sum(rows), sum(cols), 3), np.uint8
+            )  # a child without imagery stays black, as no-data does
             for dr in range(len(rows)):
                 for dc in range(len(cols)):
                     if (2 * r + dr, 2 * c + dc) in below:
                         child = cv2.imread(str(folder / str(level - 1) / f"{2 * r + dr}_{2 * c + dc}.jpg"))
                         image[dr * rows[0] : dr * rows[0] + rows[dr], dc * cols[0] : dc * cols[0] + cols[dc]] = child
-            small = cv2.resize(image, (max(1, image.shape[1] // 2), max(1, image.shape[0] // 2)), interpolation=cv2.INTER_AREA)
+            small = cv2.resize(
+                image, (max(1, image.shape[1] // 2), max(1, image.shape[0] // 2)), interpolation=cv2.INTER_AREA
+            )
             cv2.imwrite(str(folder / str(level) / f"{r}_{c}.jpg"), small, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         heights = [max(1, sum(heights[k : k + 2]) // 2) for k in range(0, len(heights), 2)]
         widths = [max(1, sum(widths[k : k + 2]) // 2) for k in range(0, len(widths), 2)]
     return levels
 
 
-def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=(), boundaries: list[dict] | None = None) -> dict:
+def page_data(
+    graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=(), boundaries: list[dict] | None = None
+) -> dict:
     """What the page draws, in mosaic pixels: vertices, edges (polyline, score, kind), the
     boundaries a reviewer acts on (``boundaries``: each one's ``edges`` in walk order, ``score``,
     ``draft`` and ``length_m``; by default the graph's chains, all in the draft) and the ground
@@ -98,25 +107,60 @@ def page_data(graph: BoundaryGraph, mosaic: Mosaic, levels: int, ground_truth=()
     edges = []
     for k, (u, v) in enumerate(graph.edges):
         line = graph.edge_polyline(k)
-        score = float(graph.edge_scores[k]) if graph.edge_scores is not None and np.isfinite(graph.edge_scores[k]) else None
-        edges.append({"id": k, "u": int(u), "v": int(v), "line": np.round(to_mosaic(np.asarray(line, float)), 2).tolist(), "score": score,
-                      "kind": graph.edge_kinds[k] if graph.edge_kinds is not None else "normal"})
+        score = (
+            float(graph.edge_scores[k]) if graph.edge_scores is not None and np.isfinite(graph.edge_scores[k]) else None
+        )
+        edges.append(
+            {
+                "id": k,
+                "u": int(u),
+                "v": int(v),
+                "line": np.round(to_mosaic(np.asarray(line, float)), 2).tolist(),
+                "score": score,
+                "kind": graph.edge_kinds[k] if graph.edge_kinds is not None else "normal",
+            }
+        )
     gt = []
     for line in ground_truth:
         xy = np.asarray(line.coords)[:, :2]
         cols, rows = world_to_pixel(mosaic.transform, xy[:, 0], xy[:, 1])
         gt.append(np.round(np.stack([cols, rows], axis=1), 2).tolist())
     if boundaries is None:
-        boundaries = [{"edges": b.edges.tolist(), "score": b.confidence if np.isfinite(b.confidence) else None, "draft": True,
-                       "length_m": None} for b in graph_boundaries(graph)]
-    return {"width": mosaic.width, "height": mosaic.height, "tile": TILE, "levels": levels, "crs": graph.crs,
-            "transform": list(mosaic.transform)[:6], "vertices": np.round(vertices, 3).tolist(), "edges": edges,
-            "boundaries": boundaries, "ground_truth": gt}
+        boundaries = [
+            {
+                "edges": b.edges.tolist(),
+                "score": b.confidence if np.isfinite(b.confidence) else None,
+                "draft": True,
+                "length_m": None,
+            }
+            for b in graph_boundaries(graph)
+        ]
+    return {
+        "width": mosaic.width,
+        "height": mosaic.height,
+        "tile": TILE,
+        "levels": levels,
+        "crs": graph.crs,
+        "transform": list(mosaic.transform)[:6],
+        "vertices": np.round(vertices, 3).tolist(),
+        "edges": edges,
+        "boundaries": boundaries,
+        "ground_truth": gt,
+    }
 
 
-def write_review_page(graph: BoundaryGraph, mosaic: Mosaic, out: str | Path, ground_truth=(), progress: bool = True,
-                      fingerprint: str | None = None, ids: tuple[np.ndarray, np.ndarray] | None = None,
-                      review_costs: dict | None = None, boundaries: list[dict] | None = None, metres_per_px: float | None = None) -> Path:
+def write_review_page(
+    graph: BoundaryGraph,
+    mosaic: Mosaic,
+    out: str | Path,
+    ground_truth=(),
+    progress: bool = True,
+    fingerprint: str | None = None,
+    ids: tuple[np.ndarray, np.ndarray] | None = None,
+    review_costs: dict | None = None,
+    boundaries: list[dict] | None = None,
+    metres_per_px: float | None = None,
+) -> Path:
     """The review folder ``out`` (``index.html``, ``data.js``, the scripts, ``tiles/``);
     ``fingerprint`` (of the graph's file) goes into every edits file the page exports. ``ids``
     (edge numbers, vertex numbers) are those of a district's edges and vertices in the whole

@@ -23,13 +23,13 @@ import numpy as np
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.metrics.compare import paired_bootstrap
 from csboundary.metrics.confidence import TRUE_SHARE, edge_truth, roc_auc
-from csboundary.pipeline.prediction.run import evaluate_run
 from csboundary.models.checkpoint import shipped_weights
 from csboundary.models.training.adapt import AdaptConfig
-from csboundary.pipeline.training.adapt import AdaptBudget, adapt
 from csboundary.pipeline.evaluation.evaluate_set import predicted_city, score_value, set_cities
-from csboundary.pipeline.training.finetune_cv import folds_of
 from csboundary.pipeline.prediction.patch import load_predictor
+from csboundary.pipeline.prediction.run import evaluate_run
+from csboundary.pipeline.training.adapt import AdaptBudget, adapt
+from csboundary.pipeline.training.finetune_cv import folds_of
 
 COMPARED = ("f1@5", "precision@5", "recall@5", "apls", "tlts")
 
@@ -44,8 +44,11 @@ def city_scores(cities: list[Path], weights: Path, seed: int) -> dict:
         gt = BoundaryGraph.from_world_lines(list(lines), result.grid.transform)
         truth = edge_truth(result.graph, gt) if result.graph.n_edges else np.zeros(0)
         scores = result.graph.edge_scores if result.graph.edge_scores is not None else np.zeros(0)
-        out[city.name] = {"metrics": {k: score_value(metrics.get(k)) for k in COMPARED},
-                          "confidence": [float(v) for v in scores], "true": [bool(v >= TRUE_SHARE) for v in truth]}
+        out[city.name] = {
+            "metrics": {k: score_value(metrics.get(k)) for k in COMPARED},
+            "confidence": [float(v) for v in scores],
+            "true": [bool(v >= TRUE_SHARE) for v in truth],
+        }
     return out
 
 
@@ -65,9 +68,13 @@ def auc_interval(base: dict, adapted: dict, names: list[str], seed: int, samples
     draws = np.array(draws)
     ok = np.isfinite(draws).all(axis=1)
     d = draws[ok]
-    return {"base": pooled_auc(base, names), "adapted": pooled_auc(adapted, names),
-            "base_interval": np.percentile(d[:, 0], [2.5, 97.5]).tolist(), "adapted_interval": np.percentile(d[:, 1], [2.5, 97.5]).tolist(),
-            "difference_interval": np.percentile(d[:, 1] - d[:, 0], [2.5, 97.5]).tolist()}
+    return {
+        "base": pooled_auc(base, names),
+        "adapted": pooled_auc(adapted, names),
+        "base_interval": np.percentile(d[:, 0], [2.5, 97.5]).tolist(),
+        "adapted_interval": np.percentile(d[:, 1], [2.5, 97.5]).tolist(),
+        "difference_interval": np.percentile(d[:, 1] - d[:, 0], [2.5, 97.5]).tolist(),
+    }
 
 
 def main() -> None:
@@ -83,42 +90,75 @@ def main() -> None:
     parser.add_argument("--method", default="{}", help="AdaptConfig overrides as JSON")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    budget = AdaptBudget.from_dict({k: v for k, v in (("fpn_steps", args.fpn_steps), ("afanet_steps", args.afanet_steps)) if v is not None})
+    budget = AdaptBudget.from_dict(
+        {k: v for k, v in (("fpn_steps", args.fpn_steps), ("afanet_steps", args.afanet_steps)) if v is not None}
+    )
     method = AdaptConfig.from_dict(json.loads(args.method))
     base = args.weights or shipped_weights()
     cities = set_cities(args.set)
-    plan = ([(f"fold-{i}", [c for c in cities if c not in held], held) for i, held in enumerate(folds_of(cities, args.folds))]
-            if args.mode == "folds" else [("all", cities, cities)])
+    plan = (
+        [
+            (f"fold-{i}", [c for c in cities if c not in held], held)
+            for i, held in enumerate(folds_of(cities, args.folds))
+        ]
+        if args.mode == "folds"
+        else [("all", cities, cities)]
+    )
     base_scores, adapted_scores, seconds = {}, {}, []
     for name, train, held in plan:
         folder = args.out / name
         scores_file = folder / "scores.json"
         if not scores_file.exists():
-            done = adapt(train, folder / "adapted.pt", weights=base, work=folder / "work", budget=budget, method=method, seed=args.seed,
-                         cache=args.cache, device="cpu")
-            record = {"train": [c.name for c in train], "held_out": [c.name for c in held], "seconds": done["seconds"],
-                      "base": city_scores(held, base, args.seed), "adapted": city_scores(held, folder / "adapted.pt", args.seed)}
+            done = adapt(
+                train,
+                folder / "adapted.pt",
+                weights=base,
+                work=folder / "work",
+                budget=budget,
+                method=method,
+                seed=args.seed,
+                cache=args.cache,
+                device="cpu",
+            )
+            record = {
+                "train": [c.name for c in train],
+                "held_out": [c.name for c in held],
+                "seconds": done["seconds"],
+                "base": city_scores(held, base, args.seed),
+                "adapted": city_scores(held, folder / "adapted.pt", args.seed),
+            }
             scores_file.write_text(json.dumps(record) + "\n")
         record = json.loads(scores_file.read_text())
         base_scores.update(record["base"])
         adapted_scores.update(record["adapted"])
         seconds.append(sum(record["seconds"].values()))
     names = sorted(base_scores)
-    lines = [f"{args.set}: {len(names)} cities, mode {args.mode}, budget {budget.to_dict()}, method {method.to_dict()}",
-             "adapting took " + ", ".join(f"{s / 60:.1f} min" for s in seconds),
-             f"{'':12s}{'base':>8s}{'adapted':>8s}{'gain':>8s}   95 % interval   adapted better in"]
+    lines = [
+        f"{args.set}: {len(names)} cities, mode {args.mode}, budget {budget.to_dict()}, method {method.to_dict()}",
+        "adapting took " + ", ".join(f"{s / 60:.1f} min" for s in seconds),
+        f"{'':12s}{'base':>8s}{'adapted':>8s}{'gain':>8s}   95 % interval   adapted better in",
+    ]
     summary = {}
     for metric in COMPARED:
         a = [base_scores[n]["metrics"][metric] for n in names]
         b = [adapted_scores[n]["metrics"][metric] for n in names]
         diff, low, high, wins = paired_bootstrap(a, b, seed=args.seed)
-        summary[metric] = {"base": float(np.mean(a)), "adapted": float(np.mean(b)), "gain": diff, "interval_95": [low, high]}
-        lines.append(f"{metric:12s}{np.mean(a):8.3f}{np.mean(b):8.3f}{diff:+8.3f}   [{low:+.3f}, {high:+.3f}]   {wins:.2f} of draws")
+        summary[metric] = {
+            "base": float(np.mean(a)),
+            "adapted": float(np.mean(b)),
+            "gain": diff,
+            "interval_95": [low, high],
+        }
+        lines.append(
+            f"{metric:12s}{np.mean(a):8.3f}{np.mean(b):8.3f}{diff:+8.3f}   [{low:+.3f}, {high:+.3f}]   {wins:.2f} of draws"
+        )
     auc = auc_interval(base_scores, adapted_scores, names, args.seed)
     summary["edge_confidence_auc"] = auc
-    lines.append(f"edge AUC    {auc['base']:8.3f}{auc['adapted']:8.3f}{auc['adapted'] - auc['base']:+8.3f}   "
-                 f"[{auc['difference_interval'][0]:+.3f}, {auc['difference_interval'][1]:+.3f}]   base interval "
-                 f"[{auc['base_interval'][0]:.3f}, {auc['base_interval'][1]:.3f}]")
+    lines.append(
+        f"edge AUC    {auc['base']:8.3f}{auc['adapted']:8.3f}{auc['adapted'] - auc['base']:+8.3f}   "
+        f"[{auc['difference_interval'][0]:+.3f}, {auc['difference_interval'][1]:+.3f}]   base interval "
+        f"[{auc['base_interval'][0]:.3f}, {auc['base_interval'][1]:.3f}]"
+    )
     text = "\n".join(lines)
     print(text)
     (args.out / "report.txt").write_text(text + "\n")

@@ -34,7 +34,12 @@ def failure_shares(pred: BoundaryGraph, gt: BoundaryGraph) -> np.ndarray:
         return np.full(4, np.nan)
     finite = np.isfinite(pairs.pred_length)
     cost = pair_costs(pairs.gt_length, pairs.pred_length)
-    counts = [(~pairs.matched).sum(), (pairs.matched & ~pairs.connected).sum(), (pairs.connected & ~finite).sum(), cost[finite].sum()]
+    counts = [
+        (~pairs.matched).sum(),
+        (pairs.matched & ~pairs.connected).sum(),
+        (pairs.connected & ~finite).sum(),
+        cost[finite].sum(),
+    ]
     return np.array(counts, float) / pairs.n_pairs
 
 
@@ -54,7 +59,9 @@ def main() -> None:
             if len(cities) > 1:
                 print(f"  {c.name:26s} " + " ".join(f"{v:12.3f}" for v in rows[-1]) + f" {1 - rows[-1].sum():12.3f}")
         mean = np.nanmean(rows, axis=0)
-        print(f"{Path(s).name[:28]:28s} " + " ".join(f"{v:12.3f}" for v in mean) + f" {1 - mean.sum():12.3f}", flush=True)
+        print(
+            f"{Path(s).name[:28]:28s} " + " ".join(f"{v:12.3f}" for v in mean) + f" {1 - mean.sum():12.3f}", flush=True
+        )
 
 
 if __name__ == "__main__":

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.data import city as layout
-from csboundary.pipeline.training.confidence_fit import city_edges
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
+from csboundary.pipeline.training.confidence_fit import city_edges
 
 
 def main() -> None:
@@ -38,10 +38,17 @@ def main() -> None:
         if target.exists():
             continue
         edges = city_edges(city, predictor, assume_model_gsd=True)
-        np.savez(target, evidence=edges.evidence if edges.evidence is not None else np.zeros((0, 0)), truth_share=edges.truth_share,
-                 length=edges.graph.edge_lengths(), kinds=np.array(edges.graph.edge_kinds or [], dtype=str))
-        print(f"{target}: {edges.graph.n_edges} edges, {edges.positive.mean() if len(edges.positive) else float('nan'):.2f} true",
-              flush=True)
+        np.savez(
+            target,
+            evidence=edges.evidence if edges.evidence is not None else np.zeros((0, 0)),
+            truth_share=edges.truth_share,
+            length=edges.graph.edge_lengths(),
+            kinds=np.array(edges.graph.edge_kinds or [], dtype=str),
+        )
+        print(
+            f"{target}: {edges.graph.n_edges} edges, {edges.positive.mean() if len(edges.positive) else float('nan'):.2f} true",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -60,7 +60,9 @@ def pooled(graph, features: np.ndarray, stride: float) -> np.ndarray:
     for k in range(graph.n_edges):
         pts, nrm = points_along(edge_line(graph, k), 2.0)
         along = _at(features, pts, stride).mean(axis=1)
-        side = np.abs(_at(features, pts + SIDE_PX * nrm, stride) - _at(features, pts - SIDE_PX * nrm, stride)).mean(axis=1)
+        side = np.abs(_at(features, pts + SIDE_PX * nrm, stride) - _at(features, pts - SIDE_PX * nrm, stride)).mean(
+            axis=1
+        )
         out[k] = np.concatenate([along, side])
     return out
 
@@ -73,15 +75,22 @@ def city_record(city: Path, predictor, cache: Path, prefix: str) -> Path:
     data, _ = model_image(city, predictor)
     features, stride = pyramid(predictor.fpn, data)
     evidence = edges.evidence if edges.graph.n_edges else np.zeros((0, len(FEATURES)))
-    np.savez(target, evidence=evidence, fpn=pooled(edges.graph, features, stride), truth_share=edges.truth_share,
-             length=edges.graph.edge_lengths())
+    np.savez(
+        target,
+        evidence=evidence,
+        fpn=pooled(edges.graph, features, stride),
+        truth_share=edges.truth_share,
+        length=edges.graph.edge_lengths(),
+    )
     print(f"{target.name}: {edges.graph.n_edges} edges", flush=True)
     return target
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("sets", nargs="+", help="NAME=PATH[,PATH...]: set folders or city directories; the first is fitted on")
+    parser.add_argument(
+        "sets", nargs="+", help="NAME=PATH[,PATH...]: set folders or city directories; the first is fitted on"
+    )
     parser.add_argument("--cache", type=Path, required=True)
     parser.add_argument("--weights", type=Path, default=None)
     parser.add_argument("--components", type=int, nargs="+", default=[4, 8, 16])
@@ -89,7 +98,10 @@ def main() -> None:
     args.cache.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(2)
     predictor = load_predictor(args.weights, "cpu")
-    sets = {name: [city_record(c, predictor, args.cache, name) for c in cities] for name, cities in named_cities(args.sets).items()}
+    sets = {
+        name: [city_record(c, predictor, args.cache, name) for c in cities]
+        for name, cities in named_cities(args.sets).items()
+    }
     names = list(sets)
     fit = load(sets[names[0]], ("evidence", "fpn"))
     from sklearn.decomposition import PCA
@@ -99,8 +111,13 @@ def main() -> None:
     for k in args.components:
         pca = PCA(n_components=k, random_state=0).fit((fit["fpn"] - fit["fpn"].mean(0)) / (fit["fpn"].std(0) + 1e-6))
         scale = (fit["fpn"].mean(0), fit["fpn"].std(0) + 1e-6)
-        columns[f"+ fpn pca{k}"] = (lambda pca, scale: lambda d: np.concatenate(
-            [d["evidence"][:, finite], pca.transform((d["fpn"] - scale[0]) / scale[1])], axis=1))(pca, scale)
+        columns[f"+ fpn pca{k}"] = (
+            lambda pca, scale: (
+                lambda d: np.concatenate(
+                    [d["evidence"][:, finite], pca.transform((d["fpn"] - scale[0]) / scale[1])], axis=1
+                )
+            )
+        )(pca, scale)
     models = {label: (make, fit_trees(make(fit), fit)) for label, make in columns.items()}
     print(f"fitted on {len(fit['length'])} edges of {len(sets[names[0]])} cities")
     print(f"{'set':24s} {'edges':>6s} " + "".join(f"{label + ' AUC':>24s}{'ECE':>7s}" for label in models))

@@ -30,12 +30,22 @@ from csboundary.graph.chains import edge_line
 from csboundary.graph.edge_evidence import FEATURES
 from csboundary.graph.polyline import points_along
 from csboundary.metrics.confidence import TRUE_SHARE, confidence_report
-from csboundary.pipeline.training.confidence_fit import TREE_SHARE, city_edges
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
+from csboundary.pipeline.training.confidence_fit import TREE_SHARE, city_edges
 
-IMAGE_FEATURES = ("img_grad_on", "img_grad_across", "img_align", "img_step", "img_color_step", "img_step_far",
-                  "img_green_high", "img_green_low", "img_texture_high", "img_texture_low")
+IMAGE_FEATURES = (
+    "img_grad_on",
+    "img_grad_across",
+    "img_align",
+    "img_step",
+    "img_color_step",
+    "img_step_far",
+    "img_green_high",
+    "img_green_low",
+    "img_texture_high",
+    "img_texture_low",
+)
 
 
 def image_channels(rgb: np.ndarray, valid: np.ndarray) -> dict[str, np.ndarray]:
@@ -51,9 +61,15 @@ def image_channels(rgb: np.ndarray, valid: np.ndarray) -> dict[str, np.ndarray]:
     v = valid if valid.any() else np.ones_like(valid)
     grad_scale = float(np.median(grad[v])) + 1e-4
     gray_scale = float(np.std(gray[v])) + 1e-4
-    return {"gx": gx / grad_scale, "gy": gy / grad_scale, "grad": grad / grad_scale, "gray": smooth / gray_scale,
-            "rgb": rgb / gray_scale, "green": green / (float(np.std(green[v])) + 1e-4),
-            "texture": texture / (float(np.median(texture[v])) + 1e-4)}
+    return {
+        "gx": gx / grad_scale,
+        "gy": gy / grad_scale,
+        "grad": grad / grad_scale,
+        "gray": smooth / gray_scale,
+        "rgb": rgb / gray_scale,
+        "green": green / (float(np.std(green[v])) + 1e-4),
+        "texture": texture / (float(np.median(texture[v])) + 1e-4),
+    }
 
 
 def _at(image: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -71,12 +87,28 @@ def image_evidence(graph, channels: dict[str, np.ndarray]) -> np.ndarray:
         grad = _at(channels["grad"], pts)
         across = np.abs(_at(channels["gx"], pts) * nrm[:, 0] + _at(channels["gy"], pts) * nrm[:, 1])
         step = abs(np.mean(_at(channels["gray"], pts + 4 * nrm)) - np.mean(_at(channels["gray"], pts - 4 * nrm)))
-        color = np.mean(np.linalg.norm(_at(channels["rgb"], pts + 4 * nrm) - _at(channels["rgb"], pts - 4 * nrm), axis=0))
+        color = np.mean(
+            np.linalg.norm(_at(channels["rgb"], pts + 4 * nrm) - _at(channels["rgb"], pts - 4 * nrm), axis=0)
+        )
         far = abs(np.mean(_at(channels["gray"], pts + 12 * nrm)) - np.mean(_at(channels["gray"], pts - 12 * nrm)))
-        green = np.sort([np.mean(_at(channels["green"], pts + 6 * nrm)), np.mean(_at(channels["green"], pts - 6 * nrm))])
-        texture = np.sort([np.mean(_at(channels["texture"], pts + 6 * nrm)), np.mean(_at(channels["texture"], pts - 6 * nrm))])
-        out[k] = (np.mean(grad), np.mean(across), np.mean(across) / (np.mean(grad) + 1e-6), step, color, far,
-                  green[1], green[0], texture[1], texture[0])
+        green = np.sort(
+            [np.mean(_at(channels["green"], pts + 6 * nrm)), np.mean(_at(channels["green"], pts - 6 * nrm))]
+        )
+        texture = np.sort(
+            [np.mean(_at(channels["texture"], pts + 6 * nrm)), np.mean(_at(channels["texture"], pts - 6 * nrm))]
+        )
+        out[k] = (
+            np.mean(grad),
+            np.mean(across),
+            np.mean(across) / (np.mean(grad) + 1e-6),
+            step,
+            color,
+            far,
+            green[1],
+            green[0],
+            texture[1],
+            texture[0],
+        )
     return out
 
 
@@ -99,8 +131,13 @@ def city_record(city: Path, predictor, cache: Path, prefix: str) -> Path:
     data, valid = model_image(city, predictor)
     channels = image_channels(data[:3], valid)
     evidence = edges.evidence if edges.graph.n_edges else np.zeros((0, len(FEATURES)))
-    np.savez(target, evidence=evidence, image=image_evidence(edges.graph, channels), truth_share=edges.truth_share,
-             length=edges.graph.edge_lengths())
+    np.savez(
+        target,
+        evidence=evidence,
+        image=image_evidence(edges.graph, channels),
+        truth_share=edges.truth_share,
+        length=edges.graph.edge_lengths(),
+    )
     print(f"{target.name}: {edges.graph.n_edges} edges", flush=True)
     return target
 
@@ -128,13 +165,18 @@ def load(files: list[Path], columns: tuple[str, ...] = ("evidence", "image")) ->
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("sets", nargs="+", help="NAME=PATH[,PATH...]: set folders or city directories; the first is fitted on")
+    parser.add_argument(
+        "sets", nargs="+", help="NAME=PATH[,PATH...]: set folders or city directories; the first is fitted on"
+    )
     parser.add_argument("--cache", type=Path, required=True)
     parser.add_argument("--weights", type=Path, default=None)
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     predictor = load_predictor(args.weights, "cpu")
-    sets = {name: [city_record(c, predictor, args.cache, name) for c in cities] for name, cities in named_cities(args.sets).items()}
+    sets = {
+        name: [city_record(c, predictor, args.cache, name) for c in cities]
+        for name, cities in named_cities(args.sets).items()
+    }
     names = list(sets)
     fit = load(sets[names[0]])
     with_image = lambda d: np.concatenate([d["evidence"], d["image"]], axis=1)  # noqa: E731

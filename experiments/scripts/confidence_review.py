@@ -22,9 +22,9 @@ from csboundary.data import city as layout
 from csboundary.metrics.confidence import confidence_report
 from csboundary.models.checkpoint import load_checkpoint, shipped_weights
 from csboundary.models.confidence import EdgeConfidence
-from csboundary.pipeline.training.confidence_fit import city_edges
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
+from csboundary.pipeline.training.confidence_fit import city_edges
 
 
 def main() -> None:
@@ -37,8 +37,10 @@ def main() -> None:
     predictor = load_predictor(weights, "cpu")
     table = EdgeConfidence.from_dict(load_checkpoint(weights, ("bundle",))["confidence"], weights)
     out = {}
-    print(f"{'set':22s} {'edges':>6s} {'true':>5s} {'AUC':>6s} {'ECE':>6s}   least sure 20 %: false edges (of attainable), false length "
-          f"(of attainable)")
+    print(
+        f"{'set':22s} {'edges':>6s} {'true':>5s} {'AUC':>6s} {'ECE':>6s}   least sure 20 %: false edges (of attainable), false length "
+        f"(of attainable)"
+    )
     for item in args.sets:
         name, path = item.split("=", 1)
         path = Path(path)
@@ -51,10 +53,12 @@ def main() -> None:
         r = confidence_report(p, share, length)
         out[name] = r
         v = r["review"]["0.2"]
-        print(f"{name:22s} {r['edges']:6d} {r['share_true']:5.2f} {r['auc']:6.3f} {r['ece']:6.3f}   "
-              f"{v['false_edges']:.2f} ({v['false_edges_of_attainable']:.2f}), {v['false_length']:.2f} "
-              f"({v['false_length_of_attainable']:.2f})",
-              flush=True)
+        print(
+            f"{name:22s} {r['edges']:6d} {r['share_true']:5.2f} {r['auc']:6.3f} {r['ece']:6.3f}   "
+            f"{v['false_edges']:.2f} ({v['false_edges_of_attainable']:.2f}), {v['false_length']:.2f} "
+            f"({v['false_length_of_attainable']:.2f})",
+            flush=True,
+        )
     if args.json:
         args.json.write_text(json.dumps(out, indent=1, default=float) + "\n")
 

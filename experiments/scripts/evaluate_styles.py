@@ -26,8 +26,21 @@ def city_dir(style: str, cache: Path, seed: int = 7) -> Path:
     name = f"test-s{seed}-2x2-2000" if style == "classic" else f"test-{style}-s{seed}-2x2-2000"
     path = cache / name
     if not (path / "city.json").exists():
-        cli("synth", str(path), "--style", style, "--split", "test", "--seed", str(seed), "--tiles", "2x2", "--tile-size", "2000",
-            "--quiet")
+        cli(
+            "synth",
+            str(path),
+            "--style",
+            style,
+            "--split",
+            "test",
+            "--seed",
+            str(seed),
+            "--tiles",
+            "2x2",
+            "--tile-size",
+            "2000",
+            "--quiet",
+        )
     return path
 
 
@@ -43,7 +56,9 @@ def mean_row(results: dict, seeds: list[int]) -> dict:
         for style in {k.split("-s")[0] for k in row}:
             cells = [row.get(cell(style, seed)) for seed in seeds]
             if all(cells):
-                out.setdefault(name, {})[style] = {k: sum(c[k] for c in cells) / len(cells) for k in ("f1@5", "apls", "tlts")}
+                out.setdefault(name, {})[style] = {
+                    k: sum(c[k] for c in cells) / len(cells) for k in ("f1@5", "apls", "tlts")
+                }
     return out
 
 
@@ -54,16 +69,24 @@ def cli(*args: str) -> None:
 def loso_table(results: dict, held_out: list[str], reference: str = "shipped") -> str:
     """APLS on each held-out style: by the model trained without it, by the other leave-one-out
     models (same budget, the style seen: their mean), and by ``reference`` (the shipped model)."""
-    rows = ["| style left out | APLS without it (F1@5) | APLS of the same-budget models that saw it (mean of 3) | APLS, shipped model "
-            "(longer, saw it) |",
-            "|---|---|---|---|"]
+    rows = [
+        "| style left out | APLS without it (F1@5) | APLS of the same-budget models that saw it (mean of 3) | APLS, shipped model "
+        "(longer, saw it) |",
+        "|---|---|---|---|",
+    ]
     for style in held_out:
         own = results[f"without-{style}"].get(style)
-        seen = [results[f"without-{o}"][style]["apls"] for o in held_out if o != style and style in results[f"without-{o}"]]
+        seen = [
+            results[f"without-{o}"][style]["apls"] for o in held_out if o != style and style in results[f"without-{o}"]
+        ]
         ref = results.get(reference, {}).get(style)
-        rows.append(f"| {style} | {own['apls']:.3f} ({own['f1@5']:.3f}) | "
-                    + (f"{sum(seen) / len(seen):.3f} ({', '.join(f'{v:.3f}' for v in seen)})" if seen else "") + " | "
-                    + (f"{ref['apls']:.3f}" if ref else "") + " |")
+        rows.append(
+            f"| {style} | {own['apls']:.3f} ({own['f1@5']:.3f}) | "
+            + (f"{sum(seen) / len(seen):.3f} ({', '.join(f'{v:.3f}' for v in seen)})" if seen else "")
+            + " | "
+            + (f"{ref['apls']:.3f}" if ref else "")
+            + " |"
+        )
     return "\n".join(rows)
 
 
@@ -71,10 +94,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bundle", action="append", required=True, help="NAME=PATH of a weights bundle (repeatable)")
     parser.add_argument("--styles", default=",".join(STYLES), help="comma-separated styles to score")
-    parser.add_argument("--seeds", default="7", help="comma-separated city seeds per style (the tables show their mean)")
+    parser.add_argument(
+        "--seeds", default="7", help="comma-separated city seeds per style (the tables show their mean)"
+    )
     parser.add_argument("--cache", type=Path, default=Path("data/cities"))
     parser.add_argument("--out", type=Path, required=True, help="JSON of results (read first: finished cells are kept)")
-    parser.add_argument("--loso-table", action="store_true", help="also print the leave-one-style-out table from the 'without-STYLE' rows")
+    parser.add_argument(
+        "--loso-table",
+        action="store_true",
+        help="also print the leave-one-style-out table from the 'without-STYLE' rows",
+    )
     args = parser.parse_args()
     results = json.loads(args.out.read_text()) if args.out.exists() else {}
     styles, seeds = args.styles.split(","), [int(s) for s in args.seeds.split(",")]
@@ -86,9 +115,19 @@ def main() -> None:
                     continue
                 with tempfile.TemporaryDirectory() as tmp:
                     report = Path(tmp) / "eval.json"
-                    cli("evaluate-model", str(city_dir(style, args.cache, seed)), "--weights", path, "--json", str(report), "--quiet")
+                    cli(
+                        "evaluate-model",
+                        str(city_dir(style, args.cache, seed)),
+                        "--weights",
+                        path,
+                        "--json",
+                        str(report),
+                        "--quiet",
+                    )
                     metrics = json.loads(report.read_text())["city"]["metrics"]
-                results.setdefault(name, {})[cell(style, seed)] = {k: round(metrics[k], 4) for k in ("f1@5", "apls", "tlts")}
+                results.setdefault(name, {})[cell(style, seed)] = {
+                    k: round(metrics[k], 4) for k in ("f1@5", "apls", "tlts")
+                }
                 args.out.parent.mkdir(parents=True, exist_ok=True)
                 args.out.write_text(json.dumps(results, indent=2) + "\n")
     results = mean_row(results, seeds)
@@ -97,7 +136,9 @@ def main() -> None:
     print("| model | " + " | ".join(styles) + " |")
     print("|---|" + "---|" * len(styles))
     for name, row in results.items():
-        cells = [f"{row[s]['f1@5']:.3f} / {row[s]['apls']:.3f} / {row[s]['tlts']:.3f}" if s in row else "" for s in styles]
+        cells = [
+            f"{row[s]['f1@5']:.3f} / {row[s]['apls']:.3f} / {row[s]['tlts']:.3f}" if s in row else "" for s in styles
+        ]
         print(f"| {name} | " + " | ".join(cells) + " |")
 
 

@@ -54,7 +54,9 @@ class FakeQuantConv(nn.Module):
         x = torch.fake_quantize_per_tensor_affine(x, scale, zero, 0, 255)
         w = self.conv.weight
         w_scale = (w.detach().abs().amax(dim=(1, 2, 3)) / 127.0).clamp_min(1e-8)
-        w = torch.fake_quantize_per_channel_affine(w, w_scale, torch.zeros_like(w_scale, dtype=torch.int32), 0, -127, 127)
+        w = torch.fake_quantize_per_channel_affine(
+            w, w_scale, torch.zeros_like(w_scale, dtype=torch.int32), 0, -127, 127
+        )
         return F.conv2d(x, w, self.conv.bias, self.conv.stride, self.conv.padding, self.conv.dilation, self.conv.groups)
 
 
@@ -89,7 +91,7 @@ def crops(windows: list[np.ndarray], rng: np.random.Generator, size: int, batch:
     for _ in range(batch):
         w = windows[int(rng.integers(len(windows)))]
         r, c = (int(rng.integers(0, w.shape[1] - size + 1)), int(rng.integers(0, w.shape[2] - size + 1)))
-        crop = w[:, r:r + size, c:c + size]
+        crop = w[:, r : r + size, c : c + size]
         crop = np.rot90(crop, int(rng.integers(4)), axes=(1, 2))
         if rng.random() < 0.5:
             crop = crop[:, :, ::-1]
@@ -104,7 +106,9 @@ def main() -> None:
     parser.add_argument("--lr", type=float, default=5e-6)  # 2e-5 drifted away from float32
     parser.add_argument("--batch", type=int, default=4)
     parser.add_argument("--crop", type=int, default=384)
-    parser.add_argument("--seeds", type=int, default=4, help="training-split windows: seeds 1..N of every calibration style")
+    parser.add_argument(
+        "--seeds", type=int, default=4, help="training-split windows: seeds 1..N of every calibration style"
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--loss", default="bce", help="bce (teacher probabilities) | mse (logits, clipped to +-8)")
     parser.add_argument("--eval-every", type=int, default=50)
@@ -126,7 +130,9 @@ def main() -> None:
     for c in convs:
         c.observing = False
     windows = training_windows(range(1, args.seeds + 1))
-    held_out = calibration_windows(CALIBRATION_STYLES, seed=args.seeds + 1)  # training split, seeds the student never trains on
+    held_out = calibration_windows(
+        CALIBRATION_STYLES, seed=args.seeds + 1
+    )  # training split, seeds the student never trains on
 
     @torch.no_grad()
     def fidelity() -> tuple[float, float]:
@@ -140,8 +146,17 @@ def main() -> None:
 
     optimizer = torch.optim.Adam([p for p in student.parameters() if p.requires_grad], lr=args.lr)
     log = (args.out / "train.log").open("w")
-    log.write(json.dumps({"event": "start", "args": {k: str(v) for k, v in vars(args).items()}, "convs": len(convs),
-                          "windows": len(windows)}) + "\n")
+    log.write(
+        json.dumps(
+            {
+                "event": "start",
+                "args": {k: str(v) for k, v in vars(args).items()},
+                "convs": len(convs),
+                "windows": len(windows),
+            }
+        )
+        + "\n"
+    )
     start, running = time.time(), []
     diff0, cross0 = fidelity()
     log.write(json.dumps({"event": "held_out", "step": 0, "mean_abs_diff": diff0, "cross_0.5": cross0}) + "\n")
@@ -162,16 +177,35 @@ def main() -> None:
         loss.backward()
         optimizer.step()
         with torch.no_grad():
-            running.append((float(loss), float((torch.sigmoid(logits) - target).abs().mean()),
-                            float(((logits[:, :2] > 0) != (target[:, :2] > 0.5)).float().mean())))
+            running.append(
+                (
+                    float(loss),
+                    float((torch.sigmoid(logits) - target).abs().mean()),
+                    float(((logits[:, :2] > 0) != (target[:, :2] > 0.5)).float().mean()),
+                )
+            )
         if step % 20 == 0 or step == args.steps:
             loss_mean, diff, cross = np.mean(running, axis=0)
             running = []
-            log.write(json.dumps({"event": "step", "step": step, "lr": lr, "loss": loss_mean, "mean_abs_diff": diff, "cross_0.5": cross,
-                                  "seconds": round(time.time() - start, 1)}) + "\n")
+            log.write(
+                json.dumps(
+                    {
+                        "event": "step",
+                        "step": step,
+                        "lr": lr,
+                        "loss": loss_mean,
+                        "mean_abs_diff": diff,
+                        "cross_0.5": cross,
+                        "seconds": round(time.time() - start, 1),
+                    }
+                )
+                + "\n"
+            )
             log.flush()
-            print(f"step {step}: loss {loss_mean:.5f} |p - p_float| {diff:.5f} crossing {cross:.5f} ({time.time() - start:.0f} s)",
-                  flush=True)
+            print(
+                f"step {step}: loss {loss_mean:.5f} |p - p_float| {diff:.5f} crossing {cross:.5f} ({time.time() - start:.0f} s)",
+                flush=True,
+            )
         if step % args.eval_every == 0 or step == args.steps:
             diff, cross = fidelity()
             log.write(json.dumps({"event": "held_out", "step": step, "mean_abs_diff": diff, "cross_0.5": cross}) + "\n")

@@ -17,10 +17,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from noisy_city import with_noise  # experiments/scripts/, beside this script
 
 from csboundary.models.maps import unit_bands
 from csboundary.models.onnx_quantization import CALIBRATION_STYLES, calibration_windows
-from noisy_city import with_noise  # experiments/scripts/, beside this script
 
 TEST_STYLES = CALIBRATION_STYLES + ("highway",)
 NYC = Path("../shared/data/real/nyc-topo-boundary/000180_31_image.tif")
@@ -32,7 +32,9 @@ def test_windows() -> dict[str, list[np.ndarray]]:
     from csboundary.data.synth.styles import style_config
     from csboundary.data.windows import PixelWindow
 
-    sets = {"synthetic": [plan_city(style_config(s, tile_size=1100), "test", 7, (1, 1)).render(0, 0) for s in TEST_STYLES]}
+    sets = {
+        "synthetic": [plan_city(style_config(s, tile_size=1100), "test", 7, (1, 1)).render(0, 0) for s in TEST_STYLES]
+    }
 
     def window(path) -> np.ndarray:
         with Mosaic.open(path) as m:
@@ -72,15 +74,28 @@ def quantize(model: bytes, windows, exclude=(), method="minmax", extra: dict | N
 
     from csboundary.models.onnx_quantization import _Windows
 
-    methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile, "entropy": CalibrationMethod.Entropy}
+    methods = {
+        "minmax": CalibrationMethod.MinMax,
+        "percentile": CalibrationMethod.Percentile,
+        "entropy": CalibrationMethod.Entropy,
+    }
     logging.getLogger().setLevel(logging.ERROR)
     with tempfile.TemporaryDirectory() as tmp:
         source, prepared, quantized = (Path(tmp) / n for n in ("f.onnx", "p.onnx", "q.onnx"))
         source.write_bytes(model)
         quant_pre_process(str(source), str(prepared), skip_symbolic_shape=True)
-        quantize_static(str(prepared), str(quantized), _Windows(windows), quant_format=QuantFormat.QDQ, per_channel=True,
-                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, calibrate_method=methods[method],
-                        nodes_to_exclude=list(exclude), extra_options=extra or {})
+        quantize_static(
+            str(prepared),
+            str(quantized),
+            _Windows(windows),
+            quant_format=QuantFormat.QDQ,
+            per_channel=True,
+            activation_type=QuantType.QUInt8,
+            weight_type=QuantType.QInt8,
+            calibrate_method=methods[method],
+            nodes_to_exclude=list(exclude),
+            extra_options=extra or {},
+        )
         return quantized.read_bytes()
 
 
@@ -93,11 +108,18 @@ def conv_names(model: bytes) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--variants", default="current,exclude-head,exclude-head-stem,exclude-decoder,percentile,calib3",
-                        help="also qat (with --qat) and float32-noiseA: float32 on windows with +-A grey levels of noise")
+    parser.add_argument(
+        "--variants",
+        default="current,exclude-head,exclude-head-stem,exclude-decoder,percentile,calib3",
+        help="also qat (with --qat) and float32-noiseA: float32 on windows with +-A grey levels of noise",
+    )
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--qat", type=Path, default=None,
-                        help="variant qat: the folded FPN of int8_qat.py, quantized as the product quantizes")
+    parser.add_argument(
+        "--qat",
+        type=Path,
+        default=None,
+        help="variant qat: the folded FPN of int8_qat.py, quantized as the product quantizes",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     from csboundary.pipeline.prediction.patch import load_predictor
@@ -115,7 +137,9 @@ def main() -> None:
         "exclude-decoder": lambda: quantize(model, calib, decoder),
         "percentile": lambda: quantize(model, calib, (), "percentile"),
         "calib3": lambda: quantize(model, calib + calibration_windows(seed=1) + calibration_windows(seed=2)),
-        "calib3-exclude-head": lambda: quantize(model, calib + calibration_windows(seed=1) + calibration_windows(seed=2), head),
+        "calib3-exclude-head": lambda: quantize(
+            model, calib + calibration_windows(seed=1) + calibration_windows(seed=2), head
+        ),
     }
 
     def qat_model() -> bytes:
@@ -150,10 +174,17 @@ def main() -> None:
                 amplitude, rng = int(name.removeprefix("float32-noise")), np.random.default_rng(0)
                 windows = [with_noise(w, amplitude, rng) for w in windows]
             probs, seconds = probabilities(sess, windows)
-            diff = np.concatenate([np.abs(p - q).reshape(len(p), -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
-            cross = np.concatenate([((p[:2] > 0.5) != (q[:2] > 0.5)).reshape(2, -1) for p, q in zip(probs, reference[set_name][0])], axis=1)
-            row[set_name] = {"mean_abs_diff": [round(float(d), 5) for d in diff.mean(axis=1)],
-                             "cross_0.5": [round(float(c), 5) for c in cross.mean(axis=1)], "s_per_window": round(seconds, 3)}
+            diff = np.concatenate(
+                [np.abs(p - q).reshape(len(p), -1) for p, q in zip(probs, reference[set_name][0])], axis=1
+            )
+            cross = np.concatenate(
+                [((p[:2] > 0.5) != (q[:2] > 0.5)).reshape(2, -1) for p, q in zip(probs, reference[set_name][0])], axis=1
+            )
+            row[set_name] = {
+                "mean_abs_diff": [round(float(d), 5) for d in diff.mean(axis=1)],
+                "cross_0.5": [round(float(c), 5) for c in cross.mean(axis=1)],
+                "s_per_window": round(seconds, 3),
+            }
         report["variants"][name] = row
         print(name, json.dumps(row), flush=True)
     (args.out / "report.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -23,7 +23,9 @@ import rasterio
 
 def with_noise(data: np.ndarray, amplitude: int, rng: np.random.Generator) -> np.ndarray:
     """uint8 ``data`` with an integer drawn uniformly from -amplitude..amplitude added to every value, clipped to 0..255."""
-    return np.clip(data.astype(np.int16) + rng.integers(-amplitude, amplitude + 1, size=data.shape), 0, 255).astype(np.uint8)
+    return np.clip(data.astype(np.int16) + rng.integers(-amplitude, amplitude + 1, size=data.shape), 0, 255).astype(
+        np.uint8
+    )
 
 
 def noisy_copy(city: Path, out: Path, amplitude: int, seed: int) -> Path:

@@ -34,8 +34,27 @@ def scores(city: Path, config: str, out: Path) -> dict:
     target = out / f"{config}-{city.name}.json"
     if not target.exists():
         env = dict(os.environ, OMP_NUM_THREADS=threads)
-        subprocess.run([sys.executable, "-m", "csboundary", "evaluate-model", str(city), "--engine", "onnx", "--precision", precision,
-                        "--device", "cpu", "--json", str(target), "--quiet"], check=True, env=env, capture_output=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "csboundary",
+                "evaluate-model",
+                str(city),
+                "--engine",
+                "onnx",
+                "--precision",
+                precision,
+                "--device",
+                "cpu",
+                "--json",
+                str(target),
+                "--quiet",
+            ],
+            check=True,
+            env=env,
+            capture_output=True,
+        )
     return city_metrics(target)
 
 
@@ -63,7 +82,9 @@ def main() -> None:
         print(f"largest |change| {c} against {configs[0]}: " + ", ".join(f"{m} {v:.3f}" for m, v in worst[c].items()))
     from csboundary.metrics.compare import paired_bootstrap
 
-    for c in configs[1:]:  # the decision's criterion: the mean change over cities, with its 95 % paired-bootstrap interval
+    for c in configs[
+        1:
+    ]:  # the decision's criterion: the mean change over cities, with its 95 % paired-bootstrap interval
         cells = []
         for m in METRICS:
             a = [scores(city, configs[0], args.out)[m] for city in args.cities]

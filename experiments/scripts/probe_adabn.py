@@ -28,7 +28,9 @@ def window_statistics_probabilities(scope: str):
 
     def predict(model, image, device):
         model.eval()
-        norms = [m for m in (model.encoder if scope == "encoder" else model).modules() if isinstance(m, torch.nn.BatchNorm2d)]
+        norms = [
+            m for m in (model.encoder if scope == "encoder" else model).modules() if isinstance(m, torch.nn.BatchNorm2d)
+        ]
         stored = [(m.running_mean.clone(), m.running_var.clone()) for m in norms]
         for m in norms:
             m.train()
@@ -48,19 +50,29 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights")
     parser.add_argument("sets", nargs="+")
-    parser.add_argument("--scope", choices=("off", "encoder", "all"), default="all", help="batch norms on the window's statistics")
-    parser.add_argument("--vertex-threshold", type=float, default=None,
-                        help="keypoint probability of vertex extraction (default: the bundle's)")
+    parser.add_argument(
+        "--scope", choices=("off", "encoder", "all"), default="all", help="batch norms on the window's statistics"
+    )
+    parser.add_argument(
+        "--vertex-threshold",
+        type=float,
+        default=None,
+        help="keypoint probability of vertex extraction (default: the bundle's)",
+    )
     args = parser.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     predictor.onnx = None  # the PyTorch path, whose batch norms can be switched
     if args.vertex_threshold is not None:
-        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices,
-                                                                                                  threshold=args.vertex_threshold))
+        predictor.settings = dataclasses.replace(
+            predictor.settings,
+            vertices=dataclasses.replace(predictor.settings.vertices, threshold=args.vertex_threshold),
+        )
     if args.scope != "off":
         patch_module.predict_probabilities = window_statistics_probabilities(args.scope)
-    print(f"scope {args.scope} vertex threshold {predictor.settings.vertices.threshold:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets,
-                                                                                                                                 predictor)))
+    print(
+        f"scope {args.scope} vertex threshold {predictor.settings.vertices.threshold:g}: F1@5/APLS/TLTS "
+        + " ".join(score_row(args.sets, predictor))
+    )
 
 
 if __name__ == "__main__":

@@ -25,8 +25,11 @@ from csboundary.models.maps import predict_probabilities
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 QUANTILES = (0.9, 0.95, 0.98, 0.99, 0.995, 0.998)
-LAST = {0: ("head.1.weight", "head.1.bias", 0), 1: ("head.1.weight", "head.1.bias", 1), 2: ("surface_head.2.weight", "surface_head.2.bias",
-                                                                                            0)}
+LAST = {
+    0: ("head.1.weight", "head.1.bias", 0),
+    1: ("head.1.weight", "head.1.bias", 1),
+    2: ("surface_head.2.weight", "surface_head.2.bias", 0),
+}
 
 
 def logits(predictor: PatchPredictor, city: Path) -> np.ndarray:
@@ -65,7 +68,9 @@ def main() -> None:
         for c in channels:
             qb, qa = np.quantile(xb[c], QUANTILES), np.quantile(xa[c], QUANTILES)
             a, b = np.polyfit(qa, qb, 1)
-            print(f"{fold.name} channel {c}: adapted quantiles {np.round(qa, 2)} base {np.round(qb, 2)} -> a {a:.3f} b {b:+.3f}")
+            print(
+                f"{fold.name} channel {c}: adapted quantiles {np.round(qa, 2)} base {np.round(qb, 2)} -> a {a:.3f} b {b:+.3f}"
+            )
             w, bias, row = LAST[c]
             state[w][row] *= float(a)
             state[bias][row] = float(a) * state[bias][row] + float(b)
@@ -84,7 +89,9 @@ def main() -> None:
         m = [adapted_scores[n][metric] for n in names]
         b = [after[n][metric] for n in names]
         diff, low, high, _ = paired_bootstrap(a, b, seed=0)
-        print(f"{metric:12s}{np.mean(a):8.3f}{np.mean(m):8.3f}{np.mean(b):9.3f}{diff:+8.3f}   [{low:+.3f}, {high:+.3f}]")
+        print(
+            f"{metric:12s}{np.mean(a):8.3f}{np.mean(m):8.3f}{np.mean(b):9.3f}{diff:+8.3f}   [{low:+.3f}, {high:+.3f}]"
+        )
 
 
 if __name__ == "__main__":

@@ -54,7 +54,9 @@ def main() -> None:
     parser.add_argument("weights")
     parser.add_argument("sets", nargs="+")
     parser.add_argument("--with", dest="others", default="", help="comma-separated FPN checkpoints averaged in")
-    parser.add_argument("--vertex-threshold", default="", help="keypoint probabilities of vertex extraction (default: the bundle's)")
+    parser.add_argument(
+        "--vertex-threshold", default="", help="keypoint probabilities of vertex extraction (default: the bundle's)"
+    )
     parser.add_argument("--views", type=int, default=1, help="dihedral views averaged (1 = the image only, up to 8)")
     args = parser.parse_args()
     device = torch.device("cpu")
@@ -65,11 +67,19 @@ def main() -> None:
     if args.views > 1:
         single = flipped_probabilities(single, args.views)
     patch_module.predict_probabilities = averaged_probabilities(others, single)
-    for vthr in [float(v) for v in args.vertex_threshold.split(",")] if args.vertex_threshold else [predictor.settings.vertices.threshold]:
-        predictor.settings = dataclasses.replace(predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices,
-                                                                                                  threshold=vthr))
-        print(f"with {len(others)} FPNs, vertex threshold {vthr:g}: F1@5/APLS/TLTS " + " ".join(score_row(args.sets, predictor)),
-              flush=True)
+    for vthr in (
+        [float(v) for v in args.vertex_threshold.split(",")]
+        if args.vertex_threshold
+        else [predictor.settings.vertices.threshold]
+    ):
+        predictor.settings = dataclasses.replace(
+            predictor.settings, vertices=dataclasses.replace(predictor.settings.vertices, threshold=vthr)
+        )
+        print(
+            f"with {len(others)} FPNs, vertex threshold {vthr:g}: F1@5/APLS/TLTS "
+            + " ".join(score_row(args.sets, predictor)),
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

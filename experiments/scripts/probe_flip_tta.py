@@ -8,11 +8,14 @@ import sys
 
 import numpy as np
 
-from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
+from csboundary.pipeline.prediction.patch import load_predictor
+
 flips = {"2": [(), (-1,)], "4": [(), (-1,), (-2,), (-2, -1)]}[sys.argv[1]]
 p = load_predictor(device="cpu", engine="torch")
 base = p.patch_maps
+
+
 def tta(patches, images):
     out = None
     for axes in flips:
@@ -21,6 +24,8 @@ def tta(patches, images):
         maps = [np.flip(m, axis=axes) if axes else m for m in maps]
         out = maps if out is None else [a + b for a, b in zip(out, maps)]
     return [np.ascontiguousarray(m / len(flips)) for m in out]
+
+
 p.patch_maps = tta
 r = evaluate_set("/tmp/ottawa", p, progress=False)
 m = r["mean"]

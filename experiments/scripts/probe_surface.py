@@ -43,7 +43,9 @@ def city_and_surface(cache: Path, style: str, seed: int) -> tuple[Path, np.ndarr
     frame = plan.frame(0, 0)
     transform = Affine(frame.gsd, 0, frame.x0, 0, -frame.gsd, frame.y1)
     roadway = plan.scene.network.roadway
-    mask = rasterio.features.rasterize([roadway], out_shape=(SIZE, SIZE), transform=transform, fill=0, default_value=1, dtype="uint8")
+    mask = rasterio.features.rasterize(
+        [roadway], out_shape=(SIZE, SIZE), transform=transform, fill=0, default_value=1, dtype="uint8"
+    )
     return path, mask
 
 
@@ -99,7 +101,7 @@ def main() -> None:
             from csboundary.data.windows import PixelWindow
 
             img = unit_bands(mosaic.read(PixelWindow(int(c), int(r), args.crop, args.crop)).data)
-            tgt = mask[r:r + args.crop, c:c + args.crop][None].astype(np.float32)
+            tgt = mask[r : r + args.crop, c : c + args.crop][None].astype(np.float32)
             img, tgt = flip_rotate90(rng, img, tgt)
             images.append(photometric(rng, img, aug))
             targets.append(tgt)
@@ -115,7 +117,12 @@ def main() -> None:
         if step % 50 == 0:
             with torch.no_grad():
                 acc = ((logits > 0) == (y > 0.5)).float().mean().item()
-            line = {"step": step, "loss": round(loss.item(), 4), "acc": round(acc, 4), "s": round(time.time() - start, 1)}
+            line = {
+                "step": step,
+                "loss": round(loss.item(), 4),
+                "acc": round(acc, 4),
+                "s": round(time.time() - start, 1),
+            }
             print(json.dumps(line), flush=True)
             log.write(json.dumps(line) + "\n")
             log.flush()

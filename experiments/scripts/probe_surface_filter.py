@@ -42,7 +42,7 @@ def edge_stats(graph, surface: np.ndarray, offset: float) -> tuple[np.ndarray, n
         seg = np.diff(line, axis=0)
         lengths = np.linalg.norm(seg, axis=1)
         pts, normals = [], []
-        for (a, d, n) in zip(line[:-1], seg, lengths):
+        for a, d, n in zip(line[:-1], seg, lengths):
             if n < 1e-6:
                 continue
             m = max(2, int(np.ceil(n)) + 1)
@@ -72,7 +72,9 @@ def main() -> None:
     p.add_argument("--rule", default="maxside")
     p.add_argument("--thresholds", default="0,0.3,0.5")
     p.add_argument("--offset", type=float, default=8.0)
-    p.add_argument("--low", type=float, default=None, help="hysteresis: keep edges >= low connected to one >= threshold")
+    p.add_argument(
+        "--low", type=float, default=None, help="hysteresis: keep edges >= low connected to one >= threshold"
+    )
     args = p.parse_args()
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     head = SurfaceHead()

@@ -37,7 +37,9 @@ def surface_scores(weights: str, crops: Path, labels: Path) -> str:
     inter = union = 0
     on, off = [], []
     # the 13 numbered crops (the demo crop's picture is red lines on white: no roadway painted)
-    for crop in sorted(p for p in crops.iterdir() if p.is_dir() and p.name[0].isdigit() and (labels / f"{p.name}_edge.png").exists()):
+    for crop in sorted(
+        p for p in crops.iterdir() if p.is_dir() and p.name[0].isdigit() and (labels / f"{p.name}_edge.png").exists()
+    ):
         with rasterio.open(next((crop / "tiles").glob("*.tif"))) as src:
             image = src.read().astype(np.float32) / 255
         image = np.concatenate([image[:3], image[1:2]])[None]  # RGB, NIR := green
@@ -48,8 +50,10 @@ def surface_scores(weights: str, crops: Path, labels: Path) -> str:
         on.append(surface[road])
         off.append(surface[~road])
     on, off = np.concatenate(on), np.concatenate(off)
-    return (f"{weights}: surface IoU {inter / max(union, 1):.3f}, mean on roadway {on.mean():.2f}, off it {off.mean():.2f}, "
-            f"off-road share above 0.5 {np.mean(off > 0.5):.2f}")
+    return (
+        f"{weights}: surface IoU {inter / max(union, 1):.3f}, mean on roadway {on.mean():.2f}, off it {off.mean():.2f}, "
+        f"off-road share above 0.5 {np.mean(off > 0.5):.2f}"
+    )
 
 
 def main() -> None:

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from pathlib import Path
 
 import numpy as np
 import torch
-
-import sys
 
 sys.path.insert(0, str(Path(__file__).parent))
 from sweep_edge_support import score_row  # noqa: E402
@@ -43,7 +42,9 @@ def main() -> None:
     p.add_argument("bundle")
     p.add_argument("sets", nargs="+")
     p.add_argument("--rules", default="hyst:0.5:0.2")
-    p.add_argument("--symmetric", action="store_true", help="score APLS in the symmetric variant (it sees false boundaries)")
+    p.add_argument(
+        "--symmetric", action="store_true", help="score APLS in the symmetric variant (it sees false boundaries)"
+    )
     args = p.parse_args()
     if args.symmetric:
         import functools
@@ -53,7 +54,9 @@ def main() -> None:
         metrics.evaluate = functools.partial(metrics.evaluate, apls="symmetric")
     predictor = PatchPredictor.load(args.bundle, torch.device("cpu"))
     # active: the maps carry the surface channel
-    predictor.settings = dataclasses.replace(predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=1e-9))
+    predictor.settings = dataclasses.replace(
+        predictor.settings, surface=dataclasses.replace(predictor.settings.surface, strong=1e-9)
+    )
 
     def finished(self, patch, maps, graph):  # the bundle's own check replaced by the rule
         graph = self.filled(patch, maps, graph)

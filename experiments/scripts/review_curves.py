@@ -37,24 +37,32 @@ def panel(review: dict, title: str, x: int, width: int, height: int) -> list[str
     out.append(f'<line x1="{xs}" y1="{y1}" x2="{xs}" y2="{y0}" stroke="#2ca02c" stroke-dasharray="5,3"/>')
     out.append(f'<text x="{xs + 3}" y="{y0 - 5}" fill="#2ca02c">from scratch</text>')
     for name, o in orders.items():
-        points = " ".join(f"{a:.1f},{b:.1f}" for a, b in (px(m / km, f) for m, f in zip(o["curve"]["minutes"], o["curve"]["f1"])))
+        points = " ".join(
+            f"{a:.1f},{b:.1f}" for a, b in (px(m / km, f) for m, f in zip(o["curve"]["minutes"], o["curve"]["f1"]))
+        )
         out.append(f'<polyline points="{points}" fill="none" stroke="{COLOURS[name]}" stroke-width="2"/>')
     for m in range(0, int(x_max) + 1, max(1, int(x_max) // 5)):
         xt, _ = px(m, 0)
         out.append(f'<text x="{xt}" y="{y0 + 14}" text-anchor="middle">{m}</text>')
-    out.append(f'<text x="{(x0 + x1) / 2}" y="{height - 8}" text-anchor="middle">minutes per km of true boundary</text>')
+    out.append(
+        f'<text x="{(x0 + x1) / 2}" y="{height - 8}" text-anchor="middle">minutes per km of true boundary</text>'
+    )
     return out
 
 
 def main(argv: list[str]) -> None:
     out, items = Path(argv[0]), argv[1:]
     width, height = 420, 300
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width * len(items)}" height="{height + 20}" font-family="sans-serif" '
-             f'font-size="12"><rect width="100%" height="100%" fill="white"/>']
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width * len(items)}" height="{height + 20}" font-family="sans-serif" '
+        f'font-size="12"><rect width="100%" height="100%" fill="white"/>'
+    ]
     for k, item in enumerate(items):
         path, city = item.rsplit(":", 1)
         scores = json.loads(Path(path).read_text())
-        sets = [scores] if "per_city" in scores else list(scores.values())  # evaluate-set's JSON, or review_sets.py's (one per set)
+        sets = (
+            [scores] if "per_city" in scores else list(scores.values())
+        )  # evaluate-set's JSON, or review_sets.py's (one per set)
         found = next(s["per_city"][city] for s in sets if city in s["per_city"])
         review = found.get("review_effort") or found["review"]
         parts += panel(review, f"{city}: F1@5 during review", k * width, width, height)

@@ -22,7 +22,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-
 from scipy.spatial import cKDTree
 
 from csboundary.graph.boundaries import graph_boundaries
@@ -53,8 +52,15 @@ def calibration(rows: list[tuple[float, float, float]]) -> list[dict]:
         picked = [(c, w, t) for c, w, t in rows if lo <= c < hi]
         if picked:
             c, w, t = (np.array(x) for x in zip(*picked))
-            table.append({"from": lo, "to": min(hi, 1.0), "boundaries": len(picked), "mean_confidence": float(np.dot(c, w) / w.sum()),
-                          "true_share": float(np.dot(t, w) / w.sum())})
+            table.append(
+                {
+                    "from": lo,
+                    "to": min(hi, 1.0),
+                    "boundaries": len(picked),
+                    "mean_confidence": float(np.dot(c, w) / w.sum()),
+                    "true_share": float(np.dot(t, w) / w.sum()),
+                }
+            )
     return table
 
 
@@ -83,16 +89,23 @@ def score_set(items) -> dict:
             for key in ("minutes", "minutes_to_target_f1", "start_f1"):
                 totals[f"{order}_{key}"] = totals.get(f"{order}_{key}", 0.0) + o[key]
     km, scratch, n = totals["true_boundary_km"], totals["scratch_minutes"], len(cities)
-    out = {"cities": n, "f1@2": float(np.mean([c["f1@2"] for c in cities.values()])),
-           "f1@5": float(np.mean([c["f1@5"] for c in cities.values()])),
-           "apls": float(np.nanmean([c["apls"] for c in cities.values()])), "true_boundary_km": km,
-           "boundaries_per_km": totals["boundaries"] / km, "draft_boundaries_per_km": totals["draft_boundaries"] / km,
-           "scratch_min_per_km": scratch / km}
+    out = {
+        "cities": n,
+        "f1@2": float(np.mean([c["f1@2"] for c in cities.values()])),
+        "f1@5": float(np.mean([c["f1@5"] for c in cities.values()])),
+        "apls": float(np.nanmean([c["apls"] for c in cities.values()])),
+        "true_boundary_km": km,
+        "boundaries_per_km": totals["boundaries"] / km,
+        "draft_boundaries_per_km": totals["draft_boundaries"] / km,
+        "scratch_min_per_km": scratch / km,
+    }
     for order in ("confidence", "random"):
         if f"{order}_minutes" in totals:
             out[f"{order}_min_per_km"] = totals[f"{order}_minutes"] / km
             out[f"{order}_ratio"] = totals[f"{order}_minutes"] / scratch
-            out[f"{order}_to_target_ratio"] = totals[f"{order}_minutes_to_target_f1"] / scratch  # NaN if a city never reaches it
+            out[f"{order}_to_target_ratio"] = (
+                totals[f"{order}_minutes_to_target_f1"] / scratch
+            )  # NaN if a city never reaches it
             out["draft_f1@5"] = totals[f"{order}_start_f1"] / n
     return {"summary": out, "calibration": calibration(truth), "per_city": cities}
 
@@ -107,18 +120,33 @@ def main() -> None:
         name, items = pairs(spec)
         results[name] = score_set(items)
         s = results[name]["summary"]
-        print(f"{name} ({s['cities']} cities, {s['true_boundary_km']:.2f} km): F1@2 {s['f1@2']:.4f} F1@5 {s['f1@5']:.4f} "
-              f"APLS {s['apls']:.4f}; "
-              f"{s['boundaries_per_km']:.1f} boundaries/km, {s['draft_boundaries_per_km']:.1f} in the draft (draft F1@5 "
-              f"{s['draft_f1@5']:.4f}); from scratch {s['scratch_min_per_km']:.2f} min/km; corrected draft "
-              + ", ".join(f"{o} {s[o + '_min_per_km']:.2f} min/km = {s[o + '_ratio']:.2f}x (to F1@5 0.95: "
-                          f"{s[o + '_to_target_ratio']:.2f}x)" for o in ("confidence", "random") if o + "_ratio" in s), flush=True)
-        print("  boundary confidence -> true share by length: " + "; ".join(
-            f"[{row['from']:g}, {row['to']:g}): {row['boundaries']} boundaries, mean {row['mean_confidence']:.2f}, "
-            f"true {row['true_share']:.2f}"
-            for row in results[name]["calibration"]), flush=True)
+        print(
+            f"{name} ({s['cities']} cities, {s['true_boundary_km']:.2f} km): F1@2 {s['f1@2']:.4f} F1@5 {s['f1@5']:.4f} "
+            f"APLS {s['apls']:.4f}; "
+            f"{s['boundaries_per_km']:.1f} boundaries/km, {s['draft_boundaries_per_km']:.1f} in the draft (draft F1@5 "
+            f"{s['draft_f1@5']:.4f}); from scratch {s['scratch_min_per_km']:.2f} min/km; corrected draft "
+            + ", ".join(
+                f"{o} {s[o + '_min_per_km']:.2f} min/km = {s[o + '_ratio']:.2f}x (to F1@5 0.95: "
+                f"{s[o + '_to_target_ratio']:.2f}x)"
+                for o in ("confidence", "random")
+                if o + "_ratio" in s
+            ),
+            flush=True,
+        )
+        print(
+            "  boundary confidence -> true share by length: "
+            + "; ".join(
+                f"[{row['from']:g}, {row['to']:g}): {row['boundaries']} boundaries, mean {row['mean_confidence']:.2f}, "
+                f"true {row['true_share']:.2f}"
+                for row in results[name]["calibration"]
+            ),
+            flush=True,
+        )
     if args.json:
-        args.json.write_text(json.dumps(results, indent=1, default=lambda v: None if isinstance(v, float) and math.isnan(v) else v) + "\n")
+        args.json.write_text(
+            json.dumps(results, indent=1, default=lambda v: None if isinstance(v, float) and math.isnan(v) else v)
+            + "\n"
+        )
 
 
 if __name__ == "__main__":

@@ -40,6 +40,7 @@ def main() -> None:
             out = method(self, *a, **k)
             moments[f"{label} ends"] = time.perf_counter() - start[0]
             return out
+
         setattr(cls, name, wrapper)
 
     timed(city_job.CityJob, "compute_maps", "FPN")
@@ -53,10 +54,20 @@ def main() -> None:
         moments.clear()
         start[0] = time.perf_counter()
         _, summary = run_prediction(mosaic, predictor, Path(tmp) / "run", progress=False)
-        print(json.dumps({"precision": predictor.precision, "network_threads": predictor.onnx.thread_count,
-                          "wall_s": round(time.perf_counter() - start[0], 3), "moments_s": {k: round(v, 3) for k, v in moments.items()},
-                          "patches": summary["patches"], "seconds": summary["seconds"],
-                          "core_seconds_per_patch": summary["core_seconds_per_patch"]}, indent=1))
+        print(
+            json.dumps(
+                {
+                    "precision": predictor.precision,
+                    "network_threads": predictor.onnx.thread_count,
+                    "wall_s": round(time.perf_counter() - start[0], 3),
+                    "moments_s": {k: round(v, 3) for k, v in moments.items()},
+                    "patches": summary["patches"],
+                    "seconds": summary["seconds"],
+                    "core_seconds_per_patch": summary["core_seconds_per_patch"],
+                },
+                indent=1,
+            )
+        )
 
 
 if __name__ == "__main__":

@@ -16,8 +16,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from csboundary.metrics.compare import paired_bootstrap
 from precision_scores import METRICS, city_metrics  # experiments/scripts/, beside this script
+
+from csboundary.metrics.compare import paired_bootstrap
 
 
 def main() -> None:
@@ -27,8 +28,10 @@ def main() -> None:
     parser.add_argument("others", nargs="+")
     parser.add_argument("--tolerance", type=float, default=0.01)
     args = parser.parse_args()
-    reference = {p.name.removeprefix(args.ref_config + "-").removesuffix(".json"): city_metrics(p)
-                 for p in sorted(args.ref_dir.glob(f"{args.ref_config}-*.json"))}
+    reference = {
+        p.name.removeprefix(args.ref_config + "-").removesuffix(".json"): city_metrics(p)
+        for p in sorted(args.ref_dir.glob(f"{args.ref_config}-*.json"))
+    }
     for other in args.others:
         name, _, where = other.partition("=")
         folder, _, config = where.partition(":")
@@ -50,8 +53,10 @@ def main() -> None:
         for m in METRICS:
             values = [abs(d[m]) for d in deltas.values()]
             mean, low, high, _ = paired_bootstrap(*pairs[m])
-            print(f"  {m}: largest |change| {max(values):.3f}, mean |change| {sum(values) / len(values):.4f}, "
-                  f"mean change {mean:+.4f} [{low:+.4f}, {high:+.4f}], over {args.tolerance}: {sum(v > args.tolerance for v in values)}")
+            print(
+                f"  {m}: largest |change| {max(values):.3f}, mean |change| {sum(values) / len(values):.4f}, "
+                f"mean change {mean:+.4f} [{low:+.4f}, {high:+.4f}], over {args.tolerance}: {sum(v > args.tolerance for v in values)}"
+            )
 
 
 if __name__ == "__main__":

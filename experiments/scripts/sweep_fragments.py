@@ -38,16 +38,28 @@ def main() -> None:
         cities = [Path(s)] if layout.is_city_dir(s) else set_cities(s)
         runs = [predicted_city(c, predictor, assume_model_gsd=True) for c in cities]
         for length in lengths:
-            metrics = [evaluate(drop_short_fragments(r.graph, length), BoundaryGraph.from_world_lines(lines, r.grid.transform),
-                                scale="city",
-                                seed=0, extent=(0, 0, r.grid.width, r.grid.height))["metrics"] for r, lines in runs]
-            table[s, length] = {k: float(np.mean([np.nan_to_num(m[k]) for m in metrics])) for k in ("precision@5", "recall@5", "f1@5",
-                                                                                                    "apls", "tlts")}
+            metrics = [
+                evaluate(
+                    drop_short_fragments(r.graph, length),
+                    BoundaryGraph.from_world_lines(lines, r.grid.transform),
+                    scale="city",
+                    seed=0,
+                    extent=(0, 0, r.grid.width, r.grid.height),
+                )["metrics"]
+                for r, lines in runs
+            ]
+            table[s, length] = {
+                k: float(np.mean([np.nan_to_num(m[k]) for m in metrics]))
+                for k in ("precision@5", "recall@5", "f1@5", "apls", "tlts")
+            }
         print(f"{Path(s).name}: predicted {len(cities)} cities", flush=True)
     print("L_px  " + " ".join(f"{Path(s).name[:16]:>16s}:P5/R5/F1@5/APLS/TLTS" for s in args.sets))
     for length in lengths:
         row = [table[s, length] for s in args.sets]
-        cells = (f"{m['precision@5']:.3f}/{m['recall@5']:.3f}/{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}".rjust(38) for m in row)
+        cells = (
+            f"{m['precision@5']:.3f}/{m['recall@5']:.3f}/{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}".rjust(38)
+            for m in row
+        )
         print(f"{length:5.0f} " + " ".join(cells))
 
 

@@ -33,17 +33,24 @@ def with_entry(settings, entry: str):
     fields = parsed(entry)
     outline = {k: v for k, v in fields.items() if "." not in k}
     check = {k.split(".", 1)[1]: v for k, v in fields.items() if k.startswith("surface.")}
-    return dataclasses.replace(settings, outline=dataclasses.replace(settings.outline, **outline),
-                               surface=dataclasses.replace(settings.surface, **check))
+    return dataclasses.replace(
+        settings,
+        outline=dataclasses.replace(settings.outline, **outline),
+        surface=dataclasses.replace(settings.surface, **check),
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights")
     parser.add_argument("sets", nargs="+")
-    parser.add_argument("--grid", nargs="+", required=True, help="OutlineConfig fields per row, e.g. sure=0.65,level=0.5")
+    parser.add_argument(
+        "--grid", nargs="+", required=True, help="OutlineConfig fields per row, e.g. sure=0.65,level=0.5"
+    )
     args = parser.parse_args()
-    predictor = load_predictor(args.weights, "cpu", precision="auto")  # the command line's engine and precision (int8 on a CPU)
+    predictor = load_predictor(
+        args.weights, "cpu", precision="auto"
+    )  # the command line's engine and precision (int8 on a CPU)
     base = predictor.settings
     print("setting", *args.sets, sep=" | ")
     for entry in args.grid:
@@ -51,8 +58,11 @@ def main() -> None:
         predictor.settings = with_entry(base, entry)
         row = []
         for s in args.sets:
-            m = evaluate_city_dir(Path(s), predictor)["metrics"] if layout.is_city_dir(s) else \
-                evaluate_set(s, predictor, progress=False)["mean"]
+            m = (
+                evaluate_city_dir(Path(s), predictor)["metrics"]
+                if layout.is_city_dir(s)
+                else evaluate_set(s, predictor, progress=False)["mean"]
+            )
             row.append(f"{m['f1@5']:.3f}/{m['precision@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
         print(entry, *row, f"{time.perf_counter() - start:.0f} s", sep=" | ", flush=True)
 

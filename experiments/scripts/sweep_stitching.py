@@ -24,8 +24,8 @@ from csboundary.data import city as layout
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig
 from csboundary.metrics import evaluate
-from csboundary.pipeline.prediction.city import city_graph
 from csboundary.pipeline.evaluation.evaluate_set import predicted_city, set_cities
+from csboundary.pipeline.prediction.city import city_graph
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 FIELDS = ("mend_px", "border_px", "snap_px", "attach_px", "node_shared")
@@ -56,14 +56,23 @@ def main() -> None:
             gt = BoundaryGraph.from_world_lines(lines, run.grid.transform)
             parts = []
             for text, (stitch, attach) in zip(rows, settings):
-                graph = city_graph(run.patch_graphs, run.grid, stitch, run.graph.crs, predictor.settings.min_fragment_px,
-                                   predictor.settings.attach_px if attach is None else attach)
+                graph = city_graph(
+                    run.patch_graphs,
+                    run.grid,
+                    stitch,
+                    run.graph.crs,
+                    predictor.settings.min_fragment_px,
+                    predictor.settings.attach_px if attach is None else attach,
+                )
                 m = evaluate(graph, gt, scale="city", seed=0, extent=(0, 0, run.grid.width, run.grid.height))["metrics"]
                 rows[text].append(np.array([m["f1@5"], m["apls"], m["tlts"]]))
                 parts.append(f"{text}: {m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")
             print(f"{city.name:28s} " + "  ".join(parts), flush=True)
     if sum(len(v) for v in rows.values()) > len(rows):
-        print(f"{'mean':28s} " + "  ".join(f"{t}: " + "/".join(f"{x:.3f}" for x in np.mean(v, axis=0)) for t, v in rows.items()))
+        print(
+            f"{'mean':28s} "
+            + "  ".join(f"{t}: " + "/".join(f"{x:.3f}" for x in np.mean(v, axis=0)) for t, v in rows.items())
+        )
 
 
 if __name__ == "__main__":

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from helpers import run_cli
 from csboundary.data import city as layout
-
+from helpers import run_cli
 
 run = run_cli
 
@@ -16,7 +15,21 @@ run = run_cli
 @pytest.fixture(scope="module")
 def small_city(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("cli") / "city"
-    result = run("synth", str(out), "--seed", "2", "--tiles", "1x2", "--tile-size", "400", "--gsd", "0.5", "--split", "valid", "--quiet")
+    result = run(
+        "synth",
+        str(out),
+        "--seed",
+        "2",
+        "--tiles",
+        "1x2",
+        "--tile-size",
+        "400",
+        "--gsd",
+        "0.5",
+        "--split",
+        "valid",
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     return out
 
@@ -78,8 +91,10 @@ def test_bad_tiles_argument_is_rejected(tmp_path):
     assert not (tmp_path / "c" / layout.META_FILE).exists()
 
 
-@pytest.mark.parametrize("args", [["--patch", "1"], ["--patch", "a,b"], ["--patch", "9,9"], ["--window", "0,0,-5,5"], ["--bounds",
-                                                                                                                       "x,1,2,3"]])
+@pytest.mark.parametrize(
+    "args",
+    [["--patch", "1"], ["--patch", "a,b"], ["--patch", "9,9"], ["--window", "0,0,-5,5"], ["--bounds", "x,1,2,3"]],
+)
 def test_bad_show_arguments_are_one_line_errors(small_city, tmp_path, args):
     result = run("show", str(small_city), *args, "--out", str(tmp_path / "x.png"))
     assert result.returncode == 2

@@ -6,12 +6,12 @@ from __future__ import annotations
 import dataclasses
 
 import typer
-from helpers import run_cli, shipped_parts
 
 from csboundary.cli.main import app, first_sentence, help_as_read
 from csboundary.cli.options import GRAPH_OPTIONS, GRAPH_PANEL
 from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.models.checkpoint import load_checkpoint
+from helpers import run_cli, shipped_parts
 
 TAKERS = ("predict", "predict-patch", "evaluate-model", "evaluate-set", "bundle-weights")
 
@@ -44,13 +44,46 @@ def test_help_reads_as_a_user_expects():
 
 def test_bundle_weights_stores_the_graph_options_as_the_bundle_s_settings(tmp_path):
     fpn, afanet = shipped_parts(tmp_path)
-    done = run_cli("bundle-weights", "--fpn", str(fpn), "--afanet", str(afanet), "--out", str(tmp_path / "b.pt"), "--min-edge-support",
-                   "0.2", "--max-degree", "0", "--attach-ends", "40", "--surface-check", "0.5")
+    done = run_cli(
+        "bundle-weights",
+        "--fpn",
+        str(fpn),
+        "--afanet",
+        str(afanet),
+        "--out",
+        str(tmp_path / "b.pt"),
+        "--min-edge-support",
+        "0.2",
+        "--max-degree",
+        "0",
+        "--attach-ends",
+        "40",
+        "--surface-check",
+        "0.5",
+    )
     assert done.returncode == 0, done.stderr
     table = load_checkpoint(tmp_path / "b.pt", ("bundle",))["inference"]
     settings = GraphSettings.from_bundle(table, "b.pt")
-    assert (settings.support.min_support, settings.max_degree, settings.attach_px, settings.surface.strong) == (0.2, None, 40.0, 0.5)
-    assert (settings.edge_threshold, settings.min_fragment_px, settings.fill.active) == (0.5, 0.0, False)  # what was not given: off
-    refused = run_cli("bundle-weights", "--fpn", str(fpn), "--afanet", str(afanet), "--out", str(tmp_path / "c.pt"), "--min-confidence",
-                      "0.5")
+    assert (settings.support.min_support, settings.max_degree, settings.attach_px, settings.surface.strong) == (
+        0.2,
+        None,
+        40.0,
+        0.5,
+    )
+    assert (settings.edge_threshold, settings.min_fragment_px, settings.fill.active) == (
+        0.5,
+        0.0,
+        False,
+    )  # what was not given: off
+    refused = run_cli(
+        "bundle-weights",
+        "--fpn",
+        str(fpn),
+        "--afanet",
+        str(afanet),
+        "--out",
+        str(tmp_path / "c.pt"),
+        "--min-confidence",
+        "0.5",
+    )
     assert refused.returncode == 2 and "--min-confidence" in refused.stderr and not (tmp_path / "c.pt").exists()

@@ -16,13 +16,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_hostile_inputs import image, tiny_bundle
 
 from helpers import run_cli
-from test_hostile_inputs import image, tiny_bundle
 
 # Run as ``python fault.py KIND ARG csboundary-args...``: the disk is full from the write KIND
 # describes on (each check of the free space then finds none), and the command runs as main does.
-FAULT = '''
+FAULT = """
 import errno, io, os, shutil, sys
 from pathlib import Path
 
@@ -107,10 +107,10 @@ from csboundary.cli import main as m
 
 sys.argv = ["csboundary", *sys.argv[1:]]
 m.main()
-'''
+"""
 
 # A Dask worker preload (``distributed.worker.preload``): the worker's disk is full for the run store.
-WORKER_FULL = '''
+WORKER_FULL = """
 import errno
 import numpy as np
 
@@ -120,7 +120,7 @@ def full(*a, **k):
 
 
 np.save = np.savez = full
-'''
+"""
 
 
 @pytest.fixture(scope="module")
@@ -132,12 +132,24 @@ def world(tmp_path_factory):
 
 
 def predict_args(world, out: Path, *extra: str) -> list[str]:
-    return ["predict", str(world["tif"]), "--out", str(out), "--weights", str(world["bundle"]), "--device", "cpu", "--quiet", *extra]
+    return [
+        "predict",
+        str(world["tif"]),
+        "--out",
+        str(out),
+        "--weights",
+        str(world["bundle"]),
+        "--device",
+        "cpu",
+        "--quiet",
+        *extra,
+    ]
 
 
 def with_fault(world, kind: str, arg: str, args: list[str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(world["root"] / "fault.py"), kind, arg, *args], capture_output=True, text=True,
-                          timeout=600)
+    return subprocess.run(
+        [sys.executable, str(world["root"] / "fault.py"), kind, arg, *args], capture_output=True, text=True, timeout=600
+    )
 
 
 def last_error(done: subprocess.CompletedProcess) -> str:
@@ -153,11 +165,19 @@ def listing(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir())
 
 
-@pytest.mark.parametrize("name, kind, arg, extra", [
-    ("boundaries.gpkg", "gpkg", "1", ()),  # GDAL's own error, the edges layer half-way through the GeoPackage (the JSON files:
-    # atomic_path, tests/data/test_atomic.py and the previous-prediction test below)
-    ("map.osm", "lanelet2", "-", ("--lanelet2",)),
-])
+@pytest.mark.parametrize(
+    "name, kind, arg, extra",
+    [
+        (
+            "boundaries.gpkg",
+            "gpkg",
+            "1",
+            (),
+        ),  # GDAL's own error, the edges layer half-way through the GeoPackage (the JSON files:
+        # atomic_path, tests/data/test_atomic.py and the previous-prediction test below)
+        ("map.osm", "lanelet2", "-", ("--lanelet2",)),
+    ],
+)
 def test_a_full_disk_while_writing_an_output_names_it_and_keeps_the_work(world, tmp_path, name, kind, arg, extra):
     out = tmp_path / "out"
     line = last_error(with_fault(world, kind, arg, predict_args(world, out, *extra)))
@@ -204,8 +224,13 @@ def test_no_space_on_a_dask_worker_ends_in_one_line(world, tmp_path):
     another cluster)."""
     out = tmp_path / "out"
     env = dict(os.environ, DASK_DISTRIBUTED__WORKER__PRELOAD=json.dumps([str(world["root"] / "worker_full.py")]))
-    done = subprocess.run([sys.executable, "-m", "csboundary", *predict_args(world, out, "--workers", "1")], capture_output=True,
-                          text=True, timeout=600, env=env)
+    done = subprocess.run(
+        [sys.executable, "-m", "csboundary", *predict_args(world, out, "--workers", "1")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
     assert last_error(done) == f"error: {out}: no space left on device; nothing of the run was kept"
     assert "Compute Failed" not in done.stderr, done.stderr
     assert not out.exists()
@@ -222,9 +247,12 @@ def test_a_worker_task_returns_a_full_disk_and_raises_other_errors(tmp_path):
     def failing(error):
         def predict_maps(batch):
             raise error
+
         return SimpleNamespace(threads=None, store=SimpleNamespace(root=tmp_path), predict_maps=predict_maps)
 
-    failure = predict_maps_task(failing(OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "maps"))), [(0, 0)])
+    failure = predict_maps_task(
+        failing(OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "maps"))), [(0, 0)]
+    )
     assert isinstance(failure, TaskFailure)
     error = failure.error()
     assert error.errno == errno.ENOSPC and error.filename == str(tmp_path / "maps")
@@ -234,9 +262,13 @@ def test_a_worker_task_returns_a_full_disk_and_raises_other_errors(tmp_path):
 
 def test_a_full_disk_said_by_gdal_alone_is_one_line():
     """The command line's last resort: GDAL's or SQLite's words, no file known, no 'internal error'."""
-    probe = ("import sys\nfrom pyogrio.errors import DataSourceError\nfrom csboundary.cli import main as m\n"
-             "def boom(*a, **k):\n    raise DataSourceError('sqlite3_exec(COMMIT) failed: database or disk is full')\n"
-             "m.command_line = lambda: boom\nsys.argv = ['csboundary']\nm.main()\n")
+    probe = (
+        "import sys\nfrom pyogrio.errors import DataSourceError\nfrom csboundary.cli import main as m\n"
+        "def boom(*a, **k):\n    raise DataSourceError('sqlite3_exec(COMMIT) failed: database or disk is full')\n"
+        "m.command_line = lambda: boom\nsys.argv = ['csboundary']\nm.main()\n"
+    )
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
-    assert last_error(done) == ("error: no space left on device (DataSourceError: sqlite3_exec(COMMIT) failed: database or disk is "
-                                "full): free some space and run the same command again")
+    assert last_error(done) == (
+        "error: no space left on device (DataSourceError: sqlite3_exec(COMMIT) failed: database or disk is "
+        "full): free some space and run the same command again"
+    )

@@ -42,8 +42,17 @@ def scene(tmp_path_factory):
 
 def scores(scene, gt: str, *extra: str) -> dict:
     out = scene["tif"].parent / f"{gt}{len(extra)}.json"
-    done = run_cli("evaluate", str(scene["pred"]), str(scene[gt]), "--raster", str(scene["tif"]), "--json", str(out), *extra,
-                   timeout=120)
+    done = run_cli(
+        "evaluate",
+        str(scene["pred"]),
+        str(scene[gt]),
+        "--raster",
+        str(scene["tif"]),
+        "--json",
+        str(out),
+        *extra,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     assert "--raster" not in done.stderr
     return json.loads(out.read_text())
@@ -66,7 +75,9 @@ def test_with_a_raster_given_a_refusal_does_not_advise_giving_it(scene, monkeypa
     from csboundary.metrics import pixel
 
     monkeypatch.setattr(pixel, "MAX_RASTER_PIXELS", 100)
-    monkeypatch.setattr(sys, "argv", ["csboundary", "evaluate", str(scene["pred"]), str(scene["far"]), "--raster", str(scene["tif"])])
+    monkeypatch.setattr(
+        sys, "argv", ["csboundary", "evaluate", str(scene["pred"]), str(scene["far"]), "--raster", str(scene["tif"])]
+    )
     with pytest.raises(SystemExit) as stop:
         main()
     lines = [line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:")]
@@ -77,12 +88,25 @@ def test_with_a_raster_given_a_refusal_does_not_advise_giving_it(scene, monkeypa
 def test_pixels_of_a_raster_are_cut_to_it(scene, tmp_path):
     """--pixels with --raster: the raster still says where the imagery is, so a label point at
     2e9 px is cut off instead of refused with advice to give the --raster that was given."""
-    line = {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": [[10, 10], [-500, 2e9]]}}
+    line = {
+        "type": "Feature",
+        "properties": {},
+        "geometry": {"type": "LineString", "coordinates": [[10, 10], [-500, 2e9]]},
+    }
     (tmp_path / "gt.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": [line]}))
     line["geometry"]["coordinates"] = [[10, 10], [10, 250]]
     (tmp_path / "pred.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": [line]}))
-    done = run_cli("evaluate", str(tmp_path / "pred.geojson"), str(tmp_path / "gt.geojson"), "--pixels", "--raster", str(scene["tif"]),
-                   "--json", str(tmp_path / "s.json"), timeout=120)
+    done = run_cli(
+        "evaluate",
+        str(tmp_path / "pred.geojson"),
+        str(tmp_path / "gt.geojson"),
+        "--pixels",
+        "--raster",
+        str(scene["tif"]),
+        "--json",
+        str(tmp_path / "s.json"),
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((tmp_path / "s.json").read_text())["inputs"]["frame"].startswith("pixels of ")
 
@@ -91,7 +115,9 @@ def test_pixels_of_a_raster_are_cut_to_it(scene, tmp_path):
 @pytest.fixture(scope="module")
 def city(tmp_path_factory):
     root = tmp_path_factory.mktemp("gate")
-    done = run_cli("synth", str(root / "city"), "--seed", "1", "--tiles", "1x1", "--tile-size", "1000", "--quiet", timeout=300)
+    done = run_cli(
+        "synth", str(root / "city"), "--seed", "1", "--tiles", "1x1", "--tile-size", "1000", "--quiet", timeout=300
+    )
     assert done.returncode == 0, done.stderr
     return root / "city"
 
@@ -100,8 +126,18 @@ def test_a_200_px_surface_gate_is_computed_once_per_patch_in_a_few_hundred_passe
     """The gate's disc of 200 px used to be visited pixel by pixel (126,000 visits per pixel, twice
     per patch: 15 core seconds for this city's one window, where the default spends 0.4 on the
     whole patch); its decisions are checked against that in tests/graph/test_disc_filter.py."""
-    done = run_cli("predict", str(city), "--out", str(tmp_path / "gate"), "--quiet", "--device", "cpu", "--surface-gate", "200",
-                   timeout=600)
+    done = run_cli(
+        "predict",
+        str(city),
+        "--out",
+        str(tmp_path / "gate"),
+        "--quiet",
+        "--device",
+        "cpu",
+        "--surface-gate",
+        "200",
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "gate" / "summary.json").read_text())
     assert summary["settings"]["surface_gate"][0] == 200 and summary["counts"]["edges"] > 0

@@ -37,8 +37,14 @@ def tiny_bundle(path: Path, **changes) -> Path:
     fpn = FPN(fpn_config)
     with torch.no_grad():
         fpn.head[-1].bias.fill_(-3.0)
-    content = {"fpn": fpn.state_dict(), "fpn_config": fpn_config.to_dict(), "afanet": AfANet(afanet_config).state_dict(),
-               "afanet_config": afanet_config.to_dict(), "inference": {"edge_threshold": 0.5, "max_degree": 2}, "pixel_size_m": GSD}
+    content = {
+        "fpn": fpn.state_dict(),
+        "fpn_config": fpn_config.to_dict(),
+        "afanet": AfANet(afanet_config).state_dict(),
+        "afanet_config": afanet_config.to_dict(),
+        "inference": {"edge_threshold": 0.5, "max_degree": 2},
+        "pixel_size_m": GSD,
+    }
     content.update(changes)
     content = {k: v for k, v in content.items() if v is not None}
     return save_checkpoint(path, "bundle", **content)
@@ -46,7 +52,11 @@ def tiny_bundle(path: Path, **changes) -> Path:
 
 def image(path: Path, size: int = 300, bands: int = 4, dtype=np.uint8, transform=None, crs=UTM, fill=None) -> Path:
     rng = np.random.default_rng(0)
-    data = rng.integers(0, 200, (bands, size, size)).astype(dtype) if fill is None else np.full((bands, size, size), fill, dtype)
+    data = (
+        rng.integers(0, 200, (bands, size, size)).astype(dtype)
+        if fill is None
+        else np.full((bands, size, size), fill, dtype)
+    )
     return write_geotiff(path, data, transform or Affine(GSD, 0, 500000, 0, -GSD, 4400000), crs)
 
 
@@ -69,7 +79,18 @@ def one_error(result: subprocess.CompletedProcess, *needles: str) -> str:
 
 def predict(world, *inputs, out=None, extra=()):
     out = out or world["root"] / "out"
-    return run_cli("predict", *map(str, inputs), "--out", str(out), "--weights", str(world["bundle"]), "--device", "cpu", "--quiet", *extra)
+    return run_cli(
+        "predict",
+        *map(str, inputs),
+        "--out",
+        str(out),
+        "--weights",
+        str(world["bundle"]),
+        "--device",
+        "cpu",
+        "--quiet",
+        *extra,
+    )
 
 
 def final_files(folder: Path) -> list[str]:
@@ -161,7 +182,9 @@ def test_geographic_crs_is_measured_on_the_ellipsoid(world, tmp_path):
     result = predict(world, path, out=tmp_path / "out")
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    area, _ = Geod(ellps="WGS84").polygon_area_perimeter([-74, -74 + 300 * dlon, -74 + 300 * dlon, -74], [lat - 300 * dlat] * 2 + [lat] * 2)
+    area, _ = Geod(ellps="WGS84").polygon_area_perimeter(
+        [-74, -74 + 300 * dlon, -74 + 300 * dlon, -74], [lat - 300 * dlat] * 2 + [lat] * 2
+    )
     assert summary["area_km2"] == pytest.approx(abs(area) / 1e6, rel=1e-3)
     assert summary["area_km2"] > 0.005 and "geodesic" in summary["length_unit"]
     assert summary["mosaic_px"][0] == pytest.approx(300, abs=3)  # square 0.3 m pixels on the ground
@@ -179,11 +202,19 @@ def curbed_image(folder: Path, transform: Affine, crs: str) -> tuple[Path, Path]
     return tif, folder / "curbs.gpkg"
 
 
-@pytest.mark.parametrize("crs, transform, metres, warned", [
-    ("EPSG:2263", Affine(0.5, 0, 987000, 0, -0.5, 200000), "0.152", False),  # NYC's own 0.5 ft: the model's pixel
-    ("EPSG:2263", Affine(0.5 / 0.3048006, 0, 987000, 0, -0.5 / 0.3048006, 200000), "0.5", True),  # 0.5 m in feet
-    ("EPSG:4326", Affine(0.152 / 84305.0, 0, -74.0, 0, -0.152 / 111040.0, 40.7), "0.152", False),  # 0.152 m in degrees at 40.7 N
-])
+@pytest.mark.parametrize(
+    "crs, transform, metres, warned",
+    [
+        ("EPSG:2263", Affine(0.5, 0, 987000, 0, -0.5, 200000), "0.152", False),  # NYC's own 0.5 ft: the model's pixel
+        ("EPSG:2263", Affine(0.5 / 0.3048006, 0, 987000, 0, -0.5 / 0.3048006, 200000), "0.5", True),  # 0.5 m in feet
+        (
+            "EPSG:4326",
+            Affine(0.152 / 84305.0, 0, -74.0, 0, -0.152 / 111040.0, 40.7),
+            "0.152",
+            False,
+        ),  # 0.152 m in degrees at 40.7 N
+    ],
+)
 def test_make_city_gives_and_compares_pixel_sizes_in_metres(tmp_path, crs, transform, metres, warned):
     """Feet and degrees are not metres: a city at the model's pixel size is not told to resample."""
     tif, curbs = curbed_image(tmp_path / "in", transform, crs)
@@ -203,24 +234,36 @@ def test_a_bundle_trained_on_a_feet_city_records_its_pixel_size_in_metres(tmp_pa
     assert run_cli("make-city", str(tif), "--ground-truth", str(curbs), "--out", str(tmp_path / "city")).returncode == 0
     bundle = load_checkpoint(tiny_bundle(tmp_path / "tiny.pt"), ("bundle",))
     train_config = {"model": "fpn", "train_city": None, "extra_train_cities": [str(tmp_path / "city")]}
-    save_checkpoint(tmp_path / "fpn.pt", "fpn", fpn=bundle["fpn"], fpn_config=bundle["fpn_config"], train_config=train_config)
+    save_checkpoint(
+        tmp_path / "fpn.pt", "fpn", fpn=bundle["fpn"], fpn_config=bundle["fpn_config"], train_config=train_config
+    )
     save_checkpoint(tmp_path / "afanet.pt", "afanet", afanet=bundle["afanet"], afanet_config=bundle["afanet_config"])
-    result = run_cli("bundle-weights", "--fpn", str(tmp_path / "fpn.pt"), "--afanet", str(tmp_path / "afanet.pt"), "--out",
-                     str(tmp_path / "b.pt"))
+    result = run_cli(
+        "bundle-weights",
+        "--fpn",
+        str(tmp_path / "fpn.pt"),
+        "--afanet",
+        str(tmp_path / "afanet.pt"),
+        "--out",
+        str(tmp_path / "b.pt"),
+    )
     assert result.returncode == 0, result.stderr
     assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["pixel_size_m"] == pytest.approx(0.1524, abs=1e-4)
 
 
 # -- weights -----------------------------------------------------------------------------------------
-@pytest.mark.parametrize("case, needle", [
-    ("junk", "not a readable weights file"),
-    ("no_fpn_config", "no 'fpn_config' entry"),
-    ("wrong_shapes", "tensors do not fit its config"),
-    ("edge_threshold_7", "edge_threshold = 7"),
-    ("max_degree_minus_1", "max_degree = -1"),
-    ("code", "refused"),
-    ("folder", "is a folder"),
-])
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("junk", "not a readable weights file"),
+        ("no_fpn_config", "no 'fpn_config' entry"),
+        ("wrong_shapes", "tensors do not fit its config"),
+        ("edge_threshold_7", "edge_threshold = 7"),
+        ("max_degree_minus_1", "max_degree = -1"),
+        ("code", "refused"),
+        ("folder", "is a folder"),
+    ],
+)
 def test_damaged_or_hostile_weights_are_one_line(world, tmp_path, case, needle):
     path = tmp_path / "w.pt"
     marker = tmp_path / "PWNED"
@@ -236,13 +279,25 @@ def test_damaged_or_hostile_weights_are_one_line(world, tmp_path, case, needle):
     elif case == "max_degree_minus_1":
         tiny_bundle(path, inference={"max_degree": -1})
     elif case == "code":
+
         class Evil:
             def __reduce__(self):
                 return (os.system, (f"touch {marker}",))
+
         torch.save({"format": FORMAT, "kind": "bundle", "x": Evil()}, path)
     elif case == "folder":
         path.mkdir()
-    result = run_cli("predict", str(world["tif"]), "--out", str(tmp_path / "out"), "--weights", str(path), "--device", "cpu", "--quiet")
+    result = run_cli(
+        "predict",
+        str(world["tif"]),
+        "--out",
+        str(tmp_path / "out"),
+        "--weights",
+        str(path),
+        "--device",
+        "cpu",
+        "--quiet",
+    )
     one_error(result, str(path), needle)
     assert not marker.exists()  # nothing in a weights file ever runs
     assert not (tmp_path / "out").exists()
@@ -251,29 +306,63 @@ def test_damaged_or_hostile_weights_are_one_line(world, tmp_path, case, needle):
 def confidence_table(**changes) -> dict:
     """A well-formed edge confidence over the score alone: one split at 0.5, leaves -2 and +2, an
     increasing isotonic map; ``changes`` damage it."""
-    table = {"version": 1, "features": ["score"], "learning_rate": 0.1, "tree_starts": [0, 3], "feature": [0, -1, -1],
-             "threshold": [0.5, 0.0, 0.0], "left": [1, -1, -1], "right": [2, -1, -1], "value": [0.0, -2.0, 2.0],
-             "iso_x": [-0.2, 0.2], "iso_y": [0.1, 0.9], "provenance": {}}
+    table = {
+        "version": 1,
+        "features": ["score"],
+        "learning_rate": 0.1,
+        "tree_starts": [0, 3],
+        "feature": [0, -1, -1],
+        "threshold": [0.5, 0.0, 0.0],
+        "left": [1, -1, -1],
+        "right": [2, -1, -1],
+        "value": [0.0, -2.0, 2.0],
+        "iso_x": [-0.2, 0.2],
+        "iso_y": [0.1, 0.9],
+        "provenance": {},
+    }
     return {**table, **changes}
 
 
 def test_a_sound_confidence_table_is_accepted(world, tmp_path):
     bundle = tiny_bundle(tmp_path / "w.pt", confidence=confidence_table())
-    result = run_cli("predict", str(world["tif"]), "--out", str(tmp_path / "out"), "--weights", str(bundle), "--device", "cpu", "--quiet")
+    result = run_cli(
+        "predict",
+        str(world["tif"]),
+        "--out",
+        str(tmp_path / "out"),
+        "--weights",
+        str(bundle),
+        "--device",
+        "cpu",
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     assert "overflow" not in result.stderr
 
 
-@pytest.mark.parametrize("changes, needle", [
-    ({"value": [0.0, -1e308, 1e308]}, "leaf value beyond"),
-    ({"iso_y": [0.9, 0.1]}, "isotonic map decreases"),
-    ({"iso_y": [0.1, 1.5]}, "isotonic map is not"),
-    ({"learning_rate": 1e300}, "learning rate"),
-    ({"value": [0.0, float("nan"), 2.0]}, "not a finite number"),
-])
+@pytest.mark.parametrize(
+    "changes, needle",
+    [
+        ({"value": [0.0, -1e308, 1e308]}, "leaf value beyond"),
+        ({"iso_y": [0.9, 0.1]}, "isotonic map decreases"),
+        ({"iso_y": [0.1, 1.5]}, "isotonic map is not"),
+        ({"learning_rate": 1e300}, "learning rate"),
+        ({"value": [0.0, float("nan"), 2.0]}, "not a finite number"),
+    ],
+)
 def test_a_damaged_confidence_table_is_one_line(world, tmp_path, changes, needle):
     bundle = tiny_bundle(tmp_path / "w.pt", confidence=confidence_table(**changes))
-    result = run_cli("predict", str(world["tif"]), "--out", str(tmp_path / "out"), "--weights", str(bundle), "--device", "cpu", "--quiet")
+    result = run_cli(
+        "predict",
+        str(world["tif"]),
+        "--out",
+        str(tmp_path / "out"),
+        "--weights",
+        str(bundle),
+        "--device",
+        "cpu",
+        "--quiet",
+    )
     one_error(result, str(bundle), needle)
     assert not (tmp_path / "out").exists()
 
@@ -282,7 +371,9 @@ def test_finetune_checks_the_base_bundle_before_training(world, tmp_path):
     bundle = tiny_bundle(tmp_path / "w.pt", confidence=confidence_table(value=[0.0, float("nan"), 2.0]))
     city = tmp_path / "city"
     synthesize_city(city, seed=3, split="valid", config=style_config("classic", tile_size=300), progress=False)
-    result = run_cli("finetune", str(city), "--weights", str(bundle), "--out", str(tmp_path / "tuned.pt"), "--device", "cpu")
+    result = run_cli(
+        "finetune", str(city), "--weights", str(bundle), "--out", str(tmp_path / "tuned.pt"), "--device", "cpu"
+    )
     one_error(result, str(bundle), "not a finite number")
     assert final_files(tmp_path) == ["city", "w.pt"]  # no tuned bundle, no work folder
 
@@ -320,7 +411,10 @@ def test_json_and_picture_outputs_are_checked_first(world, tmp_path):
     assert run_cli("synth", str(city), "--tile-size", "300", "--gsd", "0.3", "--quiet").returncode == 0
     one_error(run_cli("show", str(city), "--out", str(tmp_path / "picture")), "needs one of the extensions .png")
     one_error(run_cli("show", str(city), "--out", str(tmp_path)), "is a folder")
-    one_error(run_cli("evaluate-model", str(city), "--weights", str(world["bundle"]), "--json", str(tmp_path), "--quiet"), "is a folder")
+    one_error(
+        run_cli("evaluate-model", str(city), "--weights", str(world["bundle"]), "--json", str(tmp_path), "--quiet"),
+        "is a folder",
+    )
 
 
 def test_a_city_folder_without_city_json_is_refused(world, tmp_path):
@@ -341,9 +435,25 @@ def slow_city(tmp_path_factory):
 @pytest.mark.parametrize("signum, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_leaves_no_final_file_and_no_temporary(world, slow_city, tmp_path, signum, code):
     out = tmp_path / "out"
-    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(slow_city), "--out", str(out), "--weights",
-                            str(world["bundle"]),
-                            "--device", "cpu", "--quiet", "--write-maps"], stderr=subprocess.PIPE, text=True)
+    job = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "csboundary",
+            "predict",
+            str(slow_city),
+            "--out",
+            str(out),
+            "--weights",
+            str(world["bundle"]),
+            "--device",
+            "cpu",
+            "--quiet",
+            "--write-maps",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 120
     while not any(p.name.startswith(".run.partial-") for p in (out.iterdir() if out.exists() else [])):
         assert job.poll() is None and time.time() < deadline, "the run ended before it could be interrupted"
@@ -395,12 +505,24 @@ def test_a_prediction_of_a_picture_without_crs_is_not_scored_against_an_imported
     picture = labelled_picture(tmp_path / "src")
     done = run_cli("import-masks", str(tmp_path / "src"), "--out", str(tmp_path / "set"), "--gsd", str(GSD), "--quiet")
     assert done.returncode == 0, done.stderr
-    done = run_cli("predict-patch", str(picture), "--gsd", str(GSD), "--out", str(tmp_path / "pred"), "--weights", str(world["bundle"]),
-                   "--device", "cpu")
+    done = run_cli(
+        "predict-patch",
+        str(picture),
+        "--gsd",
+        str(GSD),
+        "--out",
+        str(tmp_path / "pred"),
+        "--weights",
+        str(world["bundle"]),
+        "--device",
+        "cpu",
+    )
     assert done.returncode == 0, done.stderr
     pred = tmp_path / "pred" / "graph.json"
     for gt in (tmp_path / "set" / "a", tmp_path / "set" / "a" / "ground_truth.gpkg"):
-        one_error(run_cli("evaluate", str(pred), str(gt)), f"{pred}: has no CRS but {gt} is in EPSG:32618", "evaluate-set")
+        one_error(
+            run_cli("evaluate", str(pred), str(gt)), f"{pred}: has no CRS but {gt} is in EPSG:32618", "evaluate-set"
+        )
     one_error(run_cli("evaluate", str(tmp_path / "set" / "a" / "ground_truth.gpkg"), str(pred)), f"{pred}: has no CRS")
 
 
@@ -408,27 +530,60 @@ def test_world_coordinates_with_and_without_a_crs_are_not_mixed_but_two_crss_are
     import geopandas as gpd
     from shapely.geometry import LineString
 
-    curbs = [LineString([(500003.0, 4399970.0), (500080.0, 4399970.0)]), LineString([(500003.0, 4399940.0), (500080.0, 4399940.0)])]
+    curbs = [
+        LineString([(500003.0, 4399970.0), (500080.0, 4399970.0)]),
+        LineString([(500003.0, 4399940.0), (500080.0, 4399940.0)]),
+    ]
     gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_file(tmp_path / "pred.gpkg")
     gpd.GeoDataFrame(geometry=curbs).to_file(tmp_path / "nocrs.gpkg")  # the same numbers, CRS left out
-    one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "nocrs.gpkg"), "--gsd", "0.3"),
-              "nocrs.gpkg: has no CRS but", "is in EPSG:32618", "ogr2ogr -a_srs EPSG:32618")
+    one_error(
+        run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "nocrs.gpkg"), "--gsd", "0.3"),
+        "nocrs.gpkg: has no CRS but",
+        "is in EPSG:32618",
+        "ogr2ogr -a_srs EPSG:32618",
+    )
     plain = image(tmp_path / "plain.tif", transform=Affine.identity(), crs=None)
-    one_error(run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "pred.gpkg"), "--raster", str(plain)),
-              f"{plain}: has no CRS", "give a georeferenced raster")
+    one_error(
+        run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "pred.gpkg"), "--raster", str(plain)),
+        f"{plain}: has no CRS",
+        "give a georeferenced raster",
+    )
     gpd.GeoDataFrame(geometry=curbs, crs=UTM).to_crs("EPSG:4326").to_file(tmp_path / "gt.geojson", driver="GeoJSON")
-    done = run_cli("evaluate", str(tmp_path / "pred.gpkg"), str(tmp_path / "gt.geojson"), "--raster", str(world["tif"]), "--json",
-                   str(tmp_path / "s.json"))
+    done = run_cli(
+        "evaluate",
+        str(tmp_path / "pred.gpkg"),
+        str(tmp_path / "gt.geojson"),
+        "--raster",
+        str(world["tif"]),
+        "--json",
+        str(tmp_path / "s.json"),
+    )
     assert done.returncode == 0, done.stderr  # two CRSs: reprojected, the same lines score 1
     assert json.loads((tmp_path / "s.json").read_text())["metrics"]["f1@2"] == pytest.approx(1.0)
 
 
 # -- huge coordinates --------------------------------------------------------------------------------
 def test_a_far_away_label_point_is_refused_in_one_line_without_memory(tmp_path):
-    gt = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {
-        "type": "LineString", "coordinates": [[10, 10], [-500, 2e9]]}}]}
-    pred = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, "geometry": {
-        "type": "LineString", "coordinates": [[10, 10], [50, 50]]}}]}
+    gt = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {},
+                "geometry": {"type": "LineString", "coordinates": [[10, 10], [-500, 2e9]]},
+            }
+        ],
+    }
+    pred = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {},
+                "geometry": {"type": "LineString", "coordinates": [[10, 10], [50, 50]]},
+            }
+        ],
+    }
     (tmp_path / "gt.geojson").write_text(json.dumps(gt))
     (tmp_path / "pred.geojson").write_text(json.dumps(pred))
     result = run_cli("evaluate", str(tmp_path / "pred.geojson"), str(tmp_path / "gt.geojson"), "--pixels", timeout=120)
@@ -436,17 +591,28 @@ def test_a_far_away_label_point_is_refused_in_one_line_without_memory(tmp_path):
 
 
 def test_an_infinite_vertex_is_refused(tmp_path):
-    from csboundary.graph.boundary_graph import FORMAT as GRAPH, VERSION
+    from csboundary.graph.boundary_graph import FORMAT as GRAPH
+    from csboundary.graph.boundary_graph import VERSION
 
-    graph = {"format": GRAPH, "version": VERSION, "vertices": [{"px": [0, 0]}, {"px": [float("inf"), 5]}], "edges": [{"u": 0, "v": 1}]}
+    graph = {
+        "format": GRAPH,
+        "version": VERSION,
+        "vertices": [{"px": [0, 0]}, {"px": [float("inf"), 5]}],
+        "edges": [{"u": 0, "v": 1}],
+    }
     (tmp_path / "g.json").write_text(json.dumps(graph))
     one_error(run_cli("evaluate", str(tmp_path / "g.json"), str(tmp_path / "g.json"), "--pixels"), "g.json", "finite")
 
 
 def test_show_clips_a_huge_window_to_the_imagery(world, tmp_path):
-    result = run_cli("show", str(world["tif"]), "--out", str(tmp_path / "a.png"), "--window", "0,0,10000000,10000000", timeout=120)
+    result = run_cli(
+        "show", str(world["tif"]), "--out", str(tmp_path / "a.png"), "--window", "0,0,10000000,10000000", timeout=120
+    )
     assert result.returncode == 0, result.stderr
-    one_error(run_cli("show", str(world["tif"]), "--out", str(tmp_path / "b.png"), "--window", "5000,5000,10,10"), "outside the imagery")
+    one_error(
+        run_cli("show", str(world["tif"]), "--out", str(tmp_path / "b.png"), "--window", "5000,5000,10,10"),
+        "outside the imagery",
+    )
     assert not (tmp_path / "b.png").exists()
 
 
@@ -457,7 +623,9 @@ def test_nan_and_inf_options_are_usage_errors(world, tmp_path):
 
 @pytest.mark.parametrize("command", ["predict", "predict-patch"])
 def test_a_pixel_size_of_zero_is_a_usage_error(world, tmp_path, command):
-    done = run_cli(command, str(world["tif"]), "--out", str(tmp_path / "o"), "--weights", str(world["bundle"]), "--gsd", "0")
+    done = run_cli(
+        command, str(world["tif"]), "--out", str(tmp_path / "o"), "--weights", str(world["bundle"]), "--gsd", "0"
+    )
     one_error(done, "--gsd", "positive pixel size")
     assert not (tmp_path / "o").exists()
 
@@ -469,13 +637,21 @@ def test_a_training_config_must_name_its_training_data(tmp_path):
     assert not (tmp_path / "run" / "train.log").exists()
 
 
-@pytest.mark.parametrize("command", [["predict", "{missing}", "--out", "{out}"], ["predict-patch", "{missing}", "--out", "{out}"],
-                                     ["evaluate-model", "{missing}"]])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["predict", "{missing}", "--out", "{out}"],
+        ["predict-patch", "{missing}", "--out", "{out}"],
+        ["evaluate-model", "{missing}"],
+    ],
+)
 def test_a_missing_input_is_reported_before_pytorch_loads(tmp_path, command):
     """The one-line error comes from opening the imagery, which needs no network: PyTorch is never imported."""
     args = [a.format(missing=tmp_path / "missing.tif", out=tmp_path / "out") for a in command]
-    probe = ("import sys\nfrom csboundary.cli.main import main\nsys.argv = ['csboundary', *sys.argv[1:]]\n"
-             "try:\n    main()\nfinally:\n    print('torch imported:', 'torch' in sys.modules)\n")
+    probe = (
+        "import sys\nfrom csboundary.cli.main import main\nsys.argv = ['csboundary', *sys.argv[1:]]\n"
+        "try:\n    main()\nfinally:\n    print('torch imported:', 'torch' in sys.modules)\n"
+    )
     result = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, timeout=120)
     one_error(result, "missing.tif")
     assert "torch imported: False" in result.stdout
@@ -495,9 +671,25 @@ def test_predict_names_what_it_wrote_and_counts_in_english(world, tmp_path):
 # -- one run per output folder -----------------------------------------------------------------------
 def _start_predict(world, inputs, out: Path) -> subprocess.Popen:
     """``predict`` started in the background, returned once it is working in ``out`` (its staging folder made)."""
-    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(inputs), "--out", str(out), "--weights",
-                            str(world["bundle"]),
-                            "--device", "cpu", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    job = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "csboundary",
+            "predict",
+            str(inputs),
+            "--out",
+            str(out),
+            "--weights",
+            str(world["bundle"]),
+            "--device",
+            "cpu",
+            "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 120
     while not any(p.name.startswith(".run.partial-") for p in (out.iterdir() if out.exists() else [])):
         assert job.poll() is None and time.time() < deadline, "the run ended before the test could meet it"
@@ -536,11 +728,13 @@ def test_the_lock_of_a_killed_run_blocks_nothing(world, slow_city, tmp_path):
 def predict_on_a_filling_disk(world, inputs, out: Path, room: int) -> subprocess.CompletedProcess:
     """``predict`` in a process whose disk is full once ``room`` arrays are stored (numpy.save and
     numpy.savez, the run store's writers, then fail with ENOSPC, as they do on a full disk)."""
-    probe = ("import errno, sys, numpy as np\nfrom csboundary.cli import main as m\n"
-             "room = [int(sys.argv.pop(1))]\n"
-             "def filling(write):\n    def full(*a, **k):\n        room[0] -= 1\n        if room[0] < 0:\n"
-             "            raise OSError(errno.ENOSPC, 'No space left on device')\n        return write(*a, **k)\n    return full\n"
-             "np.save, np.savez = filling(np.save), filling(np.savez)\nsys.argv = ['csboundary', *sys.argv[1:]]\nm.main()\n")
+    probe = (
+        "import errno, sys, numpy as np\nfrom csboundary.cli import main as m\n"
+        "room = [int(sys.argv.pop(1))]\n"
+        "def filling(write):\n    def full(*a, **k):\n        room[0] -= 1\n        if room[0] < 0:\n"
+        "            raise OSError(errno.ENOSPC, 'No space left on device')\n        return write(*a, **k)\n    return full\n"
+        "np.save, np.savez = filling(np.save), filling(np.savez)\nsys.argv = ['csboundary', *sys.argv[1:]]\nm.main()\n"
+    )
     args = ["predict", str(inputs), "--out", str(out), "--weights", str(world["bundle"]), "--device", "cpu", "--quiet"]
     return subprocess.run([sys.executable, "-c", probe, str(room), *args], capture_output=True, text=True, timeout=600)
 
@@ -572,7 +766,9 @@ def test_a_full_disk_keeps_the_finished_work_for_the_same_command(world, slow_ci
 
 
 # -- review edits and fine-tuning ---------------------------------------------------------------------
-MARGIN_RING = [[500000 + GSD * col, 4400000 - GSD * row] for col, row in [(-90, 10), (-10, 10), (-10, 80), (-90, 80), (-90, 10)]]
+MARGIN_RING = [
+    [500000 + GSD * col, 4400000 - GSD * row] for col, row in [(-90, 10), (-10, 10), (-10, 80), (-90, 80), (-90, 10)]
+]
 
 
 def test_a_complete_area_wholly_in_the_margin_is_refused(world, tmp_path):
@@ -580,9 +776,26 @@ def test_a_complete_area_wholly_in_the_margin_is_refused(world, tmp_path):
     assert predict(world, world["tif"], out=pred).returncode == 0
     before = (pred / "graph.json").read_bytes()
     edits = tmp_path / "edits.geojson"
-    edits.write_text(json.dumps({"type": "FeatureCollection", "features": [
-        {"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [MARGIN_RING]}}]}))
-    one_error(run_cli("apply-review", str(pred), str(edits)), str(edits), "edit 0 (complete)", "covers no pixel of the imagery")
+    edits.write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"action": "complete"},
+                        "geometry": {"type": "Polygon", "coordinates": [MARGIN_RING]},
+                    }
+                ],
+            }
+        )
+    )
+    one_error(
+        run_cli("apply-review", str(pred), str(edits)),
+        str(edits),
+        "edit 0 (complete)",
+        "covers no pixel of the imagery",
+    )
     assert (pred / "graph.json").read_bytes() == before and not (pred / "review.json").exists()
 
 
@@ -594,14 +807,36 @@ def test_finetune_refuses_a_margin_area_before_making_anything(world, tmp_path):
     pred = tmp_path / "pred"
     assert predict(world, world["tif"], out=pred).returncode == 0
     predicted = BoundaryGraph.read_json(pred / "graph.json")
-    reviewed = BoundaryGraph(np.array([[50.0, 20.0], [50.0, 280.0]]), [[0, 1]], edge_scores=np.array([0.9]),
-                             transform=predicted.transform, crs=predicted.crs)
+    reviewed = BoundaryGraph(
+        np.array([[50.0, 20.0], [50.0, 280.0]]),
+        [[0, 1]],
+        edge_scores=np.array([0.9]),
+        transform=predicted.transform,
+        crs=predicted.crs,
+    )
     reviewed.write_json(pred / "graph.json")
     write_graph_outputs(reviewed, pred)
-    (pred / "review.json").write_text(json.dumps({"reviews": [{"time": "2025-01-01T00:00:00", "complete_areas": [MARGIN_RING]}]}))
+    (pred / "review.json").write_text(
+        json.dumps({"reviews": [{"time": "2025-01-01T00:00:00", "complete_areas": [MARGIN_RING]}]})
+    )
     work = tmp_path / "work"
-    done = run_cli("finetune", str(pred), "--out", str(tmp_path / "tuned.pt"), "--work", str(work), "--fpn-steps", "1",
-                   "--afanet-steps", "1", "--synthetic-cities", "1", "--device", "cpu", "--quiet")
+    done = run_cli(
+        "finetune",
+        str(pred),
+        "--out",
+        str(tmp_path / "tuned.pt"),
+        "--work",
+        str(work),
+        "--fpn-steps",
+        "1",
+        "--afanet-steps",
+        "1",
+        "--synthetic-cities",
+        "1",
+        "--device",
+        "cpu",
+        "--quiet",
+    )
     one_error(done, str(pred / "review.json"), "no area marked complete in it covers any of the imagery")
     assert not work.exists() and not (tmp_path / "tuned.pt").exists()
 
@@ -613,10 +848,19 @@ def test_apply_review_names_the_folder_it_cannot_write(world, tmp_path):
     edits.write_text(json.dumps({"type": "FeatureCollection", "features": []}))
     pred.chmod(0o555)
     try:
-        done = run_cli("apply-review", str(pred), str(edits), preexec_fn=obey_file_permissions if os.geteuid() == 0 else None)
+        done = run_cli(
+            "apply-review", str(pred), str(edits), preexec_fn=obey_file_permissions if os.geteuid() == 0 else None
+        )
     except subprocess.SubprocessError:
         pytest.skip("running as root without the capability to give up CAP_DAC_OVERRIDE")
     finally:
         pred.chmod(0o755)
     one_error(done, f"error: {pred}: cannot write there")
-    assert final_files(pred) == ["boundaries.geojson", "boundaries.gpkg", "detail.png", "graph.json", "overview.png", "summary.json"]
+    assert final_files(pred) == [
+        "boundaries.geojson",
+        "boundaries.gpkg",
+        "detail.png",
+        "graph.json",
+        "overview.png",
+        "summary.json",
+    ]

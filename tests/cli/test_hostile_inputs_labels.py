@@ -38,7 +38,9 @@ def one_error(result, *needles: str) -> str:
 
 # -- synth --gsd: metres on the ground, whatever the CRS counts in ------------------------------------
 def _synth(out: Path, *extra: str):
-    return run_cli("synth", str(out), "--tile-size", "96", "--tiles", "1x2", "--gsd", "0.5", "--split", "valid", "--quiet", *extra)
+    return run_cli(
+        "synth", str(out), "--tile-size", "96", "--tiles", "1x2", "--gsd", "0.5", "--split", "valid", "--quiet", *extra
+    )
 
 
 def _tiles(city: Path) -> list[tuple[np.ndarray, Affine, object]]:
@@ -51,7 +53,10 @@ def _tiles(city: Path) -> list[tuple[np.ndarray, Affine, object]]:
 
 def _pixel_lines(city: Path, transform: Affine) -> list[np.ndarray]:
     """The city's ground truth in the pixel frame of ``transform``."""
-    return [np.array([(~transform) @ xy for xy in line.coords]) for line in read_ground_truth(layout.ground_truth_path(city)).geometry]
+    return [
+        np.array([(~transform) @ xy for xy in line.coords])
+        for line in read_ground_truth(layout.ground_truth_path(city)).geometry
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +95,11 @@ def test_synth_from_python_in_feet_keeps_gsd_in_metres(tmp_path):
     meta = synthesize_city(tmp_path / "city", 0, "valid", config=config, progress=False)
     [(_, transform, crs)] = _tiles(tmp_path / "city")
     assert pixel_size_m(ground_units(crs, (transform.c, transform.f)), transform) == pytest.approx((0.5, 0.5), rel=0.01)
-    assert meta["units"] == "US survey foot" and meta["gsd"] == pytest.approx(0.5 / 0.3048006) and layout.pixel_metres(meta) == 0.5
+    assert (
+        meta["units"] == "US survey foot"
+        and meta["gsd"] == pytest.approx(0.5 / 0.3048006)
+        and layout.pixel_metres(meta) == 0.5
+    )
 
 
 def test_synth_help_says_metres_and_an_unknown_crs_is_one_line(tmp_path):
@@ -104,15 +113,30 @@ def test_synth_help_says_metres_and_an_unknown_crs_is_one_line(tmp_path):
 def _pair(folder: Path, name: str, transform: Affine, crs: str = UTM) -> None:
     """A 64x64 GeoTIFF image and its edge mask (one vertical line at column 20), georeferenced."""
     folder.mkdir(parents=True, exist_ok=True)
-    write_geotiff(folder / f"{name}_image.tif", np.random.default_rng(0).integers(0, 200, (3, 64, 64)).astype(np.uint8), transform, crs)
+    write_geotiff(
+        folder / f"{name}_image.tif",
+        np.random.default_rng(0).integers(0, 200, (3, 64, 64)).astype(np.uint8),
+        transform,
+        crs,
+    )
     mask = np.zeros((1, 64, 64), np.uint8)
     mask[0, 4:60, 20] = 255
     write_geotiff(folder / f"{name}_edge.tif", mask, transform, crs)
 
 
 def _import(src: Path, out: Path, *extra: str):
-    return run_cli("import-masks", str(src), "--out", str(out), "--image-pattern", "{id}_image.tif", "--mask-pattern", "{id}_edge.tif",
-                   "--quiet", *extra)
+    return run_cli(
+        "import-masks",
+        str(src),
+        "--out",
+        str(out),
+        "--image-pattern",
+        "{id}_image.tif",
+        "--mask-pattern",
+        "{id}_edge.tif",
+        "--quiet",
+        *extra,
+    )
 
 
 def test_import_masks_refuses_a_gsd_that_contradicts_the_georeference_before_writing_anything(tmp_path):
@@ -138,7 +162,9 @@ def test_import_masks_reads_a_gsd_in_metres_not_in_the_crs_units(tmp_path):
     --gsd 0.152, metres, is the same size and taken."""
     src = tmp_path / "src"
     _pair(src, "a", Affine(0.5, 0, 987000.0, 0, -0.5, 200000.0), "EPSG:2263")
-    one_error(_import(src, tmp_path / "out", "--gsd", "0.5"), str(src / "a_image.tif"), "--gsd 0.5 m", "0.1524 m", "EPSG:2263")
+    one_error(
+        _import(src, tmp_path / "out", "--gsd", "0.5"), str(src / "a_image.tif"), "--gsd 0.5 m", "0.1524 m", "EPSG:2263"
+    )
     assert not (tmp_path / "out" / "a").exists()
     done = _import(src, tmp_path / "out", "--gsd", "0.152")
     assert done.returncode == 0, done.stderr
@@ -165,19 +191,38 @@ def reviewed_empty(tmp_path_factory) -> Path:
     tiles = sorted(layout.tiles_dir(city).glob("*.tif"))
     with Mosaic.open(tiles) as mosaic:
         transform, crs = mosaic.transform, mosaic.crs.to_string()
-    graph = BoundaryGraph(np.array([[60.0, 20.0], [60.0, 180.0]]), [[0, 1]], edge_scores=np.array([0.9]), transform=transform, crs=crs)
+    graph = BoundaryGraph(
+        np.array([[60.0, 20.0], [60.0, 180.0]]), [[0, 1]], edge_scores=np.array([0.9]), transform=transform, crs=crs
+    )
     pred = root / "pred"
     pred.mkdir()
     graph.write_json(pred / "graph.json")
     write_graph_outputs(graph, pred)
-    (pred / "summary.json").write_text(json.dumps({"inputs": [str(t.resolve()) for t in tiles], "mosaic_px": [SIZE, SIZE]}))
+    (pred / "summary.json").write_text(
+        json.dumps({"inputs": [str(t.resolve()) for t in tiles], "mosaic_px": [SIZE, SIZE]})
+    )
     world = lambda col, row: [float(v) for v in pixel_to_world(transform, col, row)]  # noqa: E731
     xs, ys = pixel_to_world(transform, np.array([0.0, 150.0]), np.array([0.0, float(SIZE)]))
     ring = [list(map(float, p)) for p in box(min(xs), min(ys), max(xs), max(ys)).exterior.coords]
-    (root / "edits.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": [
-        {"type": "Feature", "properties": {"action": "delete", "edge": 0},
-         "geometry": {"type": "LineString", "coordinates": [world(60.0, 20.0), world(60.0, 180.0)]}},
-        {"type": "Feature", "properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [ring]}}]}))
+    (root / "edits.geojson").write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"action": "delete", "edge": 0},
+                        "geometry": {"type": "LineString", "coordinates": [world(60.0, 20.0), world(60.0, 180.0)]},
+                    },
+                    {
+                        "type": "Feature",
+                        "properties": {"action": "complete"},
+                        "geometry": {"type": "Polygon", "coordinates": [ring]},
+                    },
+                ],
+            }
+        )
+    )
     done = run_cli("apply-review", str(pred), str(root / "edits.geojson"))
     assert done.returncode == 0 and "1 -> 0 edges" in done.stdout, done.stderr
     return pred
@@ -190,7 +235,11 @@ def test_a_reviewed_area_without_boundaries_is_a_label_of_negatives(reviewed_emp
     [city] = labelled_cities([reviewed_empty], tmp_path / "work")
     assert read_ground_truth(layout.ground_truth_path(city)).empty
     with TrainingCity(city) as training:
-        assert len(training.labels.boundaries) == 0 and len(training.labels.keypoints) == 0 and training.labels.bounds.shape[0] == 0
+        assert (
+            len(training.labels.boundaries) == 0
+            and len(training.labels.keypoints) == 0
+            and training.labels.bounds.shape[0] == 0
+        )
         _, targets, valid = training.fpn_sample(PixelWindow(0, 0, SIZE, SIZE))
         assert valid[:, :150].all() and not valid[:, 150:].any()  # known, as negatives, inside the complete area only
         assert not targets.any()
@@ -201,14 +250,25 @@ def test_a_reviewed_area_without_boundaries_is_a_label_of_negatives(reviewed_emp
 def test_ground_truth_that_is_empty_without_an_area_or_off_the_tiles_is_still_refused(tmp_path):
     from csboundary.data.user_city import make_city
 
-    tile = write_geotiff(tmp_path / "tiles" / "t.tif", np.zeros((4, 64, 64), np.uint8), Affine(0.3, 0, 500000, 0, -0.3, 4400000), UTM)
-    gpd.GeoDataFrame(geometry=gpd.GeoSeries([], crs=UTM), crs=UTM).to_file(tmp_path / "empty.gpkg", driver="GPKG", engine="pyogrio")
-    one_error(run_cli("make-city", str(tile), "--ground-truth", str(tmp_path / "empty.gpkg"), "--out", str(tmp_path / "city")),
-              str(tmp_path / "empty.gpkg"), "holds no road boundaries")
+    tile = write_geotiff(
+        tmp_path / "tiles" / "t.tif", np.zeros((4, 64, 64), np.uint8), Affine(0.3, 0, 500000, 0, -0.3, 4400000), UTM
+    )
+    gpd.GeoDataFrame(geometry=gpd.GeoSeries([], crs=UTM), crs=UTM).to_file(
+        tmp_path / "empty.gpkg", driver="GPKG", engine="pyogrio"
+    )
+    one_error(
+        run_cli(
+            "make-city", str(tile), "--ground-truth", str(tmp_path / "empty.gpkg"), "--out", str(tmp_path / "city")
+        ),
+        str(tmp_path / "empty.gpkg"),
+        "holds no road boundaries",
+    )
     assert not (tmp_path / "city").exists()
     far = gpd.GeoDataFrame(geometry=[LineString([(600000.0, 4300000.0), (600010.0, 4300000.0)])], crs=UTM)
     far.to_file(tmp_path / "far.gpkg", driver="GPKG", engine="pyogrio")
     area = gpd.GeoDataFrame(geometry=[box(500000, 4399981, 500019, 4400000)], crs=UTM)
-    with pytest.raises(InputError, match="no boundary lies on the tiles"):  # a complete area does not excuse a wrong CRS
+    with pytest.raises(
+        InputError, match="no boundary lies on the tiles"
+    ):  # a complete area does not excuse a wrong CRS
         make_city([tile], tmp_path / "far.gpkg", tmp_path / "city", complete=area)
     assert not (tmp_path / "city").exists()

@@ -22,7 +22,9 @@ from helpers import run_cli
 
 
 def one_error(result, *needles: str) -> str:
-    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith("warning: ")]  # RGB input says so
+    lines = [
+        line for line in result.stderr.strip().splitlines() if not line.startswith("warning: ")
+    ]  # RGB input says so
     assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), result.stderr
     for needle in needles:
         assert needle in lines[0], lines[0]
@@ -48,7 +50,9 @@ def unchanged(prediction: Path, before: bytes) -> bool:
     return (prediction / "graph.json").read_bytes() == before and not (prediction / "review.json").exists()
 
 
-@pytest.mark.parametrize("value, phrase", [("abc", "edge_id 'abc' is not a whole number"), ("inf", "edge_id 'inf' is not a whole number")])
+@pytest.mark.parametrize(
+    "value, phrase", [("abc", "edge_id 'abc' is not a whole number"), ("inf", "edge_id 'inf' is not a whole number")]
+)
 def test_an_edge_id_that_is_not_a_number_is_one_line(prediction, tmp_path, value, phrase):
     before = (prediction / "graph.json").read_bytes()
 
@@ -58,7 +62,9 @@ def test_an_edge_id_that_is_not_a_number_is_one_line(prediction, tmp_path, value
         return edges
 
     edited = edited_copy(prediction, tmp_path / "e.gpkg", change)
-    one_error(run_cli("apply-review", str(prediction), str(edited)), str(edited), "feature 0 of its edges layer", phrase)
+    one_error(
+        run_cli("apply-review", str(prediction), str(edited)), str(edited), "feature 0 of its edges layer", phrase
+    )
     assert unchanged(prediction, before)
 
 
@@ -81,8 +87,12 @@ def test_an_empty_polygon_marked_complete_is_one_line(prediction, tmp_path):
     review = tmp_path / "review.gpkg"
     assert run_cli("review", str(prediction), "--gpkg", str(review)).returncode == 0
     crs = gpd.read_file(review, layer="boundaries").crs
-    gpd.GeoDataFrame({"note": ["x"]}, geometry=[Polygon()], crs=crs).to_file(review, layer="complete", driver="GPKG", engine="pyogrio")
-    one_error(run_cli("apply-review", str(prediction), str(review)), "feature 0 of its complete layer is an empty polygon")
+    gpd.GeoDataFrame({"note": ["x"]}, geometry=[Polygon()], crs=crs).to_file(
+        review, layer="complete", driver="GPKG", engine="pyogrio"
+    )
+    one_error(
+        run_cli("apply-review", str(prediction), str(review)), "feature 0 of its complete layer is an empty polygon"
+    )
     assert unchanged(prediction, before)
 
 
@@ -122,7 +132,11 @@ def test_training_from_python_with_nothing_to_learn_from_is_refused(tmp_path):
 
 def _geotiff(path: Path, size: int, fill=None) -> Path:
     rng = np.random.default_rng(0)
-    data = rng.integers(0, 200, (3, size, size)).astype(np.uint8) if fill is None else np.full((3, size, size), fill, np.uint8)
+    data = (
+        rng.integers(0, 200, (3, size, size)).astype(np.uint8)
+        if fill is None
+        else np.full((3, size, size), fill, np.uint8)
+    )
     valid = np.zeros((size, size), bool) if fill == 0 else None  # all no-data: its mask says so
     return write_geotiff(path, data, Affine(0.152, 0, 500000, 0, -0.152, 4400000), "EPSG:32618", valid=valid)
 
@@ -130,14 +144,22 @@ def _geotiff(path: Path, size: int, fill=None) -> Path:
 def test_a_work_folder_that_is_a_file_or_in_use_is_one_line(tmp_path):
     image = _geotiff(tmp_path / "a.tif", 700)
     (tmp_path / "notes.txt").write_text("x")
-    one_error(run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--work", str(tmp_path / "notes.txt")),
-              "notes.txt", "is a file: it must be a folder (give --work another path)")
+    one_error(
+        run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--work", str(tmp_path / "notes.txt")),
+        "notes.txt",
+        "is a file: it must be a folder (give --work another path)",
+    )
     work = tmp_path / "work"
     work.mkdir()
     with folder_lock(work):  # another adapt or finetune working there
-        one_error(run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--work", str(work)), "in use by another csboundary run")
-        one_error(run_cli("finetune", str(tmp_path), "--out", str(tmp_path / "t.pt"), "--work", str(work)),
-                  "in use by another csboundary run")
+        one_error(
+            run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--work", str(work)),
+            "in use by another csboundary run",
+        )
+        one_error(
+            run_cli("finetune", str(tmp_path), "--out", str(tmp_path / "t.pt"), "--work", str(work)),
+            "in use by another csboundary run",
+        )
     assert not (tmp_path / "a.pt").exists() and not (tmp_path / "t.pt").exists()
 
 
@@ -148,10 +170,15 @@ def test_imagery_that_is_all_no_data_is_refused_before_any_work(tmp_path):
     assert not (tmp_path / "a.pt").exists() and not (tmp_path / "a-adapt").exists()
 
 
-@pytest.mark.parametrize("values, phrase", [({"edge_threshold": float("nan")}, "--edge-threshold: must be a finite number"),
-                                            ({"min_confidence": float("nan")}, "--min-confidence: must be a finite number"),
-                                            ({"edge_threshold": 5.0}, "--edge-threshold: must be from 0 to 1, got 5"),
-                                            ({"max_degree": -3}, "--max-degree: must be a whole number >= 0")])
+@pytest.mark.parametrize(
+    "values, phrase",
+    [
+        ({"edge_threshold": float("nan")}, "--edge-threshold: must be a finite number"),
+        ({"min_confidence": float("nan")}, "--min-confidence: must be a finite number"),
+        ({"edge_threshold": 5.0}, "--edge-threshold: must be from 0 to 1, got 5"),
+        ({"max_degree": -3}, "--max-degree: must be a whole number >= 0"),
+    ],
+)
 def test_graph_settings_from_python_are_checked_as_on_the_command_line(values, phrase):
     """NaN once dropped every decoded edge (or kept none) without a word; the ranges are
     GraphOverrides' own, so the API and the command line refuse the same values."""
@@ -175,7 +202,9 @@ def test_read_prediction_of_a_file_that_is_not_one_names_it(tmp_path):
     import csboundary
 
     tif = _geotiff(tmp_path / "x.tif", 100)
-    with pytest.raises(InputError, match=r"x\.tif: not a prediction: give its folder, its graph\.json or its boundaries\.gpkg"):
+    with pytest.raises(
+        InputError, match=r"x\.tif: not a prediction: give its folder, its graph\.json or its boundaries\.gpkg"
+    ):
         csboundary.read_prediction(tif)
 
 
@@ -186,8 +215,12 @@ def test_an_interrupted_command_says_what_it_keeps(tmp_path):
     import sys
     import time
 
-    run = subprocess.Popen([sys.executable, "-m", "csboundary", "synth", str(tmp_path / "city"), "--tiles", "2x2", "--tile-size", "3000"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run = subprocess.Popen(
+        [sys.executable, "-m", "csboundary", "synth", str(tmp_path / "city"), "--tiles", "2x2", "--tile-size", "3000"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(4)  # past the imports, rendering
     run.send_signal(signal.SIGINT)
     _, err = run.communicate(timeout=120)
@@ -202,25 +235,46 @@ def test_export_lanelet2_never_filters_raw_network_scores(tmp_path):
     from test_hostile_inputs import image, tiny_bundle
 
     bundle, tif = tiny_bundle(tmp_path / "bundle.pt"), image(tmp_path / "ok.tif")
-    done = run_cli("predict", str(tif), "--out", str(tmp_path / "pred"), "--weights", str(bundle), "--quiet", "--device", "cpu",
-                   "--engine", "torch", "--edge-threshold", "0.0")
+    done = run_cli(
+        "predict",
+        str(tif),
+        "--out",
+        str(tmp_path / "pred"),
+        "--weights",
+        str(bundle),
+        "--quiet",
+        "--device",
+        "cpu",
+        "--engine",
+        "torch",
+        "--edge-threshold",
+        "0.0",
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((tmp_path / "pred" / "summary.json").read_text())["settings"]["edge_confidence"] is False
-    one_error(run_cli("export-lanelet2", str(tmp_path / "pred"), "--out", str(tmp_path / "map.osm"), "--min-confidence", "0.5"),
-              "predicted with weights that have no edge confidence")
+    one_error(
+        run_cli(
+            "export-lanelet2", str(tmp_path / "pred"), "--out", str(tmp_path / "map.osm"), "--min-confidence", "0.5"
+        ),
+        "predicted with weights that have no edge confidence",
+    )
     assert not (tmp_path / "map.osm").exists()
 
 
 def test_a_step_count_no_one_means_is_refused(tmp_path):
     """adapt --fpn-steps 1000000000 started a run of about 2.4 million hours without a word."""
     image = _geotiff(tmp_path / "a.tif", 300)
-    one_error(run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--fpn-steps", "1000000000"),
-              "--fpn-steps: must be a whole number from 1 to 1,000,000, got 1000000000")
+    one_error(
+        run_cli("adapt", str(image), "--out", str(tmp_path / "a.pt"), "--fpn-steps", "1000000000"),
+        "--fpn-steps: must be a whole number from 1 to 1,000,000, got 1000000000",
+    )
     assert not (tmp_path / "a.pt").exists() and not (tmp_path / "a-adapt").exists()
 
 
-@pytest.mark.parametrize("args, name, kind", [(["qgis-plugin", "--out"], "notes.zip", "a zip"),
-                                              (["adapt", "IMAGE", "--out"], "notes.pt", "a weights bundle")])
+@pytest.mark.parametrize(
+    "args, name, kind",
+    [(["qgis-plugin", "--out"], "notes.zip", "a zip"), (["adapt", "IMAGE", "--out"], "notes.pt", "a weights bundle")],
+)
 def test_an_output_name_that_holds_something_else_is_never_overwritten(tmp_path, args, name, kind):
     image = _geotiff(tmp_path / "a.tif", 300)
     target = tmp_path / name

@@ -32,9 +32,11 @@ def test_the_command_line_says_it_in_one_line(tmp_path, monkeypatch):
     import subprocess
     import sys
 
-    probe = ("import sys, numpy as np\nfrom csboundary.cli import main as m\n"
-             "def boom(*a, **k):\n    raise OSError(28, 'no space left on device', '/data/run')\n"
-             "m.command_line = lambda: boom\nsys.argv = ['csboundary']\nm.main()\n")
+    probe = (
+        "import sys, numpy as np\nfrom csboundary.cli import main as m\n"
+        "def boom(*a, **k):\n    raise OSError(28, 'no space left on device', '/data/run')\n"
+        "m.command_line = lambda: boom\nsys.argv = ['csboundary']\nm.main()\n"
+    )
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
     assert done.returncode == 1
     assert done.stderr.strip() == "error: /data/run: no space left on device"

@@ -31,8 +31,12 @@ def scattered(folder, side: int = 200, gsd: float = 0.152, places=((0, 0), (1, 1
     paths = []
     for k, (east, south) in enumerate(places):
         path = folder / f"t{k}.tif"
-        write_geotiff(path, np.full((4, side, side), 60 + 20 * k, np.uint8),
-                      Affine(gsd, 0, 500000.0 + east * step, 0, -gsd, 4400000.0 - south * step), "EPSG:32618")
+        write_geotiff(
+            path,
+            np.full((4, side, side), 60 + 20 * k, np.uint8),
+            Affine(gsd, 0, 500000.0 + east * step, 0, -gsd, 4400000.0 - south * step),
+            "EPSG:32618",
+        )
         paths.append(path)
     return paths
 
@@ -46,9 +50,13 @@ def test_union_area_counts_overlaps_once():
 def test_tiles_together_are_their_box_and_groups_far_apart_are_their_own():
     box = W(0, 0, 5000, 3000)
     assert footprint([W(0, 0, 1000, 1000), W(1000, 0, 1000, 1000)], box) == [box]
-    assert footprint([W(0, 0, 1000, 1000), W(1500, 1500, 1000, 1000)], box) == [box]  # a missing tile: 500 px apart, one group
+    assert footprint([W(0, 0, 1000, 1000), W(1500, 1500, 1000, 1000)], box) == [
+        box
+    ]  # a missing tile: 500 px apart, one group
     assert footprint([W(-5, 0, 1000, 1000), W(100, 500, 1000, 1000), W(4000, 2000, 1000, 1000)], box) == [
-        W(0, 0, 1100, 1500), W(4000, 2000, 1000, 1000)]  # 2,900 px apart: two groups, each its box, clipped
+        W(0, 0, 1100, 1500),
+        W(4000, 2000, 1000, 1000),
+    ]  # 2,900 px apart: two groups, each its box, clipped
 
 
 def test_one_part_draws_what_two_integers_over_it_always_drew():
@@ -60,12 +68,22 @@ def test_one_part_draws_what_two_integers_over_it_always_drew():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 10**6), st.integers(1, 600), st.integers(1, 600)), min_size=1,
-                max_size=6), st.integers(1, 300), st.integers(0, 2**32 - 1))
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 10**6), st.integers(0, 10**6), st.integers(1, 600), st.integers(1, 600)),
+        min_size=1,
+        max_size=6,
+    ),
+    st.integers(1, 300),
+    st.integers(0, 2**32 - 1),
+)
 def test_every_drawn_window_lies_in_a_part_or_covers_it(boxes, size, seed):
     parts = [W(*b) for b in boxes]
     window = draw_window(np.random.default_rng(seed), parts, size)
-    assert any((p.contains(window) if p.width >= size and p.height >= size else window.intersection(p) is not None) for p in parts)
+    assert any(
+        (p.contains(window) if p.width >= size and p.height >= size else window.intersection(p) is not None)
+        for p in parts
+    )
 
 
 def test_parts_are_drawn_in_proportion_to_their_area():
@@ -128,14 +146,21 @@ def test_review_tiles_are_written_only_over_the_imagery(tmp_path):
 
 def test_a_filled_mosaic_writes_the_same_pyramid_as_before(tmp_path):
     """Every tile written, each level the halved composite of the four below it."""
-    write_geotiff(tmp_path / "a.tif", np.random.default_rng(0).integers(0, 255, (4, 700, 1100), np.uint8),
-                  Affine(0.152, 0, 500000.0, 0, -0.152, 4400000.0), "EPSG:32618")
+    write_geotiff(
+        tmp_path / "a.tif",
+        np.random.default_rng(0).integers(0, 255, (4, 700, 1100), np.uint8),
+        Affine(0.152, 0, 500000.0, 0, -0.152, 4400000.0),
+        "EPSG:32618",
+    )
     with Mosaic.open(tmp_path / "a.tif") as mosaic:
         levels = write_pyramid(mosaic, tmp_path / "tiles", progress=False)
     import cv2
 
     assert levels == 3 and len(list((tmp_path / "tiles" / "0").glob("*.jpg"))) == 2 * 3
-    assert cv2.imread(str(tmp_path / "tiles" / "1" / "0_0.jpg")).shape[:2] == (350, 512)  # rows (512 + 188) / 2, cols (512 + 512) / 2
+    assert cv2.imread(str(tmp_path / "tiles" / "1" / "0_0.jpg")).shape[:2] == (
+        350,
+        512,
+    )  # rows (512 + 188) / 2, cols (512 + 512) / 2
     assert cv2.imread(str(tmp_path / "tiles" / "1" / "0_1.jpg")).shape[:2] == (350, 38)  # the last column: 76 / 2
     assert cv2.imread(str(tmp_path / "tiles" / "2" / "0_0.jpg")).shape[:2] == (175, 275)
 
@@ -150,14 +175,20 @@ def test_a_picture_without_crs_keeps_its_rows_going_down_when_resampled(tmp_path
         view = model_view(mosaic, gsd=0.304).mosaic  # pixels of 0.304 m seen at 0.152: twice as many
         xs, ys = view.pixel_to_world(np.array([0.0, view.width]), np.array([0.0, view.height]))
         assert view.width == 600 and view.height == 400
-        assert xs.tolist() == pytest.approx([0, 300]) and ys.tolist() == pytest.approx([0, 200])  # the picture's own pixels
+        assert xs.tolist() == pytest.approx([0, 300]) and ys.tolist() == pytest.approx(
+            [0, 200]
+        )  # the picture's own pixels
 
 
 def test_groups_join_tiles_less_than_the_gap_apart_and_part_the_others():
     side_by_side = [W(0, 0, 10, 10), W(10, 0, 10, 10), W(0, 10, 10, 10)]
     assert groups(side_by_side) == [W(0, 0, 20, 20)]
     assert groups([W(5000, 0, 10, 10), W(0, 0, 10, 10), W(10, 10, 5, 5)]) == [W(0, 0, 15, 15), W(5000, 0, 10, 10)]
-    chain = [W(0, 0, 10, 10), W(1030, 0, 10, 10), W(2060, 0, 10, 10)]  # each 1,020 px from the next: one group through the middle
+    chain = [
+        W(0, 0, 10, 10),
+        W(1030, 0, 10, 10),
+        W(2060, 0, 10, 10),
+    ]  # each 1,020 px from the next: one group through the middle
     assert groups(chain) == [W(0, 0, 2070, 10)] and len(groups(chain, gap=1000)) == 3
 
 
@@ -171,8 +202,10 @@ def test_a_labelled_city_of_scattered_tiles_trains_as_one_city_per_group(tmp_pat
 
     tiles = scattered(tmp_path / "t", side=300)
     with Mosaic.open(tiles) as mosaic:
-        ends = [mosaic.pixel_to_world(np.array([w.col_off + 20.0, w.col_end - 20.0]), np.full(2, w.row_off + 150.0))
-                for w in mosaic.footprint]  # a line across the middle of each tile
+        ends = [
+            mosaic.pixel_to_world(np.array([w.col_off + 20.0, w.col_end - 20.0]), np.full(2, w.row_off + 150.0))
+            for w in mosaic.footprint
+        ]  # a line across the middle of each tile
     lines = [LineString(list(zip(xs, ys))) for xs, ys in ends]
     gpd.GeoDataFrame(geometry=lines, crs="EPSG:32618").to_file(tmp_path / "gt.gpkg")
     make_city(tiles, tmp_path / "gt.gpkg", tmp_path / "city")
@@ -183,7 +216,9 @@ def test_a_labelled_city_of_scattered_tiles_trains_as_one_city_per_group(tmp_pat
         for part in parts:
             image, targets, valid = part.fpn_sample(part.random_window(rng, 128))
             assert valid.all()
-            full = part.fpn_sample(PixelWindow(0, 0, 300, 300))[1][1]  # the segmentation of the whole part: its one line
+            full = part.fpn_sample(PixelWindow(0, 0, 300, 300))[1][
+                1
+            ]  # the segmentation of the whole part: its one line
             assert full[150, 150] > 0 and full[20, 150] == 0
     finally:
         for part in parts:
@@ -200,8 +235,12 @@ def test_a_16_bit_stretch_and_the_evaluation_grid_follow_the_groups(tmp_path):
     folder = tmp_path / "t"
     folder.mkdir()
     for k, (east, value) in enumerate([(0, 1000), (60_000, 3000)]):
-        write_geotiff(folder / f"t{k}.tif", np.full((4, 200, 200), value, np.uint16), Affine(0.152, 0, 500000.0 + east * 0.152, 0, -0.152,
-                                                                                            4400000.0), "EPSG:32618")
+        write_geotiff(
+            folder / f"t{k}.tif",
+            np.full((4, 200, 200), value, np.uint16),
+            Affine(0.152, 0, 500000.0 + east * 0.152, 0, -0.152, 4400000.0),
+            "EPSG:32618",
+        )
     with Mosaic.open(folder) as mosaic:
         stretch = fit_stretch(mosaic)
     assert stretch.low == pytest.approx((1000,) * 4) and stretch.high == pytest.approx((3000,) * 4)

@@ -7,19 +7,17 @@ import math
 import numpy as np
 import pytest
 from affine import Affine
+from conftest import ORIGIN
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from helpers import north_up
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.data.windows import PixelWindow as W
-
-from conftest import ORIGIN
+from helpers import north_up
 
 X0, Y0 = ORIGIN
 UTM = Affine(0.5, 0.0, 500000.0, 0.0, -0.5, 4400000.0)
-
 
 
 @st.composite
@@ -227,7 +225,14 @@ def test_overlap_regions_match_brute_force(params, data):
 
 @pytest.mark.parametrize(
     "col,row,index",
-    [(0, 0, (0, 0)), (999, 999, (0, 0)), (999.5, 0, (0, 0)), (1000, 0, (0, 1)), (0, 1000, (1, 0)), (2499, 1799, (1, 2))],
+    [
+        (0, 0, (0, 0)),
+        (999, 999, (0, 0)),
+        (999.5, 0, (0, 0)),
+        (1000, 0, (0, 1)),
+        (0, 1000, (1, 0)),
+        (2499, 1799, (1, 2)),
+    ],
 )
 def test_patch_of_pixel(col, row, index):
     assert PatchGrid(2500, 1800).patch_of_pixel(col, row).index == index
@@ -324,8 +329,6 @@ def test_grid_on_a_real_mosaic(shared_tiles):
     assert (only.transform.c, only.transform.f) == pytest.approx((X0 - 25.0, Y0 + 25.0), abs=1e-9)
     x, y = only.pixel_to_world(50, 50)
     assert (float(x), float(y)) == pytest.approx((X0, Y0), abs=1e-9)
-
-
 
 
 @settings(max_examples=150, deadline=None)

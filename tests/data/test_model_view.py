@@ -62,7 +62,9 @@ def test_resampled_pixels_show_what_lies_at_their_place(tmp_path_factory, gsd):
     centres = (np.arange(5, 45) + 0.5) * 0.152  # metres east of each view pixel's centre
     inside = centres < (120 * gsd - 2 * gsd) * 0.9
     expected = np.clip(centres * 10, 0, 255)
-    assert np.abs(read.data[0, 5, inside].astype(float) - expected[inside]).max() <= 2.5 + 10 * gsd  # one source pixel's blur
+    assert (
+        np.abs(read.data[0, 5, inside].astype(float) - expected[inside]).max() <= 2.5 + 10 * gsd
+    )  # one source pixel's blur
 
 
 def test_model_view_leaves_model_sized_8_bit_imagery_alone_and_refuses_unknown_scale(tmp_path):

@@ -80,7 +80,9 @@ def test_a_rectangle_of_imagery_is_filled_as_the_general_rule_says(rows, cols, d
     top, bottom = draw.draw(st.integers(0, 7)), draw.draw(st.integers(0, 7))
     left, right = draw.draw(st.integers(0, 7)), draw.draw(st.integers(0, 7))
     valid = np.zeros((top + rows + bottom, left + cols + right), bool)
-    valid[top:top + rows, left:left + cols] = True  # a window reaching beyond the mosaic (the fast path when it is wide enough)
+    valid[top : top + rows, left : left + cols] = (
+        True  # a window reaching beyond the mosaic (the fast path when it is wide enough)
+    )
     data = np.random.default_rng(rows * cols).integers(0, 255, (3, *valid.shape), dtype=np.uint8)
     expected = data if valid.all() else mirror_fill(data, valid)
     assert np.array_equal(fill_nodata(data, valid), expected)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import rasterio
 from affine import Affine
+from conftest import CRS, GSD, ORIGIN, TILE_H, TILE_W
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -19,8 +20,6 @@ from csboundary.data.geotiff import BAND_NAMES, write_geotiff
 from csboundary.data.raster import Mosaic, find_rasters
 from csboundary.data.windows import PixelWindow
 from csboundary.errors import InputError, InputWarning
-
-from conftest import CRS, GSD, ORIGIN, TILE_H, TILE_W
 
 X0, Y0 = ORIGIN
 
@@ -574,8 +573,17 @@ def test_band_four_holding_only_0_and_255_is_alpha_not_nir(tmp_path):
     alpha = np.full((1, 40, 40), 255, np.uint8)
     alpha[0, :, :10] = 0  # a transparent strip
     path = tmp_path / "rgba.tif"
-    with rasterio.open(path, "w", driver="GTiff", width=40, height=40, count=4, dtype="uint8", crs="EPSG:32618",
-                       transform=Affine(0.15, 0, 500000, 0, -0.15, 4400000)) as ds:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        width=40,
+        height=40,
+        count=4,
+        dtype="uint8",
+        crs="EPSG:32618",
+        transform=Affine(0.15, 0, 500000, 0, -0.15, 4400000),
+    ) as ds:
         ds.write(np.concatenate([rgb, alpha]))
         ds.colorinterp = [ColorInterp.red, ColorInterp.green, ColorInterp.blue, ColorInterp.alpha]
     with pytest.warns(InputWarning, match="RGB \\+ alpha"):
@@ -592,7 +600,12 @@ def test_open_files_stay_under_the_cap_and_reads_do_not_change(shared_tiles):
     with Mosaic.open(shared_tiles.directory) as mosaic:
         mosaic.max_open = 2  # four tiles, two handles at most
         for _ in range(2):
-            for window in (PixelWindow(0, 0, 30, 20), PixelWindow(70, 50, 30, 20), PixelWindow(0, 50, 30, 20), PixelWindow(70, 0, 30, 20)):
+            for window in (
+                PixelWindow(0, 0, 30, 20),
+                PixelWindow(70, 50, 30, 20),
+                PixelWindow(0, 50, 30, 20),
+                PixelWindow(70, 0, 30, 20),
+            ):
                 mosaic.read(window)
                 assert len(mosaic._handles) <= 2
         assert np.array_equal(mosaic.read(mosaic.window).data, expected)

@@ -14,8 +14,20 @@ from csboundary.data.windows import PixelWindow
 
 
 def sparse_tif(path, size=4096, data_px=1000, sparse=True):
-    profile = dict(driver="GTiff", count=4, dtype="uint8", width=size, height=size, tiled=True, blockxsize=512, blockysize=512,
-                   compress="deflate", nodata=0, crs="EPSG:32618", transform=from_origin(500000, 4500000, 0.152, 0.152))
+    profile = dict(
+        driver="GTiff",
+        count=4,
+        dtype="uint8",
+        width=size,
+        height=size,
+        tiled=True,
+        blockxsize=512,
+        blockysize=512,
+        compress="deflate",
+        nodata=0,
+        crs="EPSG:32618",
+        transform=from_origin(500000, 4500000, 0.152, 0.152),
+    )
     if sparse:
         profile["SPARSE_OK"] = True
     with rasterio.open(path, "w", **profile) as dst:
@@ -66,8 +78,19 @@ def test_a_truncated_geotiff_is_refused_before_any_work(tmp_path):
     from helpers import run_cli
 
     path = tmp_path / "cut.tif"
-    profile = dict(driver="GTiff", count=4, dtype="uint8", width=2000, height=2000, tiled=True, blockxsize=512, blockysize=512,
-                   compress="deflate", crs="EPSG:32618", transform=from_origin(500000, 4500000, 0.152, 0.152))
+    profile = dict(
+        driver="GTiff",
+        count=4,
+        dtype="uint8",
+        width=2000,
+        height=2000,
+        tiled=True,
+        blockxsize=512,
+        blockysize=512,
+        compress="deflate",
+        crs="EPSG:32618",
+        transform=from_origin(500000, 4500000, 0.152, 0.152),
+    )
     with rasterio.open(path, "w", **profile) as dst:
         dst.write(np.random.default_rng(0).integers(0, 255, (4, 2000, 2000), dtype=np.uint8))
     with open(path, "r+b") as f:

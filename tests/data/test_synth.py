@@ -201,7 +201,8 @@ def test_written_road_surface_lies_between_the_boundaries(tmp_path):
 
 
 def test_a_city_without_a_road_surface_layer_has_an_unknown_surface(tmp_path):
-    from csboundary.data.ground_truth import read_ground_truth as read, write_ground_truth
+    from csboundary.data.ground_truth import read_ground_truth as read
+    from csboundary.data.ground_truth import write_ground_truth
     from csboundary.models.training.data import TrainingCity
 
     synthesize_city(tmp_path / "c", seed=1, split="valid", tiles=(1, 1), config=SMALL, progress=False)

@@ -20,9 +20,21 @@ from csboundary.data.synth.render import CameraLook, TileFrame, _Canvas, _draw_d
 from csboundary.data.synth.scene import WHITE_PAINT, WINDOW, Car, _centred_rect
 from csboundary.data.synth.styles import STYLES, style_config
 
-PHOTO_KNOBS = ("road_wear_per_km", "car_detail", "flat_roof_detail", "relief_lean", "tree_pits", "court_share",
-               "lot_stalls", "photo_texture", "photo_blur", "jpeg_quality", "house_depth", "bare_tree_share",
-               "bus_lane_share")
+PHOTO_KNOBS = (
+    "road_wear_per_km",
+    "car_detail",
+    "flat_roof_detail",
+    "relief_lean",
+    "tree_pits",
+    "court_share",
+    "lot_stalls",
+    "photo_texture",
+    "photo_blur",
+    "jpeg_quality",
+    "house_depth",
+    "bare_tree_share",
+    "bus_lane_share",
+)
 
 # md5 of the ground-truth WKB of tile (0, 0) of each older style's seed-7 test city at 1000 px,
 # recorded before the dense style's knobs were added (2026-12-04). The ground truth is exact
@@ -112,10 +124,14 @@ def test_the_render_check_tells_a_moved_car_from_another_cpus_rounding():
 def test_older_styles_render_as_before_with_another_blas_kernel():
     # OpenBLAS's Haswell kernels stand in for another CPU: the residential tile renders 0.03 % of
     # its pixel values differently with them (above), and the check must still pass
-    code = ("import sys; sys.path.insert(0, sys.argv[1]); import test_synth_dense as t; "
-            "t.test_older_styles_render_as_before_the_dense_knobs('residential')")
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import test_synth_dense as t; "
+        "t.test_older_styles_render_as_before_the_dense_knobs('residential')"
+    )
     env = dict(os.environ, OPENBLAS_CORETYPE="Haswell")
-    result = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)], env=env, capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-c", code, str(Path(__file__).parent)], env=env, capture_output=True, text=True
+    )
     assert result.returncode == 0, result.stderr
 
 
@@ -166,7 +182,9 @@ def test_dense_style_has_its_street_proportions_and_full_curbs(dense_city):
     scene = dense_city.scene
     streets = scene.network.streets
     assert all(10.0 <= s.width <= 30.0 or s.kind == "boulevard" for s in streets)
-    assert all(b.parapet is not None or b.facets for b in scene.buildings[:3]) or any(b.parapet for b in scene.buildings)
+    assert all(b.parapet is not None or b.facets for b in scene.buildings[:3]) or any(
+        b.parapet for b in scene.buildings
+    )
     assert any(len(b.roof_items) > 0 for b in scene.buildings)
     assert scene.lean != (0.0, 0.0) and scene.texture > 0
     assert all(car.detail for car in scene.cars)
@@ -175,8 +193,15 @@ def test_dense_style_has_its_street_proportions_and_full_curbs(dense_city):
 
 
 def test_dense_photo_knobs_change_the_pixels_but_not_the_ground_truth():
-    plain = {"road_wear_per_km": 0.0, "car_detail": False, "flat_roof_detail": 0.0, "relief_lean": (0.0, 0.0),
-             "photo_texture": 0.0, "photo_blur": (0.0, 0.0), "jpeg_quality": (0, 0)}
+    plain = {
+        "road_wear_per_km": 0.0,
+        "car_detail": False,
+        "flat_roof_detail": 0.0,
+        "relief_lean": (0.0, 0.0),
+        "photo_texture": 0.0,
+        "photo_blur": (0.0, 0.0),
+        "jpeg_quality": (0, 0),
+    }
     a, b = plan_city(small(), "train", 4, (1, 1)), plan_city(small(**plain), "train", 4, (1, 1))
     assert [g.wkb for g in a.ground_truth().geometry] == [g.wkb for g in b.ground_truth().geometry]
     assert not np.array_equal(a.render(0, 0), b.render(0, 0))
@@ -212,5 +237,10 @@ def test_blur_and_jpeg_change_a_noisy_image_but_keep_its_mean():
 
 
 if __name__ == "__main__":  # rewrite the reference from this machine's renders
-    np.savez_compressed(REFERENCE, **{style: np.round(block_means(render_older_style(style)[0]) * 100).astype(np.uint16)
-                                      for style in sorted(OLDER_STYLE_TRUTH_MD5)})
+    np.savez_compressed(
+        REFERENCE,
+        **{
+            style: np.round(block_means(render_older_style(style)[0]) * 100).astype(np.uint16)
+            for style in sorted(OLDER_STYLE_TRUTH_MD5)
+        },
+    )

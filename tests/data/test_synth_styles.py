@@ -14,7 +14,7 @@ from shapely.geometry import Point
 
 from csboundary.data.synth.city import draw_look, plan_city
 from csboundary.data.synth.config import SynthConfig
-from csboundary.data.synth.render import CameraLook, HAZE_VEIL, apply_look, resample
+from csboundary.data.synth.render import HAZE_VEIL, CameraLook, apply_look, resample
 from csboundary.data.synth.scene import CONCRETE, GRAVEL, SOIL
 from csboundary.data.synth.streets import rng_share
 from csboundary.data.synth.styles import DEFAULT_MIX, MAJOR_STYLES, STYLES, draw_style, style_config
@@ -70,7 +70,9 @@ def test_a_city_is_the_same_on_cpus_with_and_without_avx512(style="suburb"):
     hashes = []
     for disabled in ("", " ".join(f for f in WIDE_SIMD.split() if __cpu_features__.get(f))):
         env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled}
-        done = subprocess.run([sys.executable, "-c", GROUND_TRUTH_HASH, style], env=env, capture_output=True, text=True, check=True)
+        done = subprocess.run(
+            [sys.executable, "-c", GROUND_TRUTH_HASH, style], env=env, capture_output=True, text=True, check=True
+        )
         hashes.append(done.stdout.strip())
     assert hashes[0] == hashes[1]
 
@@ -184,7 +186,9 @@ def test_style_mix_is_seeded_and_never_draws_a_zero_weight_style():
 
 
 def test_worlds_are_numbered_cities_of_the_mix_and_refuse_unknown_keys():
-    worlds = WorldsConfig.from_dict({"styles": {"suburb": 1, "rural": 1}, "cities": 5, "tiles": [1, 1], "tile_size": 400, "first_seed": 7})
+    worlds = WorldsConfig.from_dict(
+        {"styles": {"suburb": 1, "rural": 1}, "cities": 5, "tiles": [1, 1], "tile_size": 400, "first_seed": 7}
+    )
     specs = worlds.specs()
     assert [s.seed for s in specs] == [7, 8, 9, 10, 11]
     assert {s.style for s in specs} <= {"suburb", "rural"}
@@ -195,8 +199,13 @@ def test_worlds_are_numbered_cities_of_the_mix_and_refuse_unknown_keys():
 
 
 def test_training_on_worlds_only_builds_them_and_needs_some_city(tmp_path):
-    config = TrainConfig.from_dict({"cache": str(tmp_path), "train_city": None,
-                                    "worlds": {"styles": {"rural": 1, "downtown": 1}, "cities": 2, "tile_size": 300}})
+    config = TrainConfig.from_dict(
+        {
+            "cache": str(tmp_path),
+            "train_city": None,
+            "worlds": {"styles": {"rural": 1, "downtown": 1}, "cities": 2, "tile_size": 300},
+        }
+    )
     cities = training_cities(config)
     assert len(cities) == 2
     styles = [json.loads((c.path / "city.json").read_text())["style"] for c in cities]

@@ -16,7 +16,14 @@ from csboundary.data.synth.city import plan_city
 from csboundary.data.synth.scene import DRIVEWAYS, roof_facets
 from csboundary.data.synth.styles import STYLES, style_config
 
-YARD_KNOBS = ("bare_block_share", "pitched_roof_share", "house_driveway_share", "lot_fence_share", "lawn_patch_share", "pool_share")
+YARD_KNOBS = (
+    "bare_block_share",
+    "pitched_roof_share",
+    "house_driveway_share",
+    "lot_fence_share",
+    "lawn_patch_share",
+    "pool_share",
+)
 
 
 def small(style: str, **overrides):
@@ -24,7 +31,9 @@ def small(style: str, **overrides):
 
 
 def test_gable_roof_over_a_10_by_6_rectangle_is_two_halves_split_by_the_long_ridge():
-    facets, ridge = roof_facets(np.zeros(2), np.array([1.0, 0.0]), np.array([0.0, 1.0]), 10.0, 6.0, hip=False, sun=(0.0, -1.0))
+    facets, ridge = roof_facets(
+        np.zeros(2), np.array([1.0, 0.0]), np.array([0.0, 1.0]), 10.0, 6.0, hip=False, sun=(0.0, -1.0)
+    )
     assert [round(f.area, 9) for f, _ in facets] == [30.0, 30.0]
     assert ridge is not None and ridge.centroid.coords[0] == pytest.approx((5.0, 3.0))
     assert ridge.bounds == pytest.approx((0.0, 2.88, 10.0, 3.12))  # along the long side, 0.24 m wide
@@ -34,19 +43,25 @@ def test_gable_roof_over_a_10_by_6_rectangle_is_two_halves_split_by_the_long_rid
 
 
 def test_hip_roof_on_a_square_is_four_triangles_meeting_at_the_centre_without_a_ridge():
-    facets, ridge = roof_facets(np.zeros(2), np.array([1.0, 0.0]), np.array([0.0, 1.0]), 8.0, 8.0, hip=True, sun=(1.0, 0.0))
+    facets, ridge = roof_facets(
+        np.zeros(2), np.array([1.0, 0.0]), np.array([0.0, 1.0]), 8.0, 8.0, hip=True, sun=(1.0, 0.0)
+    )
     assert len(facets) == 4 and ridge is None
     assert all(f.area == pytest.approx(16.0) for f, _ in facets)
     assert sorted(round(b, 9) for _, b in facets) == [0.7, 1.0, 1.0, 1.3]  # the -x facet faces the sun
 
 
-@given(st.floats(2.0, 30.0), st.floats(2.0, 30.0), st.floats(0.0, 2 * math.pi), st.booleans(), st.floats(0.0, 2 * math.pi))
+@given(
+    st.floats(2.0, 30.0), st.floats(2.0, 30.0), st.floats(0.0, 2 * math.pi), st.booleans(), st.floats(0.0, 2 * math.pi)
+)
 @settings(max_examples=60, deadline=None)
 def test_roof_facets_tile_the_footprint_and_the_ridge_runs_along_its_longer_side(length, width, angle, hip, sun_angle):
     along = np.array([math.cos(angle), math.sin(angle)])
     across = np.array([-along[1], along[0]])
     origin = np.array([3.0, -7.0])
-    footprint = Polygon([origin, origin + along * length, origin + along * length + across * width, origin + across * width])
+    footprint = Polygon(
+        [origin, origin + along * length, origin + along * length + across * width, origin + across * width]
+    )
     facets, ridge = roof_facets(origin, along, across, length, width, hip, (math.cos(sun_angle), math.sin(sun_angle)))
     assert len(facets) == (4 if hip else 2)
     assert sum(f.area for f, _ in facets) == pytest.approx(footprint.area, rel=1e-9)
@@ -58,7 +73,9 @@ def test_roof_facets_tile_the_footprint_and_the_ridge_runs_along_its_longer_side
         assert footprint.buffer(1e-9).contains(ridge)
 
 
-@pytest.mark.parametrize("style", sorted(set(STYLES) - {"residential", "leafy", "highway"}))  # the styles built before the knobs
+@pytest.mark.parametrize(
+    "style", sorted(set(STYLES) - {"residential", "leafy", "highway"})
+)  # the styles built before the knobs
 def test_yard_knobs_are_off_in_every_style_that_predates_them(style):
     config = style_config(style)
     assert all(getattr(config, knob) == 0.0 for knob in YARD_KNOBS)
@@ -80,7 +97,12 @@ def test_residential_houses_have_pitched_roofs_and_driveways_that_stop_at_the_cu
         assert sum(f.area for f, _ in b.facets) == pytest.approx(b.footprint.area, rel=1e-6)
     driveway_colours = {c[:3] for c in DRIVEWAYS}
     roadway = scene.network.roadway
-    paved = [p.polygon for p in scene.ground if p.roughness == 5 and p.polygon.area > 15 and any(
-        np.abs(np.subtract(p.colour[:3], c)).max() <= 30 for c in driveway_colours)]
+    paved = [
+        p.polygon
+        for p in scene.ground
+        if p.roughness == 5
+        and p.polygon.area > 15
+        and any(np.abs(np.subtract(p.colour[:3], c)).max() <= 30 for c in driveway_colours)
+    ]
     assert len(paved) > 10
     assert max(roadway.intersection(p).area for p in paved) < 0.05  # clipped to the block: never on the road

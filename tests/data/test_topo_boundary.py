@@ -16,13 +16,13 @@ from csboundary.data.city import ground_truth_path, read_meta, tiles_dir
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.topo_boundary import (
-    pixels_to_line,
     Piece,
     assemble_tile,
     import_topo_boundary,
     join_pieces,
     parse_patch_id,
     patch_id,
+    pixels_to_line,
     scan,
 )
 from csboundary.errors import InputError, InputWarning
@@ -136,7 +136,9 @@ def test_patches_reassemble_in_the_right_place(tmp_path):
         np.testing.assert_array_equal(tile.image[:, R * PS + r, C * PS + c], patch_pixels(R, C)[:, r, c])
     for R in range(5):
         for C in range(5):
-            np.testing.assert_array_equal(tile.image[:, R * PS : (R + 1) * PS, C * PS : (C + 1) * PS], patch_pixels(R, C))
+            np.testing.assert_array_equal(
+                tile.image[:, R * PS : (R + 1) * PS, C * PS : (C + 1) * PS], patch_pixels(R, C)
+            )
 
 
 def test_boundary_crossing_a_patch_border_becomes_one_linestring(tmp_path):
@@ -150,38 +152,54 @@ def test_boundary_crossing_a_patch_border_becomes_one_linestring(tmp_path):
     # The staircase is simplified (0.75 px): every pixel centre lies within 0.57 px of the chord
     # from the first to the last, so only the ends remain.
     np.testing.assert_allclose(np.asarray(crossing[0].coords), [(7.75, -2.75), (11.25, -3.25)])
-    every_pixel = [(7.75, -2.75), (8.25, -2.75), (8.75, -2.75), (9.25, -2.75), (9.75, -2.75),
-                   (10.25, -3.25), (10.75, -3.25), (11.25, -3.25)]
+    every_pixel = [
+        (7.75, -2.75),
+        (8.25, -2.75),
+        (8.75, -2.75),
+        (9.25, -2.75),
+        (9.75, -2.75),
+        (10.25, -3.25),
+        (10.75, -3.25),
+        (11.25, -3.25),
+    ]
     chain = np.array([[5, 15], [5, 16], [5, 17], [5, 18], [5, 19], [6, 20], [6, 21], [6, 22]])
     np.testing.assert_allclose(np.asarray(pixels_to_line(tile.transform, chain, simplify_px=0).coords), every_pixel)
     other = [ln for ln, src in zip(tile.lines, tile.line_sources) if len(src) == 1][0]
-    np.testing.assert_allclose(np.asarray(other.coords), [(1.25, -6.25), (2.25, -6.25)])  # collinear middle point simplified away
+    np.testing.assert_allclose(
+        np.asarray(other.coords), [(1.25, -6.25), (2.25, -6.25)]
+    )  # collinear middle point simplified away
 
 
 def test_join_pieces_rings_corners_and_forks():
     pts = lambda *p: np.array(p, dtype=float)  # noqa: E731
     # A ring cut into two halves by a vertical border between col 19 and col 20.
-    ring = join_pieces([
-        Piece("a", pts([0, 19], [0, 18], [1, 18], [1, 19])),
-        Piece("b", pts([1, 20], [1, 21], [0, 21], [0, 20])),
-    ])
+    ring = join_pieces(
+        [
+            Piece("a", pts([0, 19], [0, 18], [1, 18], [1, 19])),
+            Piece("b", pts([1, 20], [1, 21], [0, 21], [0, 20])),
+        ]
+    )
     assert len(ring) == 1 and ring[0][1] == ["a", "b"]
     assert (ring[0][0][0] == ring[0][0][-1]).all() and len(ring[0][0]) == 9
     # Ends closer than 1.5 px in the same patch are not joined (they are separate boundaries).
     assert len(join_pieces([Piece("a", pts([0, 0], [0, 5])), Piece("a", pts([0, 6], [0, 9]))])) == 2
     # A one-pixel piece clipped by a patch corner still links its neighbours.
-    corner = join_pieces([
-        Piece("00", pts([17, 17], [19, 19])),
-        Piece("01", pts([20, 20])),
-        Piece("11", pts([21, 21], [25, 25])),
-    ])
+    corner = join_pieces(
+        [
+            Piece("00", pts([17, 17], [19, 19])),
+            Piece("01", pts([20, 20])),
+            Piece("11", pts([21, 21], [25, 25])),
+        ]
+    )
     assert len(corner) == 1 and corner[0][1] == ["00", "01", "11"]
     # Three ends meeting: the closest pair joins, the third stays an end (no forks).
-    fork = join_pieces([
-        Piece("a", pts([0, 10], [5, 19])),
-        Piece("b", pts([5, 20], [5, 30])),
-        Piece("c", pts([6, 20], [9, 30])),
-    ])
+    fork = join_pieces(
+        [
+            Piece("a", pts([0, 10], [5, 19])),
+            Piece("b", pts([5, 20], [5, 30])),
+            Piece("c", pts([6, 20], [9, 30])),
+        ]
+    )
     assert sorted(src for _, src in fork) == [["a", "b"], ["c"]]
     assert join_pieces([Piece("a", pts([3, 3]))]) == []  # fewer than 2 points: skipped
 
@@ -244,7 +262,12 @@ def test_not_georeferenced_falls_back_to_epsg2263_half_foot_pixels(tmp_path):
     meta = read_meta(city)
     assert meta["source"] == "topo-boundary" and meta["tile_id"] == TILE
     assert meta["crs"] == "EPSG:2263" and meta["gsd"] == 0.5 and meta["georeferenced"] is False
-    assert meta["patch_split"] == {f"{TILE}_00": "train", f"{TILE}_01": "valid", f"{TILE}_10": "test", f"{TILE}_11": "pretrain"}
+    assert meta["patch_split"] == {
+        f"{TILE}_00": "train",
+        f"{TILE}_01": "valid",
+        f"{TILE}_10": "test",
+        f"{TILE}_11": "pretrain",
+    }
     with rasterio.open(tiles_dir(city) / f"{TILE}.tif") as ds:
         assert ds.crs.to_epsg() == 2263
         assert ds.transform == Affine(0.5, 0, 0, 0, -0.5, 0)
@@ -340,15 +363,30 @@ def test_tile_ids_decode_to_the_2500_ft_grid_by_hand():
 def _placed_tile(tile_id: str, transform: Affine, chains: list[np.ndarray], size: int = 40):
     from csboundary.data.topo_boundary import AssembledTile
 
-    return AssembledTile(tile_id, np.zeros((4, 1, 1), np.uint8), np.zeros((1, 1), bool), transform, "EPSG:2263", False, size // 2, 2,
-                         {}, [], [], chains=chains, placed=True)
+    return AssembledTile(
+        tile_id,
+        np.zeros((4, 1, 1), np.uint8),
+        np.zeros((1, 1), bool),
+        transform,
+        "EPSG:2263",
+        False,
+        size // 2,
+        2,
+        {},
+        [],
+        [],
+        chains=chains,
+        placed=True,
+    )
 
 
 def test_boundaries_continue_across_correctly_placed_tiles_and_not_across_misplaced_ones():
     from csboundary.data.topo_boundary import border_continuity, join_tiles
 
     west = _placed_tile("a", Affine(0.5, 0, 1000.0, 0, -0.5, 2000.0), [np.array([[10.0, 5.0], [10.0, 39.0]])])
-    east = _placed_tile("b", Affine(0.5, 0, 1020.0, 0, -0.5, 2000.0), [np.array([[10.0, 0.0], [10.0, 30.0]])])  # 40 px = 20 ft east
+    east = _placed_tile(
+        "b", Affine(0.5, 0, 1020.0, 0, -0.5, 2000.0), [np.array([[10.0, 0.0], [10.0, 30.0]])]
+    )  # 40 px = 20 ft east
     report = border_continuity([west, east])
     assert report == {"border_ends": 2, "matched": 2, "share": 1.0}
     frame, lines, sources = join_tiles([west, east])
@@ -359,10 +397,12 @@ def test_boundaries_continue_across_correctly_placed_tiles_and_not_across_mispla
 
 
 def test_import_places_tiles_from_ids_and_writes_a_city_per_split(tmp_path):
-    root = make_dataset(tmp_path / "src", tile="987217", labels={(0, 0): [[[5, 0], [5, 19]]], (0, 1): [[[5, 0], [5, 10]]]})
+    root = make_dataset(
+        tmp_path / "src", tile="987217", labels={(0, 0): [[[5, 0], [5, 19]]], (0, 1): [[[5, 0], [5, 10]]]}
+    )
     report = import_topo_boundary(root, tmp_path / "out", patch_size=PS, splits=2, progress=False)
     assert report["tiles"]["987217"]["placed_from_id"]
-    (split, city), = report["split_cities"].items()
+    ((split, city),) = report["split_cities"].items()
     meta = read_meta(city["city_dir"])
     assert meta["tile_ids"] == ["987217"] and meta["crs"] == "EPSG:2263"
     with Mosaic.open(tiles_dir(city["city_dir"])) as mosaic:  # the linked tile, on the map

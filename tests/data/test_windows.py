@@ -8,7 +8,6 @@ from affine import Affine
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from helpers import north_up
 from csboundary.data.windows import (
     PixelWindow,
     pixel_to_world,
@@ -16,6 +15,7 @@ from csboundary.data.windows import (
     window_transform,
     world_to_pixel,
 )
+from helpers import north_up
 
 W = PixelWindow
 
@@ -194,8 +194,6 @@ def test_window_transform_maps_window_origin():
     np.testing.assert_allclose(xs, [105.0, 105.5])
     np.testing.assert_allclose(ys, [190.0, 189.5])
     assert (t.a, t.e) == (T.a, T.e)
-
-
 
 
 @given(north_up, st.floats(-1e4, 6e4), st.floats(-1e4, 6e4))

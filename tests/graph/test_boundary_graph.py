@@ -43,8 +43,10 @@ def test_world_lines_round_trip_through_pixels():
 
 
 @settings(max_examples=40, deadline=None)
-@given(points=st.lists(st.tuples(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4)), min_size=2, max_size=12, unique=True),
-       with_extras=st.booleans())
+@given(
+    points=st.lists(st.tuples(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4)), min_size=2, max_size=12, unique=True),
+    with_extras=st.booleans(),
+)
 def test_json_round_trip(points, with_extras, tmp_path_factory):
     pts = np.array(points)
     g = BoundaryGraph.from_polylines([pts], transform=T, crs="EPSG:32618")
@@ -74,6 +76,10 @@ def test_bad_graph_files_name_the_file(tmp_path):
     p.write_text(json.dumps({"format": "something-else"}))
     with pytest.raises(InputError, match="not a csboundary-graph"):
         BoundaryGraph.read_json(p)
-    p.write_text(json.dumps({"format": "csboundary-graph", "version": 1, "vertices": [{"px": [0, 0]}], "edges": [{"u": 0, "v": 5}]}))
+    p.write_text(
+        json.dumps(
+            {"format": "csboundary-graph", "version": 1, "vertices": [{"px": [0, 0]}], "edges": [{"u": 0, "v": 5}]}
+        )
+    )
     with pytest.raises(InputError, match="malformed"):
         BoundaryGraph.read_json(p)

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import shipped_parts
-
 from csboundary.graph.crossings import CrossingConfig, crossing_points, run_centres
+from helpers import shipped_parts
 
 
 def test_runs_have_their_centres():
@@ -49,11 +48,20 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", 0.3, min_support=0.2, crossing_spacing_px=250,
-                min_fragment_px=160)
+    make_bundle(
+        tmp_path / "fpn.pt",
+        tmp_path / "afanet.pt",
+        tmp_path / "b.pt",
+        0.3,
+        min_support=0.2,
+        crossing_spacing_px=250,
+        min_fragment_px=160,
+    )
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
     settings = predictor.settings
-    assert settings.crossings.spacing_px == 250 and settings.support.min_support == 0.2 and settings.min_fragment_px == 160
+    assert (
+        settings.crossings.spacing_px == 250 and settings.support.min_support == 0.2 and settings.min_fragment_px == 160
+    )
     maps = np.zeros((2, 400, 400), np.float32)
     maps[1, 119:122, :] = 1.0  # a boundary and no keypoint at all: the crossings are the vertices
     assert sorted(map(tuple, np.round(predictor.extract(maps).vertices, 1))) == [(50.5, 120.5), (300.5, 120.5)]
@@ -76,7 +84,10 @@ def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_pat
     assert PatchPredictor.load(tmp_path / "given.pt", torch.device("cpu")).settings.vertices.threshold == 0.6
     shipped = torch.load(shipped_weights(), map_location="cpu", weights_only=True)["inference"]["vertex_threshold"]
     # chosen on both real sets
-    assert shipped == 0.25 and PatchPredictor.load(shipped_weights(), torch.device("cpu")).settings.vertices.threshold == shipped
+    assert (
+        shipped == 0.25
+        and PatchPredictor.load(shipped_weights(), torch.device("cpu")).settings.vertices.threshold == shipped
+    )
     # a keypoint blob peaking at 0.45 is a vertex at 0.35, not at 0.6
     maps = np.zeros((2, 200, 200), np.float32)
     yy, xx = np.mgrid[:200, :200]

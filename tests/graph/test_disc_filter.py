@@ -79,5 +79,7 @@ def test_a_patch_is_gated_once_for_its_vertices_and_again_for_its_edges():
     other = maps[2].copy()
     other[0, 0] = 0.5
     assert patch_surface_change(other, config) is not first
-    assert np.array_equal(patch_surface_change(maps[2], SurfaceGateConfig(radius_px=41, min_piece_px=0)),
-                          surface_change(maps[2], SurfaceGateConfig(radius_px=41, min_piece_px=0)))
+    assert np.array_equal(
+        patch_surface_change(maps[2], SurfaceGateConfig(radius_px=41, min_piece_px=0)),
+        surface_change(maps[2], SurfaceGateConfig(radius_px=41, min_piece_px=0)),
+    )

@@ -15,6 +15,7 @@ def array_sampler(maps: np.ndarray):
         col = np.clip(np.rint(points[:, 0]).astype(int), 0, maps.shape[2] - 1)
         row = np.clip(np.rint(points[:, 1]).astype(int), 0, maps.shape[1] - 1)
         return maps[:, row, col].T
+
     return sample
 
 
@@ -33,7 +34,9 @@ def features_of(graph: BoundaryGraph, maps=None) -> list[dict[str, float]]:
 
 
 def test_a_curb_has_roadway_on_one_side_and_boundary_along_it():
-    graph = BoundaryGraph(np.array([[10.0, 50.0], [90.0, 50.0]]), np.array([[0, 1]]), edge_kinds=["normal"], edge_scores=np.array([0.7]))
+    graph = BoundaryGraph(
+        np.array([[10.0, 50.0], [90.0, 50.0]]), np.array([[0, 1]]), edge_kinds=["normal"], edge_scores=np.array([0.7])
+    )
     (f,) = features_of(graph, curb_maps())
     assert f["boundary_mean"] == f["boundary_min"] == 1.0
     assert f["surface_high"] == 1.0 and f["surface_low"] == 0.0 and f["surface_contrast"] == 1.0
@@ -55,8 +58,12 @@ def test_shape_and_place_in_the_graph():
     # an L of two edges (degree 2 where they meet) and a lone zig-zag edge of its own piece
     vertices = np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 40.0], [100.0, 100.0], [130.0, 100.0]])
     zigzag = np.array([[100.0, 100.0], [115.0, 110.0], [130.0, 100.0]])
-    graph = BoundaryGraph(vertices, np.array([[0, 1], [1, 2], [3, 4]]), edge_kinds=["corner", "normal", "skeleton"],
-                          edge_polylines=[None, None, zigzag])
+    graph = BoundaryGraph(
+        vertices,
+        np.array([[0, 1], [1, 2], [3, 4]]),
+        edge_kinds=["corner", "normal", "skeleton"],
+        edge_polylines=[None, None, zigzag],
+    )
     a, b, c = features_of(graph)
     assert a["degree_min"] == 1 and a["degree_max"] == 2 and b["degree_max"] == 2
     assert a["log_piece_length"] == b["log_piece_length"] == pytest.approx(np.log1p(70.0))
@@ -69,7 +76,6 @@ def test_points_along_are_evenly_spaced_with_left_normals():
     points, normals = points_along(np.array([[0.0, 0.0], [10.0, 0.0]]), 2.0)
     np.testing.assert_allclose(points[:, 0], [1, 3, 5, 7, 9])
     np.testing.assert_allclose(normals, [[0.0, -1.0]] * 5)  # image rows grow downwards: left of east is up
-
 
 
 def test_groups_end_pieces_and_boundaries_where_they_meet():

@@ -9,10 +9,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from helpers import bundle_without, shipped_parts
-
 from csboundary.graph.edge_support import EdgeSupportConfig, longest_gap, segment_support, unsupported_pairs, widened
 from csboundary.graph.settings import GraphOverrides
+from helpers import bundle_without, shipped_parts
 
 
 def line_map() -> np.ndarray:
@@ -130,10 +129,17 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4)
+    make_bundle(
+        tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4
+    )
     support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.support
     assert (support.min_support, support.max_gap_px, support.gap_level) == (0.2, 50, 0.4)
-    assert load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(max_edge_gap=0), engine="torch").settings.support.max_gap_px == 0
+    assert (
+        load_predictor(
+            tmp_path / "b.pt", "cpu", GraphOverrides(max_edge_gap=0), engine="torch"
+        ).settings.support.max_gap_px
+        == 0
+    )
     # a bundle from before the check (no such settings) loads with the check off
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("max_gap_px", "gap_level"))
     assert PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.support.max_gap_px == 0

@@ -22,8 +22,14 @@ ROAD = np.array([[0.0, 100], [150, 100], [300, 100]])
 
 def side_street(stop_y: float = 70.0, x: float = 150.0) -> BoundaryGraph:
     vertices = np.array([[0.0, 100], [300, 100], [x, 0], [x, stop_y]])
-    return BoundaryGraph(vertices, np.array([[0, 1], [2, 3]]), edge_kinds=["corner", "normal"], edge_polylines=[ROAD, None],
-                         edge_scores=np.array([0.9, 0.6]), edge_patches=np.array([[0, 0], [0, 1]]))
+    return BoundaryGraph(
+        vertices,
+        np.array([[0, 1], [2, 3]]),
+        edge_kinds=["corner", "normal"],
+        edge_polylines=[ROAD, None],
+        edge_scores=np.array([0.9, 0.6]),
+        edge_patches=np.array([[0, 0], [0, 1]]),
+    )
 
 
 def attached(graph: BoundaryGraph, radius: float = 40.0, **options) -> BoundaryGraph:
@@ -34,7 +40,12 @@ def attached(graph: BoundaryGraph, radius: float = 40.0, **options) -> BoundaryG
 def test_dangling_ends_and_the_way_their_lines_were_going():
     ends, edges, headings = dangling_ends(side_street())
     assert ends.tolist() == [0, 1, 2, 3] and edges.tolist() == [0, 0, 1, 1]
-    assert headings.tolist() == [[-1, 0], [1, 0], [0, -1], [0, 1]]  # the road's ends outwards; the street's down at (150, 70)
+    assert headings.tolist() == [
+        [-1, 0],
+        [1, 0],
+        [0, -1],
+        [0, 1],
+    ]  # the road's ends outwards; the street's down at (150, 70)
 
 
 def test_an_end_30_px_short_of_the_road_ahead_is_joined_to_it_and_the_road_split():
@@ -60,11 +71,17 @@ def test_a_foot_within_the_merge_radius_of_a_vertex_reuses_it():
     assert city.n_vertices == 4 and 0 in city.edges[join].tolist()
 
 
-@pytest.mark.parametrize("graph, radius, why", [
-    (side_street(stop_y=55), 40.0, "the road is 45 px away, beyond the radius"),
-    (BoundaryGraph(np.array([[0.0, 100], [300, 100], [100, 70], [150, 70]]), np.array([[0, 1], [2, 3]])), 40.0,
-     "the line runs east, parallel to the road: it lies 90 degrees off its heading"),
-])
+@pytest.mark.parametrize(
+    "graph, radius, why",
+    [
+        (side_street(stop_y=55), 40.0, "the road is 45 px away, beyond the radius"),
+        (
+            BoundaryGraph(np.array([[0.0, 100], [300, 100], [100, 70], [150, 70]]), np.array([[0, 1], [2, 3]])),
+            40.0,
+            "the line runs east, parallel to the road: it lies 90 degrees off its heading",
+        ),
+    ],
+)
 def test_an_end_not_heading_to_a_line_within_the_radius_stays(graph, radius, why):
     assert attached(graph, radius).n_edges == 2, why
 
@@ -79,7 +96,11 @@ def test_the_line_ahead_wins_over_a_nearer_one_behind():
     # (behind), the road 40 px ahead
     vertices = np.array([[0.0, 110], [300, 110], [150, 0], [150, 70], [155, 50], [300, 50]])
     city = attached(BoundaryGraph(vertices, np.array([[0, 1], [2, 3], [4, 5]])), radius=45.0)
-    joins = [sorted(map(tuple, city.vertices[city.edges[k]].tolist())) for k, kind in enumerate(city.edge_kinds) if kind == "attach"]
+    joins = [
+        sorted(map(tuple, city.vertices[city.edges[k]].tolist()))
+        for k, kind in enumerate(city.edge_kinds)
+        if kind == "attach"
+    ]
     assert [(150, 70), (150, 110)] in joins
     assert [(150, 50), (155, 50)] in joins and len(joins) == 2  # that line's own end heads west onto the street
 
@@ -97,8 +118,13 @@ def test_the_city_graph_drops_a_short_piece_before_attaching_the_rest():
     """A 30 px scrap heading to the road is dropped as noise, not kept alive by a join; a long
     street is attached."""
     vertices = np.array([[0.0, 100], [300, 100], [150, 40], [150, 70], [250, 0], [250, 70]])
-    graph = BoundaryGraph(vertices, np.array([[0, 1], [2, 3], [4, 5]]), edge_kinds=["normal"] * 3, edge_scores=np.ones(3),
-                          edge_patches=np.zeros((3, 2), int))
+    graph = BoundaryGraph(
+        vertices,
+        np.array([[0, 1], [2, 3], [4, 5]]),
+        edge_kinds=["normal"] * 3,
+        edge_scores=np.ones(3),
+        edge_patches=np.zeros((3, 2), int),
+    )
     city = city_graph({(0, 0): graph}, GRID, CityGraphRecipe(StitchConfig(), None, min_fragment_px=50, attach_px=40))
     assert city.edge_kinds.count("attach") == 1 and len(fragment_lengths(city)[1]) == 1
     assert not np.any(np.all(city.vertices == [150, 40], axis=1))  # the scrap is gone
@@ -107,25 +133,38 @@ def test_the_city_graph_drops_a_short_piece_before_attaching_the_rest():
 
 def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp_path):
     import torch
-    from helpers import shipped_parts
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
+    from helpers import shipped_parts
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", attach_max_px=40)
     assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.attach_px == 40
-    assert load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(attach_ends=0), engine="torch").settings.attach_px == 0
+    assert (
+        load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(attach_ends=0), engine="torch").settings.attach_px == 0
+    )
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
-    assert "attach_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
+    assert (
+        "attach_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]
+    )  # off: readable by older versions
     assert PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).settings.attach_px == 0
-    assert load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(attach_ends=25), engine="torch").settings.attach_px == 25
+    assert (
+        load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(attach_ends=25), engine="torch").settings.attach_px
+        == 25
+    )
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 200), st.integers(0, 200), st.integers(0, 200), st.integers(0, 200)), min_size=2, max_size=8),
-       st.floats(5, 60))
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 200), st.integers(0, 200), st.integers(0, 200), st.integers(0, 200)),
+        min_size=2,
+        max_size=8,
+    ),
+    st.floats(5, 60),
+)
 def test_joins_are_short_go_between_pieces_and_only_add_their_own_length(segments, radius):
     """Random straight pieces: every attach edge is at most the radius long and joins a dangling
     end to what was another piece; an end joins at most once; splitting a line adds no length,
@@ -162,5 +201,7 @@ def test_an_end_takes_the_nearest_point_its_vetting_accepts():
     far = attached(two_roads, accept=lambda starts, feet: feet[:, 1] > 90)  # e.g. the map backs only the far join
     assert {tuple(near.vertices[v]) for v in range(near.n_vertices)} >= {(150.0, 80.0)}
     assert (150.0, 100.0) not in {tuple(v) for v in near.vertices.tolist()}
-    assert (150.0, 100.0) in {tuple(v) for v in far.vertices.tolist()} and (150.0, 80.0) not in {tuple(v) for v in far.vertices.tolist()}
+    assert (150.0, 100.0) in {tuple(v) for v in far.vertices.tolist()} and (150.0, 80.0) not in {
+        tuple(v) for v in far.vertices.tolist()
+    }
     assert attached(two_roads, accept=lambda starts, feet: np.zeros(len(feet), bool)) is two_roads

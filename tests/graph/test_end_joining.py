@@ -30,8 +30,13 @@ def line_map(row: int = 50, x0: int = 0, x1: int = 100, size: int = 100) -> np.n
 
 def graph(vertices, edges) -> BoundaryGraph:
     edges = np.array(edges, np.int64).reshape(-1, 2)
-    return BoundaryGraph(np.array(vertices, float).reshape(-1, 2), edges, edge_kinds=["normal"] * len(edges),
-                         edge_polylines=[None] * len(edges), edge_scores=np.ones(len(edges)))
+    return BoundaryGraph(
+        np.array(vertices, float).reshape(-1, 2),
+        edges,
+        edge_kinds=["normal"] * len(edges),
+        edge_polylines=[None] * len(edges),
+        edge_scores=np.ones(len(edges)),
+    )
 
 
 def two_pieces(gap_start: float = 30.5, gap_end: float = 45.5) -> BoundaryGraph:
@@ -46,8 +51,11 @@ def test_headings_point_out_of_the_line_at_its_ends():
 
 
 def test_heading_comes_from_the_polyline_not_the_far_vertex():
-    bent = BoundaryGraph(np.array([(10.5, 10.5), (30.5, 30.5)]), np.array([(0, 1)]),
-                         edge_polylines=[np.array([(10.5, 10.5), (30.5, 10.5), (30.5, 30.5)])])
+    bent = BoundaryGraph(
+        np.array([(10.5, 10.5), (30.5, 30.5)]),
+        np.array([(0, 1)]),
+        edge_polylines=[np.array([(10.5, 10.5), (30.5, 10.5), (30.5, 30.5)])],
+    )
     _, heading = end_headings(bent)
     np.testing.assert_allclose(heading, [(-1, 0), (0, 1)])  # vertex 1 was heading down when the line stopped
 
@@ -109,14 +117,18 @@ def test_closest_pair_first_and_one_join_per_end():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.floats(2, 97), st.floats(2, 97)), min_size=2, max_size=16), st.floats(5, 60), st.floats(0, 180))
+@given(
+    st.lists(st.tuples(st.floats(2, 97), st.floats(2, 97)), min_size=2, max_size=16),
+    st.floats(5, 60),
+    st.floats(0, 180),
+)
 def test_joins_are_short_new_and_keep_degrees_at_most_two(points, max_px, turn):
     vertices = np.array(points)
     edges = [(k, k + 1) for k in range(0, len(vertices) - 1, 2)]  # disjoint pieces: every vertex an end
     g = graph(vertices, edges)
     joined = join_ends(g, np.ones((100, 100), np.float32), EndJoinConfig(max_px=max_px, max_turn_deg=turn))
-    assert joined.edges[:len(edges)].tolist() == [list(e) for e in edges]
-    new = joined.edges[len(edges):]
+    assert joined.edges[: len(edges)].tolist() == [list(e) for e in edges]
+    new = joined.edges[len(edges) :]
     degree = np.bincount(joined.edges.ravel(), minlength=joined.n_vertices)
     assert degree.max(initial=0) <= 2
     assert np.all(np.linalg.norm(vertices[new[:, 0]] - vertices[new[:, 1]], axis=1) <= max_px + 1e-9)
@@ -124,24 +136,33 @@ def test_joins_are_short_new_and_keep_degrees_at_most_two(points, max_px, turn):
     assert len(pairs) == joined.n_edges  # no edge twice
 
 
-@pytest.mark.parametrize("key, option, field", [("join_max_px", "join_ends", "max_px"), ("join_attach_px", "attach_backed", "attach_px")])
+@pytest.mark.parametrize(
+    "key, option, field", [("join_max_px", "join_ends", "max_px"), ("join_attach_px", "attach_backed", "attach_px")]
+)
 def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_path, key, option, field):
     import torch
-
-    from helpers import shipped_parts
 
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
+    from helpers import shipped_parts
 
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", **{key: 40})
     assert getattr(PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.join, field) == 40
-    assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(**{option: 0}), engine="torch").settings.join.active
+    assert not load_predictor(
+        tmp_path / "b.pt", "cpu", GraphOverrides(**{option: 0}), engine="torch"
+    ).settings.join.active
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
     assert key not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
     assert not PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).settings.join.active
-    assert getattr(load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(**{option: 25}), engine="torch").settings.join, field) == 25
+    assert (
+        getattr(
+            load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(**{option: 25}), engine="torch").settings.join,
+            field,
+        )
+        == 25
+    )
 
 
 def test_the_predictor_joins_after_the_fill_on_the_boundary_map():
@@ -163,7 +184,7 @@ def side_street(stop_row: float = 30.5) -> BoundaryGraph:
 def tee_map(gap_from: int = 100) -> np.ndarray:
     """The road along row 50 and the side street down column 50 to it, blank from ``gap_from`` on."""
     m = line_map()
-    m[:min(gap_from, 50), 50] = 1.0
+    m[: min(gap_from, 50), 50] = 1.0
     return m
 
 
@@ -186,7 +207,9 @@ def test_no_attachment_across_a_gap_the_map_does_not_back():
 def test_ends_joined_to_each_other_are_not_attached_as_well():
     # a break in the road 15 px wide, the side street's end 25 px above it: the road's ends join
     # each other first, then the street's end reaches the joined road
-    broken = graph([(0.5, 50.5), (40.5, 50.5), (55.5, 50.5), (99.5, 50.5), (70.5, 0.5), (70.5, 25.5)], [(0, 1), (2, 3), (4, 5)])
+    broken = graph(
+        [(0.5, 50.5), (40.5, 50.5), (55.5, 50.5), (99.5, 50.5), (70.5, 0.5), (70.5, 25.5)], [(0, 1), (2, 3), (4, 5)]
+    )
     m = line_map()
     m[:50, 70] = 1.0
     done = join_ends(broken, m, EndJoinConfig(max_px=20, attach_px=30))

@@ -16,9 +16,15 @@ def three_pieces() -> BoundaryGraph:
     vertices = [(0, 0), (3, 0), (3, 4), (100, 100), (110, 100), (50, 50), (52, 50), (200, 200)]
     edges = [(0, 1), (1, 2), (3, 4), (5, 6)]
     polylines = [None, np.array([(3, 0), (7, 0), (7, 4), (3, 4)], float), None, None]
-    return BoundaryGraph(np.array(vertices, float), np.array(edges), vertex_kinds=["a", "b", "c", "d", "e", "f", "g", "h"],
-                         edge_kinds=["normal", "corner", "normal", "normal"], edge_polylines=polylines,
-                         edge_scores=np.array([0.9, 1.0, 0.8, 0.4]), edge_patches=np.array([[0, 0], [0, 0], [0, 1], [1, 1]]))
+    return BoundaryGraph(
+        np.array(vertices, float),
+        np.array(edges),
+        vertex_kinds=["a", "b", "c", "d", "e", "f", "g", "h"],
+        edge_kinds=["normal", "corner", "normal", "normal"],
+        edge_polylines=polylines,
+        edge_scores=np.array([0.9, 1.0, 0.8, 0.4]),
+        edge_patches=np.array([[0, 0], [0, 0], [0, 1], [1, 1]]),
+    )
 
 
 def test_piece_lengths_follow_the_polylines():
@@ -36,7 +42,9 @@ def test_short_pieces_go_with_the_vertices_only_they_use():
     assert np.allclose(kept.edge_scores, [0.9, 1.0, 0.8]) and kept.edge_patches.tolist() == [[0, 0], [0, 0], [0, 1]]
     assert np.allclose(kept.edge_polyline(1), [(3, 0), (7, 0), (7, 4), (3, 4)])
     assert drop_short_fragments(three_pieces(), 15.5).n_edges == 0
-    assert drop_short_fragments(three_pieces(), 0.0) is not None and drop_short_fragments(three_pieces(), 0.0).n_edges == 4
+    assert (
+        drop_short_fragments(three_pieces(), 0.0) is not None and drop_short_fragments(three_pieces(), 0.0).n_edges == 4
+    )
 
 
 @settings(max_examples=50, deadline=None)
@@ -48,5 +56,7 @@ def test_every_kept_edge_lies_in_a_long_enough_piece_and_no_long_piece_loses_an_
     kept = drop_short_fragments(graph, limit)
     expected = int((length[piece] >= limit).sum()) if limit > 0 else graph.n_edges
     assert kept.n_edges == expected
-    assert np.isclose(kept.edge_lengths().sum(),
-                      graph.edge_lengths()[length[piece] >= limit].sum() if limit > 0 else graph.edge_lengths().sum())
+    assert np.isclose(
+        kept.edge_lengths().sum(),
+        graph.edge_lengths()[length[piece] >= limit].sum() if limit > 0 else graph.edge_lengths().sum(),
+    )

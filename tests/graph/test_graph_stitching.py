@@ -10,7 +10,13 @@ from scipy.spatial.distance import pdist
 
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.stitching import StitchConfig, border_distance, owner_bounds, polyline_midpoint, stitch_patch_graphs
+from csboundary.graph.stitching import (
+    StitchConfig,
+    border_distance,
+    owner_bounds,
+    polyline_midpoint,
+    stitch_patch_graphs,
+)
 
 # 1 x 2 patches: cores [0, 100) and [100, 200); windows [-10, 110) and [90, 210).
 GRID = PatchGrid(200, 100, config=GridConfig(core=100, margin=10))
@@ -66,7 +72,9 @@ def test_patches_on_the_mosaic_border_keep_edges_beyond_it():
 
 def test_corner_polylines_follow_their_merged_ends():
     arc = np.array([[60.0, 60], [80, 62], [99.6, 80]])
-    left = graph([[60, 60], [99.6, 80]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[arc], edge_scores=np.array([0.8]))
+    left = graph(
+        [[60, 60], [99.6, 80]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[arc], edge_scores=np.array([0.8])
+    )
     right = graph([[100, 80], [150, 80]], [[0, 1]], edge_kinds=["normal"], edge_polylines=[None])
     city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
     assert city.n_vertices == 3  # 99.6 and 100 are within merge_px
@@ -139,7 +147,9 @@ def pieces(city: BoundaryGraph) -> int:
     from scipy.sparse.csgraph import connected_components
 
     e = city.edges
-    return connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(city.n_vertices,) * 2), directed=False)[0]
+    return connected_components(
+        coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(city.n_vertices,) * 2), directed=False
+    )[0]
 
 
 def test_ends_cut_by_the_window_borders_are_mended_onto_the_edge_they_lie_on():
@@ -160,7 +170,9 @@ def test_ends_cut_by_the_window_borders_are_mended_onto_the_edge_they_lie_on():
 
 def test_an_end_beside_the_edge_gets_a_short_seam_edge_and_splits_a_shaped_edge():
     arc = np.array([[20.0, 50], [60, 50], [100, 50]])
-    left = graph([[20, 50], [100, 50]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[arc], edge_scores=np.array([0.8]))
+    left = graph(
+        [[20, 50], [100, 50]], [[0, 1]], edge_kinds=["corner"], edge_polylines=[arc], edge_scores=np.array([0.8])
+    )
     right = graph([[91, 53], [180, 53]], [[0, 1]], edge_kinds=["normal"], edge_scores=np.array([0.6]))
     city = stitch_patch_graphs({(0, 0): left, (0, 1): right}, GRID)
     assert pieces(city) == 1 and city.n_edges == 4

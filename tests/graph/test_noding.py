@@ -21,8 +21,13 @@ def corners(*lines: np.ndarray, scores=None) -> BoundaryGraph:
     index: dict[tuple, int] = {}
     edges = [[index.setdefault(tuple(line[k]), len(index)) for k in (0, -1)] for line in lines]
     vertices = np.array(list(index), float).reshape(-1, 2)
-    return BoundaryGraph(vertices, edges, edge_kinds=["corner"] * len(lines), edge_polylines=list(lines),
-                         edge_scores=np.array(scores if scores is not None else [0.5] * len(lines), float))
+    return BoundaryGraph(
+        vertices,
+        edges,
+        edge_kinds=["corner"] * len(lines),
+        edge_polylines=list(lines),
+        edge_scores=np.array(scores if scores is not None else [0.5] * len(lines), float),
+    )
 
 
 def test_two_corner_edges_running_together_meet_where_the_overlap_starts_and_ends():
@@ -31,7 +36,11 @@ def test_two_corner_edges_running_together_meet_where_the_overlap_starts_and_end
     meets = sorted(map(tuple, noded.vertices[degree == 3].tolist()))
     assert meets == [(20, 0), (40, 0)]
     assert noded.n_edges == 5 and len(fragment_lengths(noded)[1]) == 1  # one piece
-    shared = [k for k in range(noded.n_edges) if sorted(map(tuple, noded.vertices[noded.edges[k]].tolist())) == [(20, 0), (40, 0)]]
+    shared = [
+        k
+        for k in range(noded.n_edges)
+        if sorted(map(tuple, noded.vertices[noded.edges[k]].tolist())) == [(20, 0), (40, 0)]
+    ]
     assert len(shared) == 1 and noded.edge_scores[shared[0]] == 0.9  # the common stretch once, the more confident
     assert noded.edge_polyline(shared[0]).tolist() in ([[20, 0], [30, 0], [40, 0]], [[40, 0], [30, 0], [20, 0]])
     assert np.isclose(noded.edge_lengths().sum(), 60 + 2 * np.hypot(5, 10))
@@ -39,8 +48,13 @@ def test_two_corner_edges_running_together_meet_where_the_overlap_starts_and_end
 
 def test_a_straight_edge_ending_on_a_corner_edge_splits_it_there():
     graph = corners(A)
-    graph = BoundaryGraph(np.concatenate([graph.vertices, [[30, 30], [30, 0]]]), np.concatenate([graph.edges, [[2, 3]]]),
-                          edge_kinds=["corner", "normal"], edge_polylines=[A, None], edge_scores=np.array([0.5, 0.7]))
+    graph = BoundaryGraph(
+        np.concatenate([graph.vertices, [[30, 30], [30, 0]]]),
+        np.concatenate([graph.edges, [[2, 3]]]),
+        edge_kinds=["corner", "normal"],
+        edge_polylines=[A, None],
+        edge_scores=np.array([0.5, 0.7]),
+    )
     noded = node_shared_points(graph)
     assert noded.n_edges == 3 and len(fragment_lengths(noded)[1]) == 1
     assert np.bincount(noded.edges.ravel())[3] == 3  # the straight edge's end, (30, 0), now joins A's two halves
@@ -67,8 +81,10 @@ def _paths(draw_steps: list[list[int]], starts: list[tuple[int, int]]) -> list[n
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.lists(st.integers(0, 7), min_size=1, max_size=14), min_size=2, max_size=4),
-       st.lists(st.tuples(st.integers(0, 4), st.integers(0, 4)), min_size=4, max_size=4))
+@given(
+    st.lists(st.lists(st.integers(0, 7), min_size=1, max_size=14), min_size=2, max_size=4),
+    st.lists(st.tuples(st.integers(0, 4), st.integers(0, 4)), min_size=4, max_size=4),
+)
 def test_noded_edges_share_only_end_vertices_and_cover_the_union_once(moves, starts):
     """Skeleton-like paths (8-connected pixel steps, none crossing itself), touching, crossing
     and running along each other: afterwards no two edges have a common polyline point other than
@@ -81,10 +97,14 @@ def test_noded_edges_share_only_end_vertices_and_cover_the_union_once(moves, sta
         for j in range(i + 1, noded.n_edges):
             a, b = noded.edge_polyline(i), noded.edge_polyline(j)
             common = {tuple(p) for p in a.tolist()} & {tuple(p) for p in b.tolist()}
-            ends = {tuple(p) for p in noded.vertices[noded.edges[i]].tolist()} & {tuple(p) for p in noded.vertices[noded.edges[j]].tolist()}
+            ends = {tuple(p) for p in noded.vertices[noded.edges[i]].tolist()} & {
+                tuple(p) for p in noded.vertices[noded.edges[j]].tolist()
+            }
             assert common <= ends
             meeting = LineString(a).intersection(LineString(b))  # geometrically too: no crossing, no shared stretch
             assert meeting.geom_type in ("Point", "MultiPoint") or meeting.is_empty
-            assert all(min(np.hypot(px - qx, py - qy) for qx, qy in ends) < 1e-9 for px, py in shapely.get_coordinates(meeting))
+            assert all(
+                min(np.hypot(px - qx, py - qy) for qx, qy in ends) < 1e-9 for px, py in shapely.get_coordinates(meeting)
+            )
     union = shapely.unary_union([LineString(line) for line in lines]).length
     assert np.isclose(noded.edge_lengths().sum(), union)

@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.graph.outline_fusion import OUTLINE, OutlineConfig, bridged, cut_along, fused_with_outline, placed_on_ridge
+from csboundary.graph.outline_fusion import (
+    OUTLINE,
+    OutlineConfig,
+    bridged,
+    cut_along,
+    fused_with_outline,
+    placed_on_ridge,
+)
 
 H, W = 120, 300
 TOP, BOTTOM = 40, 80  # the roadway: rows 40..79
@@ -26,8 +33,13 @@ def afanet_graph() -> BoundaryGraph:
     from the street (a roof outline)."""
     line = np.array([[20.5, 40.5], [80.5, 43.5], [140.5, 40.5], [200.5, 43.5], [280.5, 40.5]])
     roof = np.array([[20.5, 110.5], [120.5, 110.5]])
-    return BoundaryGraph(np.array([line[0], line[-1], roof[0], roof[-1]]), np.array([[0, 1], [2, 3]]),
-                         edge_kinds=["normal", "normal"], edge_polylines=[line, roof], edge_scores=np.array([0.7, 0.6]))
+    return BoundaryGraph(
+        np.array([line[0], line[-1], roof[0], roof[-1]]),
+        np.array([[0, 1], [2, 3]]),
+        edge_kinds=["normal", "normal"],
+        edge_polylines=[line, roof],
+        edge_scores=np.array([0.7, 0.6]),
+    )
 
 
 def kinds_and_lines(graph: BoundaryGraph, kind: str) -> list[np.ndarray]:
@@ -71,8 +83,13 @@ def test_outline_pixels_are_added_only_inside_the_region_but_edges_are_cut_every
 
 
 def test_an_edge_is_cut_where_it_runs_along_the_mask():
-    graph = BoundaryGraph(np.array([[0.5, 10.5], [100.5, 10.5]]), np.array([[0, 1]]), edge_kinds=["normal"],
-                          edge_polylines=[np.array([[0.5, 10.5], [100.5, 10.5]])], edge_scores=np.array([0.5]))
+    graph = BoundaryGraph(
+        np.array([[0.5, 10.5], [100.5, 10.5]]),
+        np.array([[0, 1]]),
+        edge_kinds=["normal"],
+        edge_polylines=[np.array([[0.5, 10.5], [100.5, 10.5]])],
+        edge_scores=np.array([0.5]),
+    )
     mask = np.zeros((30, 120), bool)
     mask[12, 40:61] = True  # 1.5 px from the edge, from x 40 to 60
     cut = cut_along(graph, mask, OutlineConfig(sure=0.5, cover_px=8.0, keep_px=20.0))
@@ -104,13 +121,17 @@ def test_points_move_onto_the_ridge_and_the_ends_stay():
     line = np.array([[10.5, 20.5], [90.5, 20.5]])
     placed = placed_on_ridge(line, boundary, OutlineConfig(sure=0.5, place_px=4.0, simplify_px=0.5))
     assert np.array_equal(placed[0], line[0]) and np.array_equal(placed[-1], line[-1])
-    assert np.allclose(np.interp([20.5, 50.5, 80.5], placed[:, 0], placed[:, 1]), 23.5)  # the median keeps the moves whole
+    assert np.allclose(
+        np.interp([20.5, 50.5, 80.5], placed[:, 0], placed[:, 1]), 23.5
+    )  # the median keeps the moves whole
     far = placed_on_ridge(line, boundary, OutlineConfig(sure=0.5, place_px=2.0, simplify_px=0.5))
     assert np.allclose(far[:, 1], 20.5)  # the ridge is 3 px away: out of reach
 
 
 def test_a_surface_map_unsure_around_the_street_frames_nothing():
-    surface, boundary = street(surface_outside=0.35)  # lawns and roofs half called roadway: about half of every square unsure
+    surface, boundary = street(
+        surface_outside=0.35
+    )  # lawns and roofs half called roadway: about half of every square unsure
     graph = afanet_graph()
     assert fused_with_outline(graph, surface, boundary, OutlineConfig(sure=0.3, max_unsure=0.3)) is graph
     assert fused_with_outline(graph, surface, boundary, OutlineConfig(sure=0.3, max_unsure=1.0)) is not graph

@@ -17,8 +17,13 @@ def test_hand_computed_pixels_in_raster_order():
 
 
 @settings(max_examples=200, deadline=None)
-@given(arrays(st.sampled_from([np.bool_, np.int32, np.float32]), st.tuples(st.integers(0, 12), st.integers(0, 12)),
-              elements=st.sampled_from([0, 1])))
+@given(
+    arrays(
+        st.sampled_from([np.bool_, np.int32, np.float32]),
+        st.tuples(st.integers(0, 12), st.integers(0, 12)),
+        elements=st.sampled_from([0, 1]),
+    )
+)
 def test_same_as_numpy_nonzero(image):
     rows, cols = nonzero_pixels(image)
     expected = np.nonzero(image)

@@ -12,7 +12,9 @@ L = np.array([[0.0, 0], [10, 0], [10, 20]])  # an L: 10 px east, then 20 px sout
 
 
 def test_segment_feet_by_hand():
-    t, foot, d = segment_feet(np.array([[0.0, 0], [0, 0]]), np.array([[10.0, 0], [10, 0]]), np.array([[4.0, 3], [-6, 8]]))
+    t, foot, d = segment_feet(
+        np.array([[0.0, 0], [0, 0]]), np.array([[10.0, 0], [10, 0]]), np.array([[4.0, 3], [-6, 8]])
+    )
     assert t.tolist() == [0.4, 0.0] and foot.tolist() == [[4, 0], [0, 0]] and d.tolist() == [3, 10]
 
 
@@ -21,7 +23,9 @@ def test_nearest_on_polyline_by_hand():
     assert (distance, k, foot.tolist()) == (3.0, 1, [10, 15])
     distance, k, foot = nearest_on_polyline(L, np.array([4.0, -2]))
     assert (distance, k, foot.tolist()) == (2.0, 0, [4, 0])
-    distance, k, foot = nearest_on_polyline(L, np.array([13.0, -4]))  # beyond the corner: the corner itself, first segment
+    distance, k, foot = nearest_on_polyline(
+        L, np.array([13.0, -4])
+    )  # beyond the corner: the corner itself, first segment
     assert (distance, k, foot.tolist()) == (5.0, 0, [10, 0])
 
 

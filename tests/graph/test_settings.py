@@ -22,23 +22,63 @@ def test_an_empty_bundle_table_gives_the_defaults_with_every_optional_step_off()
 
 
 def test_a_bundle_table_lands_in_its_fields():
-    table = {"edge_threshold": 0.4, "max_degree": None, "min_support": 0.2, "max_length_px": 300, "max_gap_px": 40, "gap_level": 0.25,
-             "crossing_spacing_px": 250, "min_fragment_px": 240, "vertex_threshold": 0.25, "fill_min_length_px": 40, "join_max_px": 30,
-             "join_attach_px": 60, "attach_max_px": 50, "surface_strong": 0.5, "surface_weak": 0.2, "surface_offset_px": 8,
-             "surface_both_sides": 0.7, "surface_gate_px": 8, "surface_gate_full": 0.5, "surface_gate_min_piece_px": 100,
-             "outline_sure": 0.7, "outline_support": 0.4, "outline_min_length_px": 60, "outline_max_unsure": 0.2}
+    table = {
+        "edge_threshold": 0.4,
+        "max_degree": None,
+        "min_support": 0.2,
+        "max_length_px": 300,
+        "max_gap_px": 40,
+        "gap_level": 0.25,
+        "crossing_spacing_px": 250,
+        "min_fragment_px": 240,
+        "vertex_threshold": 0.25,
+        "fill_min_length_px": 40,
+        "join_max_px": 30,
+        "join_attach_px": 60,
+        "attach_max_px": 50,
+        "surface_strong": 0.5,
+        "surface_weak": 0.2,
+        "surface_offset_px": 8,
+        "surface_both_sides": 0.7,
+        "surface_gate_px": 8,
+        "surface_gate_full": 0.5,
+        "surface_gate_min_piece_px": 100,
+        "outline_sure": 0.7,
+        "outline_support": 0.4,
+        "outline_min_length_px": 60,
+        "outline_max_unsure": 0.2,
+    }
     s = GraphSettings.from_bundle(table, "b.pt")
     assert (s.edge_threshold, s.max_degree, s.vertices.threshold, s.crossings.spacing_px) == (0.4, None, 0.25, 250)
-    assert (s.support.min_support, s.support.max_length_px, s.support.max_gap_px, s.support.gap_level) == (0.2, 300, 40, 0.25)
-    assert (s.fill.min_length_px, s.join.max_px, s.join.attach_px, s.attach_px, s.min_fragment_px) == (40, 30, 60, 50, 240)
+    assert (s.support.min_support, s.support.max_length_px, s.support.max_gap_px, s.support.gap_level) == (
+        0.2,
+        300,
+        40,
+        0.25,
+    )
+    assert (s.fill.min_length_px, s.join.max_px, s.join.attach_px, s.attach_px, s.min_fragment_px) == (
+        40,
+        30,
+        60,
+        50,
+        240,
+    )
     assert (s.surface.strong, s.surface.weak, s.surface.offset_px, s.surface.both_sides) == (0.5, 0.2, 8, 0.7)
     assert (s.gate.radius_px, s.gate.full_change, s.gate.min_piece_px) == (8, 0.5, 100) and s.reads_surface
     assert (s.outline.sure, s.outline.support, s.outline.min_length_px, s.outline.max_unsure) == (0.7, 0.4, 60, 0.2)
 
 
-@pytest.mark.parametrize("table, needle", [({"edge_threshold": 7}, "edge_threshold = 7"), ({"max_degree": -1}, "max_degree = -1"),
-                                           ({"max_degree": 2.5}, "must be an integer"), ({"nonsense": 1}, "unknown inference setting"),
-                                           ({"min_support": float("nan")}, "min_support = nan"), ([1, 2], "not a table")])
+@pytest.mark.parametrize(
+    "table, needle",
+    [
+        ({"edge_threshold": 7}, "edge_threshold = 7"),
+        ({"max_degree": -1}, "max_degree = -1"),
+        ({"max_degree": 2.5}, "must be an integer"),
+        ({"nonsense": 1}, "unknown inference setting"),
+        ({"min_support": float("nan")}, "min_support = nan"),
+        ([1, 2], "not a table"),
+    ],
+)
 def test_a_damaged_table_names_the_file(table, needle):
     with pytest.raises(InputError, match=needle) as caught:
         GraphSettings.from_bundle(table, "weights.pt")
@@ -46,21 +86,35 @@ def test_a_damaged_table_names_the_file(table, needle):
 
 
 def test_each_override_replaces_its_field_and_nothing_else():
-    base = GraphSettings.from_bundle({"min_support": 0.2, "max_length_px": 300, "join_max_px": 30, "surface_strong": 0.5}, "b.pt")
+    base = GraphSettings.from_bundle(
+        {"min_support": 0.2, "max_length_px": 300, "join_max_px": 30, "surface_strong": 0.5}, "b.pt"
+    )
     assert base.overridden(GraphOverrides()) == base
-    cases = {"edge_threshold": (0.3, lambda s: s.edge_threshold), "min_edge_support": (0.4, lambda s: s.support.min_support),
-             "max_edge_length": (10, lambda s: s.support.max_length_px), "max_edge_gap": (5, lambda s: s.support.max_gap_px),
-             "fill_min_length": (20, lambda s: s.fill.min_length_px), "join_ends": (0, lambda s: s.join.max_px),
-             "attach_ends": (25, lambda s: s.attach_px), "attach_backed": (60, lambda s: s.join.attach_px),
-             "surface_check": (0, lambda s: s.surface.strong), "surface_gate": (8, lambda s: s.gate.radius_px),
-             "roadway_outline": (0.7, lambda s: s.outline.sure), "max_degree": (3, lambda s: s.max_degree),
-             "min_fragment_length": (120, lambda s: s.min_fragment_px),
-             "min_confidence": (0.6, lambda s: s.min_confidence)}
+    cases = {
+        "edge_threshold": (0.3, lambda s: s.edge_threshold),
+        "min_edge_support": (0.4, lambda s: s.support.min_support),
+        "max_edge_length": (10, lambda s: s.support.max_length_px),
+        "max_edge_gap": (5, lambda s: s.support.max_gap_px),
+        "fill_min_length": (20, lambda s: s.fill.min_length_px),
+        "join_ends": (0, lambda s: s.join.max_px),
+        "attach_ends": (25, lambda s: s.attach_px),
+        "attach_backed": (60, lambda s: s.join.attach_px),
+        "surface_check": (0, lambda s: s.surface.strong),
+        "surface_gate": (8, lambda s: s.gate.radius_px),
+        "roadway_outline": (0.7, lambda s: s.outline.sure),
+        "max_degree": (3, lambda s: s.max_degree),
+        "min_fragment_length": (120, lambda s: s.min_fragment_px),
+        "min_confidence": (0.6, lambda s: s.min_confidence),
+    }
     assert set(cases) == {f.name for f in dataclasses.fields(GraphOverrides)}
     for name, (value, read) in cases.items():
         changed = base.overridden(GraphOverrides(**{name: value}))
         assert read(changed) == value and type(read(changed)) is (int if name == "max_degree" else float), name
-        differing = [f.name for f in dataclasses.fields(GraphSettings) if getattr(changed, f.name) != getattr(base, f.name)]
+        differing = [
+            f.name for f in dataclasses.fields(GraphSettings) if getattr(changed, f.name) != getattr(base, f.name)
+        ]
         assert len(differing) == 1, (name, differing)
     assert base.overridden(GraphOverrides(max_degree=0)).max_degree is None  # 0: no cap
-    assert base.overridden(GraphOverrides(min_edge_support=0.1)).support.max_length_px == 300  # the rest of the check kept
+    assert (
+        base.overridden(GraphOverrides(min_edge_support=0.1)).support.max_length_px == 300
+    )  # the rest of the check kept

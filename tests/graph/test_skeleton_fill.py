@@ -8,12 +8,18 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from helpers import bundle_without, shipped_parts
-
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.polyline import polyline_length
 from csboundary.graph.settings import GraphOverrides, GraphSettings
-from csboundary.graph.skeleton_fill import SKELETON, FillConfig, fill_from_skeleton, long_stretches, pieces, uncovered_skeleton
+from csboundary.graph.skeleton_fill import (
+    SKELETON,
+    FillConfig,
+    fill_from_skeleton,
+    long_stretches,
+    pieces,
+    uncovered_skeleton,
+)
+from helpers import bundle_without, shipped_parts
 
 ON = FillConfig(min_length_px=30)
 
@@ -21,14 +27,20 @@ ON = FillConfig(min_length_px=30)
 def row_map(x0: int = 20, x1: int = 220, row: int = 50, size: int = 120) -> np.ndarray:
     """A 3 px wide boundary along ``row`` from column x0 to x1 - 1 (a (size, 240) map)."""
     m = np.zeros((size, 240), np.float32)
-    m[row - 1:row + 2, x0:x1] = 1.0
+    m[row - 1 : row + 2, x0:x1] = 1.0
     return m
 
 
 def graph(vertices, edges) -> BoundaryGraph:
     edges = np.array(edges, np.int64).reshape(-1, 2)
-    return BoundaryGraph(np.array(vertices, float).reshape(-1, 2), edges, vertex_kinds=["isolated"] * len(vertices),
-                         edge_kinds=["normal"] * len(edges), edge_polylines=[None] * len(edges), edge_scores=np.ones(len(edges)))
+    return BoundaryGraph(
+        np.array(vertices, float).reshape(-1, 2),
+        edges,
+        vertex_kinds=["isolated"] * len(vertices),
+        edge_kinds=["normal"] * len(edges),
+        edge_polylines=[None] * len(edges),
+        edge_scores=np.ones(len(edges)),
+    )
 
 
 def test_off_returns_the_graph_itself():
@@ -109,7 +121,9 @@ def test_a_drawn_straight_boundary_is_filled_on_its_own_line(angle, length, dx, 
     out = fill_from_skeleton(graph([], []), m.astype(np.float32), ON)
     assert out.n_edges >= 1
     total = out.edge_lengths().sum()
-    assert 0.8 * length <= total <= 1.1 * length + 4  # a short diagonal line loses up to ~10 px (found: 0.75 rad, 60 px -> 50.2)
+    assert (
+        0.8 * length <= total <= 1.1 * length + 4
+    )  # a short diagonal line loses up to ~10 px (found: 0.75 rad, 60 px -> 50.2)
     # every filled point lies on the drawn line (pixel centres, so within ~2 px of its axis)
     points = np.concatenate([out.edge_polyline(k) for k in range(out.n_edges)]) - 0.5
     axis = (b - a) / np.linalg.norm(b - a)
@@ -130,15 +144,27 @@ def test_a_closed_boundary_is_filled_as_a_ring_of_three_edges():
 def test_pieces_cut_a_line_at_equal_arc_lengths():
     line = np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 300.0]])  # an L, 600 px
     parts = pieces(line, 200.0)
-    assert [p.tolist() for p in parts] == [[[0, 0], [200, 0]], [[200, 0], [300, 0], [300, 100]], [[300, 100], [300, 300]]]
+    assert [p.tolist() for p in parts] == [
+        [[0, 0], [200, 0]],
+        [[200, 0], [300, 0], [300, 100]],
+        [[300, 100], [300, 300]],
+    ]
     assert len(pieces(line, 0.0)) == 1 and pieces(line, 0.0)[0] is line
     assert pieces(np.array([[5.0, 5.0], [5.0, 5.0]]), 200.0, closed=True) == []  # nothing between the ends
-    ring = pieces(np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0], [0.0, 30.0], [0.0, 0.0]]), 200.0, closed=True)  # 120 px
-    assert [p.tolist() for p in ring] == [[[0, 0], [30, 0], [30, 10]], [[30, 10], [30, 30], [10, 30]], [[10, 30], [0, 30], [0, 0]]]
+    ring = pieces(
+        np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0], [0.0, 30.0], [0.0, 0.0]]), 200.0, closed=True
+    )  # 120 px
+    assert [p.tolist() for p in ring] == [
+        [[0, 0], [30, 0], [30, 10]],
+        [[30, 10], [30, 30], [10, 30]],
+        [[10, 30], [0, 30], [0, 0]],
+    ]
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.lists(st.tuples(st.floats(0, 500), st.floats(0, 500)), min_size=2, max_size=12), st.floats(5, 400), st.booleans())
+@given(
+    st.lists(st.tuples(st.floats(0, 500), st.floats(0, 500)), min_size=2, max_size=12), st.floats(5, 400), st.booleans()
+)
 def test_pieces_join_up_into_the_line(points, split_px, closed):
     line = np.array(points)
     parts = pieces(line, split_px, closed)
@@ -172,7 +198,9 @@ def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path)
     shipped_parts(tmp_path)
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", fill_min_length_px=55)
     assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.fill.min_length_px == 55
-    assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(fill_min_length=0), engine="torch").settings.fill.active
+    assert not load_predictor(
+        tmp_path / "b.pt", "cpu", GraphOverrides(fill_min_length=0), engine="torch"
+    ).settings.fill.active
     bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("fill_min_length_px",))  # a bundle from before the fill
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.fill.active
 
@@ -189,6 +217,8 @@ def test_the_predictor_fills_a_window_only_inside_its_core_and_one_pixel_beyond(
     core = SimpleNamespace(core_local=PixelWindow(col_off=10, row_off=10, width=100, height=100))
     out = PatchPredictor.filled(host, core, maps, graph([], []))
     xs = np.concatenate([out.edge_polyline(k)[:, 0] for k in range(out.n_edges)])
-    assert xs.min() == pytest.approx(20.5) and xs.max() == pytest.approx(110.5)  # columns 20..110: the core's 10..109 and 110
+    assert xs.min() == pytest.approx(20.5) and xs.max() == pytest.approx(
+        110.5
+    )  # columns 20..110: the core's 10..109 and 110
     whole = PatchPredictor.filled(host, None, maps, graph([], []))  # a single patch: no core
     assert whole.edge_lengths().sum() > out.edge_lengths().sum() + 100

@@ -25,8 +25,12 @@ def test_nodes_are_the_pixels_in_raster_order():
 def test_a_corner_diagonal_is_kept_for_distances_and_left_out_for_chains():
     pixels, links, lengths = skeleton_pixel_links(l_corner())
     named = {tuple(sorted((tuple(pixels[a]), tuple(pixels[b])))): d for (a, b), d in zip(links.tolist(), lengths)}
-    assert named == {((2, 1), (2, 2)): 1.0, ((2, 2), (2, 3)): 1.0, ((1, 3), (2, 3)): 1.0,
-                     ((1, 3), (2, 2)): np.sqrt(2.0)}
+    assert named == {
+        ((2, 1), (2, 2)): 1.0,
+        ((2, 2), (2, 3)): 1.0,
+        ((1, 3), (2, 3)): 1.0,
+        ((1, 3), (2, 2)): np.sqrt(2.0),
+    }
     _, links, lengths = skeleton_pixel_links(l_corner(), corner_diagonals=False)
     assert len(links) == 3 and np.all(lengths == 1.0)
 

@@ -103,9 +103,15 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     assert shipped["fpn_config"]["surface"]
     # the option works on the shipped weights
     assert load_predictor(None, "cpu", GraphOverrides(surface_check=0.5), engine="torch").settings.surface.strong == 0.5
-    assert load_predictor(None, "cpu", engine="torch").settings.surface.strong == 0.5  # on by default since the model card's choice
-    assert not load_predictor(None, "cpu", GraphOverrides(surface_check=0.0), engine="torch").settings.surface.active  # and 0 turns it off
-    plain = {k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")}  # an FPN from before the head
+    assert (
+        load_predictor(None, "cpu", engine="torch").settings.surface.strong == 0.5
+    )  # on by default since the model card's choice
+    assert not load_predictor(
+        None, "cpu", GraphOverrides(surface_check=0.0), engine="torch"
+    ).settings.surface.active  # and 0 turns it off
+    plain = {
+        k: v for k, v in shipped["fpn"].items() if not k.startswith("surface_head.")
+    }  # an FPN from before the head
     save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
     with pytest.raises(InputError, match="surface head"):
         make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_strong=0.5)
@@ -116,10 +122,16 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     model = fpn_for_weights(config)
     missing, _ = model.load_state_dict(plain, strict=False)
     assert missing and all(k.startswith("surface_head.") for k in missing)
-    save_checkpoint(tmp_path / "fpn-surface.pt", "fpn", fpn=model.state_dict(), fpn_config=FPNConfig.from_dict(config).to_dict())
+    save_checkpoint(
+        tmp_path / "fpn-surface.pt", "fpn", fpn=model.state_dict(), fpn_config=FPNConfig.from_dict(config).to_dict()
+    )
     make_bundle(tmp_path / "fpn-surface.pt", afanet_path, tmp_path / "b.pt", surface_strong=0.6, surface_weak=0.25)
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
-    assert (predictor.settings.surface.strong, predictor.settings.surface.weak, predictor.settings.surface.offset_px) == (0.6, 0.25, 8.0)
+    assert (
+        predictor.settings.surface.strong,
+        predictor.settings.surface.weak,
+        predictor.settings.surface.offset_px,
+    ) == (0.6, 0.25, 8.0)
     assert predictor.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
     off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_check=0), engine="torch")
     # nothing reads the surface
@@ -144,8 +156,10 @@ def _side_surface_per_edge(g: BoundaryGraph, surface: np.ndarray, offset_px: flo
         starts, steps, lengths = line[:-1][keep], steps[keep], lengths[keep]
         points, segment, _, _ = points_along(starts, starts + steps)
         normals = np.stack([-steps[:, 1], steps[:, 0]], axis=1)[segment] / lengths[segment, None]
-        sides = [surface[np.clip(np.floor(q[:, 1]).astype(int), 0, h - 1), np.clip(np.floor(q[:, 0]).astype(int), 0, w - 1)]
-                 for q in (points + offset_px * normals, points - offset_px * normals)]
+        sides = [
+            surface[np.clip(np.floor(q[:, 1]).astype(int), 0, h - 1), np.clip(np.floor(q[:, 0]).astype(int), 0, w - 1)]
+            for q in (points + offset_px * normals, points - offset_px * normals)
+        ]
         scores[k] = float(np.maximum(*sides).mean())
     return scores
 
@@ -157,8 +171,10 @@ def test_all_edges_at_once_score_as_one_edge_at_a_time(seed, n_edges, offset):
     surface = rng.random((60, 80)).astype(np.float32)
     vertices = rng.uniform(-10, 90, (2 * n_edges, 2))
     vertices[1::4] = vertices[0::4][: len(vertices[1::4])]  # some zero-length edges
-    polylines = [np.vstack([vertices[2 * k], rng.uniform(-10, 90, (int(rng.integers(0, 4)), 2)), vertices[2 * k + 1]])
-                 for k in range(n_edges)]
+    polylines = [
+        np.vstack([vertices[2 * k], rng.uniform(-10, 90, (int(rng.integers(0, 4)), 2)), vertices[2 * k + 1]])
+        for k in range(n_edges)
+    ]
     g = BoundaryGraph(vertices, np.arange(2 * n_edges).reshape(-1, 2), edge_polylines=polylines)
     assert np.allclose(side_surface(g, surface, offset), _side_surface_per_edge(g, surface, offset), atol=1e-6)
     assert side_surface(graph(np.zeros((0, 2)), np.zeros((0, 2))), surface, offset).shape == (0,)

@@ -82,7 +82,9 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
     gated = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_check=0), engine="torch")
     assert not gated.settings.surface.active and gated.settings.gate.active
     assert gated.maps(np.zeros((4, 128, 128), np.uint8)).shape == (3, 128, 128)
-    assert not load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_gate=0), engine="torch").settings.gate.active
+    assert not load_predictor(
+        tmp_path / "b.pt", "cpu", GraphOverrides(surface_gate=0), engine="torch"
+    ).settings.gate.active
     fpn_without_surface_head(fpn_path, tmp_path / "plain.pt")
     with pytest.raises(InputError, match="surface head"):
         make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_gate_px=8)

@@ -154,7 +154,9 @@ def test_curved_band_gives_its_two_ends_and_a_corner_edge_along_the_arc():
     for end in ends:
         assert min(math.dist(v, end) for v in graph.vertices) < 3.0
     line = graph.edge_polyline(0)
-    assert np.array_equal(line[0], graph.vertices[graph.edges[0, 0]]) and np.array_equal(line[-1], graph.vertices[graph.edges[0, 1]])
+    assert np.array_equal(line[0], graph.vertices[graph.edges[0, 0]]) and np.array_equal(
+        line[-1], graph.vertices[graph.edges[0, 1]]
+    )
     assert np.all(arc_distance(line[:, 0], line[:, 1], cx, cy, radius, 0.0, math.pi / 2) < 2.0)
     assert graph.edge_lengths()[0] == pytest.approx(math.pi / 2 * radius, rel=0.10)
     assert np.all(np.linalg.norm(np.diff(line, axis=0), axis=1) <= math.sqrt(2) + 1e-9)  # 8-connected steps
@@ -188,7 +190,9 @@ def test_rounded_square_label_map_gives_four_corner_edges_at_the_run_ends():
     matched = set()
     for u, v in graph.edges:  # both ends of every corner edge sit on the two ends of one run
         pu, pv = graph.vertices[u], graph.vertices[v]
-        errors = [min(max(math.dist(pu, a), math.dist(pv, e)), max(math.dist(pu, e), math.dist(pv, a))) for a, e in runs]
+        errors = [
+            min(max(math.dist(pu, a), math.dist(pv, e)), max(math.dist(pu, e), math.dist(pv, a))) for a, e in runs
+        ]
         best = int(np.argmin(errors))
         assert errors[best] < 3.0
         matched.add(best)
@@ -199,7 +203,10 @@ def test_rounded_square_label_map_gives_four_corner_edges_at_the_run_ends():
 
 def test_branched_band_uses_its_longest_path():
     centre = np.array([50.0, 50.0])
-    tips = [centre + r * np.array([math.cos(a), math.sin(a)]) for r, a in ((30, -math.pi / 2), (22, math.pi / 6), (14, 5 * math.pi / 6))]
+    tips = [
+        centre + r * np.array([math.cos(a), math.sin(a)])
+        for r, a in ((30, -math.pi / 2), (22, math.pi / 6), (14, 5 * math.pi / 6))
+    ]
     px, py = centres(100, 100)
     prob = heat(np.minimum.reduce([segment_distance(px, py, centre, t) for t in tips]))
     graph = extract_vertices(prob)

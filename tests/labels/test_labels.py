@@ -35,8 +35,16 @@ def test_rounded_square_gives_four_gathered_corners_at_the_tangent_points(radius
     b = ring(round_convex_corners(box(lo, lo, hi, hi), radius)[0])
     runs, isolated = curvature_keypoints(b, NO_AUX)
     assert len(runs) == 4 and isolated == []
-    tangent_points = [(lo + radius, lo), (hi - radius, lo), (hi, lo + radius), (hi, hi - radius),
-                      (hi - radius, hi), (lo + radius, hi), (lo, hi - radius), (lo, lo + radius)]
+    tangent_points = [
+        (lo + radius, lo),
+        (hi - radius, lo),
+        (hi, lo + radius),
+        (hi, hi - radius),
+        (hi - radius, hi),
+        (lo + radius, hi),
+        (lo, hi - radius),
+        (lo, lo + radius),
+    ]
     ends = b.at(np.array([s for run in runs for s in run]))
     for end in ends:  # every run end lies where an arc meets a straight side
         assert min(math.dist(end, t) for t in tangent_points) < 2.0
@@ -69,7 +77,9 @@ def test_straight_boundary_has_keypoints_on_patch_edges_and_every_aux_line():
     b = Boundary(np.array([[-10.0, 612.3], [2510.0, 612.3]]), False)
     kp = boundary_keypoints(b, config)
     xs = sorted(p[0] for p, k in zip(kp.points, kp.kinds) if k == INTERSECTION)
-    expected = sorted({0, 250, 500, 750, 1000, 1250, 1500, 1750, 2000, 2250, 2500, 950, 1050, 1950, 2050, -50 + 1000 * 0, 50})
+    expected = sorted(
+        {0, 250, 500, 750, 1000, 1250, 1500, 1750, 2000, 2250, 2500, 950, 1050, 1950, 2050, -50 + 1000 * 0, 50}
+    )
     expected = [x for x in expected if -10 <= x <= 2510]
     assert xs == pytest.approx(expected, abs=1e-9)
     assert all(p[1] == pytest.approx(612.3) for p in kp.points)
@@ -107,7 +117,12 @@ def city_labels():
     lines = [line for line, _ in city.scene.network.boundaries]
     boundaries = boundaries_from_world(lines, transform)
     config = LabelConfig()
-    return boundaries, compute_keypoints(boundaries, config), boundary_bounds(boundaries), PatchGrid(2400, 1200, transform, config.grid)
+    return (
+        boundaries,
+        compute_keypoints(boundaries, config),
+        boundary_bounds(boundaries),
+        PatchGrid(2400, 1200, transform, config.grid),
+    )
 
 
 def test_overlapping_patches_agree_inside_their_overlap(city_labels):
@@ -125,7 +140,9 @@ def test_overlapping_patches_agree_inside_their_overlap(city_labels):
     heat_b = keypoint_heat(kps, bounds, b.expanded)
     rows_a, cols_a = overlap.relative_to(a.expanded).slices()
     rows_b, cols_b = overlap.relative_to(b.expanded).slices()
-    assert np.allclose(heat_a[rows_a, cols_a], heat_b[rows_b, cols_b], rtol=0, atol=1e-6)  # equal up to float32 rounding
+    assert np.allclose(
+        heat_a[rows_a, cols_a], heat_b[rows_b, cols_b], rtol=0, atol=1e-6
+    )  # equal up to float32 rounding
     seg_a = segmentation_label(boundaries, bounds, a.expanded)
     seg_b = segmentation_label(boundaries, bounds, b.expanded)
     assert np.array_equal(seg_a[rows_a, cols_a], seg_b[rows_b, cols_b])
@@ -185,14 +202,26 @@ def test_label_files_round_trip_and_show(tmp_path):
 
     synthesize_city(tmp_path / "c", 4, "train", (1, 1), SynthConfig(tile_size=1200, gsd=0.3), progress=False)
     from helpers import run_cli as run
+
     result = run("labels", str(tmp_path / "c"), "--out", str(tmp_path / "lab"), "--quiet")
     assert result.returncode == 0, result.stderr
     arrays = load_patch_arrays(tmp_path / "lab" / PATCH_DIR / "r01_c01.npz")
     assert arrays["segmentation"].shape == (1100, 1100) and arrays["orientation"].shape == (2, 1100, 1100)
-    assert arrays["valid"][:250, :250].all() and not arrays["valid"][-1, -1]  # patch (1,1) reaches past the 1200 px mosaic
+    assert (
+        arrays["valid"][:250, :250].all() and not arrays["valid"][-1, -1]
+    )  # patch (1,1) reaches past the 1200 px mosaic
     graph = BoundaryGraph.read_json(tmp_path / "lab" / PATCH_DIR / "r01_c01.graph.json")
     assert graph.transform is not None and graph.n_vertices > 0
-    result = run("show", str(tmp_path / "c"), "--labels", str(tmp_path / "lab"), "--patch", "1,1", "--out", str(tmp_path / "l.png"))
+    result = run(
+        "show",
+        str(tmp_path / "c"),
+        "--labels",
+        str(tmp_path / "lab"),
+        "--patch",
+        "1,1",
+        "--out",
+        str(tmp_path / "l.png"),
+    )
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "l.png").stat().st_size > 1000
 
@@ -204,7 +233,9 @@ def test_pixel_chain_ground_truth_gives_the_same_corners_after_import_simplifica
 
     radius = 40.0
     poly = round_convex_corners(box(130, 130, 730, 730), radius)[0]
-    dense, _ = __import__("csboundary.graph.polyline", fromlist=["dense_samples"]).dense_samples(np.asarray(poly.exterior.coords), 0.25)
+    dense, _ = __import__("csboundary.graph.polyline", fromlist=["dense_samples"]).dense_samples(
+        np.asarray(poly.exterior.coords), 0.25
+    )
     pixels = np.floor(dense).astype(int)
     keep = np.concatenate([[True], np.any(np.diff(pixels, axis=0) != 0, axis=1)])
     chain = pixels[keep][:, ::-1]  # [row, col] like dense_seq

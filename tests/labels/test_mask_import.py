@@ -11,8 +11,8 @@ from affine import Affine
 
 from csboundary.data import city as layout
 from csboundary.data.ground_truth import read_ground_truth
-from csboundary.labels.mask_import import MaskRule, import_masks, mask_polylines, surface_outline
 from csboundary.errors import InputError
+from csboundary.labels.mask_import import MaskRule, import_masks, mask_polylines, surface_outline
 from helpers import run_cli
 
 
@@ -52,7 +52,9 @@ def test_surface_outline_skips_the_picture_border():
 
 def test_import_resamples_image_and_ground_truth_to_the_target_pixel_size(tmp_path):
     pair(tmp_path / "src", row=20)
-    report = import_masks(tmp_path / "src", tmp_path / "out", gsd=0.3, target_gsd=0.15, rule=MaskRule(channel=1), progress=False)
+    report = import_masks(
+        tmp_path / "src", tmp_path / "out", gsd=0.3, target_gsd=0.15, rule=MaskRule(channel=1), progress=False
+    )
     city = tmp_path / "out" / "a"
     assert layout.is_city_dir(city) and report["cities"][0]["size"] == [128, 128]
     meta = layout.read_meta(city)
@@ -71,16 +73,30 @@ def test_georeferenced_input_keeps_its_crs_and_origin(tmp_path, write_tif):
     label = np.zeros((1, 32, 32), np.uint8)
     label[0, :, 8] = 255
     write_tif(src / "t_edge.tif", label, transform, "EPSG:32618")
-    import_masks(src, tmp_path / "out", gsd=None, image_pattern="{id}_image.tif", mask_pattern="{id}_edge.tif", target_gsd=0.3,
-                 progress=False)
+    import_masks(
+        src,
+        tmp_path / "out",
+        gsd=None,
+        image_pattern="{id}_image.tif",
+        mask_pattern="{id}_edge.tif",
+        target_gsd=0.3,
+        progress=False,
+    )
     (line,) = read_ground_truth(layout.ground_truth_path(tmp_path / "out" / "t")).geometry
     assert np.allclose(np.asarray(line.coords)[:, 0], 500000.0 + 8.5 * 0.3)
 
 
-@pytest.mark.parametrize("crs, transform, size", [
-    ("EPSG:2263", Affine(0.5, 0, 987000.0, 0, -0.5, 200000.0), 64),  # 0.5 ft = 0.1524 m: as good as the target already
-    ("EPSG:4326", Affine(0.3 / 84305.0, 0, -74.0, 0, -0.3 / 111040.0, 40.7), 128),  # 0.3 m in degrees at 40.7 N
-])
+@pytest.mark.parametrize(
+    "crs, transform, size",
+    [
+        (
+            "EPSG:2263",
+            Affine(0.5, 0, 987000.0, 0, -0.5, 200000.0),
+            64,
+        ),  # 0.5 ft = 0.1524 m: as good as the target already
+        ("EPSG:4326", Affine(0.3 / 84305.0, 0, -74.0, 0, -0.3 / 111040.0, 40.7), 128),  # 0.3 m in degrees at 40.7 N
+    ],
+)
 def test_feet_and_degrees_are_resampled_by_their_size_in_metres(tmp_path, write_tif, crs, transform, size):
     src = tmp_path / "src"
     src.mkdir()
@@ -89,8 +105,19 @@ def test_feet_and_degrees_are_resampled_by_their_size_in_metres(tmp_path, write_
     label[0, :, 8] = 255
     write_tif(src / "t_edge.tif", label, transform, crs)
     target = "0.152" if size == 64 else "0.15"
-    done = run_cli("import-masks", str(src), "--out", str(tmp_path / "out"), "--image-pattern", "{id}_image.tif",
-                   "--mask-pattern", "{id}_edge.tif", "--target-gsd", target, "--quiet")
+    done = run_cli(
+        "import-masks",
+        str(src),
+        "--out",
+        str(tmp_path / "out"),
+        "--image-pattern",
+        "{id}_image.tif",
+        "--mask-pattern",
+        "{id}_edge.tif",
+        "--target-gsd",
+        target,
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     meta = layout.read_meta(tmp_path / "out" / "t")
     assert (meta["width"], meta["height"]) == (size, size) and meta["pixel_m"] == float(target)
@@ -102,7 +129,9 @@ def test_a_second_import_adds_to_the_set(tmp_path):
     pair(tmp_path / "src", "a")
     pair(tmp_path / "src", "b", row=30)
     import_masks(tmp_path / "src", tmp_path / "out", gsd=0.15, rule=MaskRule(channel=1), ids=["a"], progress=False)
-    import_masks(tmp_path / "src", tmp_path / "out", gsd=0.15, rule=MaskRule(channel=2, invert=True), ids=["b"], progress=False)
+    import_masks(
+        tmp_path / "src", tmp_path / "out", gsd=0.15, rule=MaskRule(channel=2, invert=True), ids=["b"], progress=False
+    )
     listing = json.loads((tmp_path / "out" / "set.json").read_text())
     assert [c["dir"] for c in listing["cities"]] == ["a", "b"]
     assert listing["cities"][1]["mask_rule"]["invert"] is True
@@ -122,7 +151,17 @@ def test_bad_inputs_name_the_file(tmp_path):
 def test_cli_imports_and_scores_a_set(tmp_path):
     pair(tmp_path / "src", "a", size=96, row=40)
     pair(tmp_path / "src", "b", size=96, row=60)
-    done = run_cli("import-masks", str(tmp_path / "src"), "--out", str(tmp_path / "set"), "--gsd", "0.152", "--channel", "2", "--quiet")
+    done = run_cli(
+        "import-masks",
+        str(tmp_path / "src"),
+        "--out",
+        str(tmp_path / "set"),
+        "--gsd",
+        "0.152",
+        "--channel",
+        "2",
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     assert "2 cities" in done.stdout
     scores = tmp_path / "scores.json"
@@ -164,12 +203,30 @@ def test_make_city_refuses_ground_truth_without_crs_or_off_the_tiles(tiles, tmp_
     import geopandas as gpd
     from shapely.geometry import LineString
 
-    gpd.GeoDataFrame(geometry=[LineString([(500001.0, 4399990.0), (500050.0, 4399990.0)])]).to_file(tmp_path / "nocrs.gpkg")
-    done = run_cli("make-city", str(tiles.directory), "--ground-truth", str(tmp_path / "nocrs.gpkg"), "--out", str(tmp_path / "city"))
+    gpd.GeoDataFrame(geometry=[LineString([(500001.0, 4399990.0), (500050.0, 4399990.0)])]).to_file(
+        tmp_path / "nocrs.gpkg"
+    )
+    done = run_cli(
+        "make-city",
+        str(tiles.directory),
+        "--ground-truth",
+        str(tmp_path / "nocrs.gpkg"),
+        "--out",
+        str(tmp_path / "city"),
+    )
     assert done.returncode == 2 and "has no CRS" in done.stderr and "Traceback" not in done.stderr
     # plain GeoJSON is WGS84 by definition: UTM numbers read as degrees land nowhere near the tiles
-    (tmp_path / "curbs.geojson").write_text('{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, '
-                                            '"geometry": {"type": "LineString", "coordinates": [[10, 10], [11, 11]]}}]}')
-    done = run_cli("make-city", str(tiles.directory), "--ground-truth", str(tmp_path / "curbs.geojson"), "--out", str(tmp_path / "city"))
+    (tmp_path / "curbs.geojson").write_text(
+        '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {}, '
+        '"geometry": {"type": "LineString", "coordinates": [[10, 10], [11, 11]]}}]}'
+    )
+    done = run_cli(
+        "make-city",
+        str(tiles.directory),
+        "--ground-truth",
+        str(tmp_path / "curbs.geojson"),
+        "--out",
+        str(tmp_path / "city"),
+    )
     assert done.returncode == 2 and "no boundary lies on the tiles" in done.stderr
     assert not (tmp_path / "city" / "city.json").exists()

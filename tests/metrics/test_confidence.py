@@ -54,8 +54,12 @@ def test_ordering_and_auc_on_the_hand_case():
     assert right["auc"] == 1.0
     assert right["share_true"] == 0.5
     # least sure half: B and D, all the false length (100 + 100 px) is found there
-    assert right["review"]["0.5"] == {"false_edges": 1.0, "false_length": 1.0, "false_edges_of_attainable": 1.0,
-                                      "false_length_of_attainable": 1.0}
+    assert right["review"]["0.5"] == {
+        "false_edges": 1.0,
+        "false_length": 1.0,
+        "false_edges_of_attainable": 1.0,
+        "false_length_of_attainable": 1.0,
+    }
     wrong = confidence_report(np.array([0.9, 0.2, 0.6, 0.95]), share, length)  # D above both true edges
     assert wrong["auc"] == 0.5  # pairs (A,B) (C,B) right, (A,D) (C,D) wrong
     assert wrong["review"]["0.5"]["false_edges"] == 0.5  # least sure half: B, C
@@ -82,10 +86,19 @@ def test_review_effort_counts_length():
     effort = review_effort(confidence, positive, length)
     # the least sure edge: 1 of 2 false edges, 10 of 40 px false length; one edge could hold 1 false
     # edge at best (all of it), and 30 px (the longest false edge)
-    assert effort["0.1"] == {"false_edges": 0.5, "false_length": 0.25, "false_edges_of_attainable": 1.0,
-                             "false_length_of_attainable": 1 / 3}
+    assert effort["0.1"] == {
+        "false_edges": 0.5,
+        "false_length": 0.25,
+        "false_edges_of_attainable": 1.0,
+        "false_length_of_attainable": 1 / 3,
+    }
     # five edges could hold both false ones (2 edges, 40 px): this order finds one
-    assert effort["0.5"] == {"false_edges": 0.5, "false_length": 0.25, "false_edges_of_attainable": 0.5, "false_length_of_attainable": 0.25}
+    assert effort["0.5"] == {
+        "false_edges": 0.5,
+        "false_length": 0.25,
+        "false_edges_of_attainable": 0.5,
+        "false_length_of_attainable": 0.25,
+    }
 
 
 def test_review_effort_of_attainable_where_most_edges_are_false():

@@ -28,8 +28,13 @@ def test_a_graph_inside_is_returned_as_it_is():
 
 
 def test_a_far_edge_is_cut_at_the_border_keeping_vertices_inside_and_each_edges_fields():
-    graph = BoundaryGraph([[10, 10], [50, 10], [1e9, 10], [-5e8, -5e8]], [[0, 1], [1, 2], [2, 3]],
-                          edge_kinds=["a", "b", "c"], edge_scores=np.array([0.1, 0.7, 0.3]), vertex_kinds=["x", "y", "z", "w"])
+    graph = BoundaryGraph(
+        [[10, 10], [50, 10], [1e9, 10], [-5e8, -5e8]],
+        [[0, 1], [1, 2], [2, 3]],
+        edge_kinds=["a", "b", "c"],
+        edge_scores=np.array([0.1, 0.7, 0.3]),
+        vertex_kinds=["x", "y", "z", "w"],
+    )
     cut = clip_graph(graph, WINDOW)
     np.testing.assert_allclose(cut.vertices, [[10, 10], [50, 10], [100, 10]])
     np.testing.assert_array_equal(cut.edges, [[0, 1], [1, 2]])  # the far edge (2, 3) misses the window: gone
@@ -39,7 +44,9 @@ def test_a_far_edge_is_cut_at_the_border_keeping_vertices_inside_and_each_edges_
 
 
 def test_a_polyline_stored_backwards_keeps_its_vertices():
-    graph = BoundaryGraph([[20, 20], [500, 20]], [[0, 1]], edge_polylines=[np.array([[500.0, 20.0], [300.0, 60.0], [20.0, 20.0]])])
+    graph = BoundaryGraph(
+        [[20, 20], [500, 20]], [[0, 1]], edge_polylines=[np.array([[500.0, 20.0], [300.0, 60.0], [20.0, 20.0]])]
+    )
     cut = clip_graph(graph, WINDOW)
     assert cut.n_edges == 1
     np.testing.assert_allclose(cut.vertices[cut.edges[0, 1]], [20, 20])  # the polyline's end, still vertex 0's point
@@ -50,10 +57,13 @@ def test_a_polyline_stored_backwards_keeps_its_vertices():
 
 def test_metrics_of_a_line_far_outside_are_those_of_its_part_inside():
     """Cutting to the window first changes no score of what lies in the imagery."""
-    pred = BoundaryGraph.from_polylines([np.array([[5.0, 20.0], [95.0, 20.0]]), np.array([[5.0, 60.0], [95.0, 62.0]])],
-                                        scores=[0.9, 0.2])
+    pred = BoundaryGraph.from_polylines(
+        [np.array([[5.0, 20.0], [95.0, 20.0]]), np.array([[5.0, 60.0], [95.0, 62.0]])], scores=[0.9, 0.2]
+    )
     far = BoundaryGraph.from_polylines([np.array([[5.0, 21.0], [4e8, 21.0], [4e8, 7e8]])])
-    near = BoundaryGraph.from_polylines([np.array([[5.0, 21.0], [grown(WINDOW)[2], 21.0]])])  # cut by hand where the metrics look
+    near = BoundaryGraph.from_polylines(
+        [np.array([[5.0, 21.0], [grown(WINDOW)[2], 21.0]])]
+    )  # cut by hand where the metrics look
     a = evaluate(pred, far, extent=WINDOW)
     b = evaluate(pred, near, extent=WINDOW)
     assert a["metrics"] == pytest.approx(b["metrics"], nan_ok=True)

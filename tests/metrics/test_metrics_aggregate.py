@@ -48,7 +48,11 @@ def test_empty_prediction_patch_scores_zero_and_counts():
     result = evaluate_patches(pred, gt, GRID)
     m = result["metrics"]
     assert m["precision@2"] == pytest.approx(0.5) and m["recall@2"] == pytest.approx(0.5)
-    assert m["apls"] == pytest.approx(0.5) and m["tlts"] == pytest.approx(0.5) and m["tlts_infeasible"] == pytest.approx(0.5)
+    assert (
+        m["apls"] == pytest.approx(0.5)
+        and m["tlts"] == pytest.approx(0.5)
+        and m["tlts_infeasible"] == pytest.approx(0.5)
+    )
     assert result["counts"]["patches_per_metric"]["apls"] == 2
 
 

@@ -9,12 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import run_cli
 from csboundary.data import city as layout
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics.io import load_pair
-
+from helpers import run_cli
 
 run = run_cli
 
@@ -22,7 +21,21 @@ run = run_cli
 @pytest.fixture(scope="module")
 def city(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("evaluate") / "city"
-    result = run("synth", str(out), "--seed", "4", "--tiles", "1x2", "--tile-size", "400", "--gsd", "0.5", "--split", "test", "--quiet")
+    result = run(
+        "synth",
+        str(out),
+        "--seed",
+        "4",
+        "--tiles",
+        "1x2",
+        "--tile-size",
+        "400",
+        "--gsd",
+        "0.5",
+        "--split",
+        "test",
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     return out
 
@@ -63,8 +76,19 @@ def test_graph_json_prediction_at_patch_scale_is_seeded(city, broken_prediction,
     outs = []
     for name in ("a.json", "b.json"):
         out = tmp_path / name
-        result = run("evaluate", str(broken_prediction), str(city), "--scale", "patch", "--apls", "symmetric", "--seed", "3", "--json",
-                     str(out))
+        result = run(
+            "evaluate",
+            str(broken_prediction),
+            str(city),
+            "--scale",
+            "patch",
+            "--apls",
+            "symmetric",
+            "--seed",
+            "3",
+            "--json",
+            str(out),
+        )
         assert result.returncode == 0, result.stderr
         outs.append(json.loads(out.read_text()))
     assert outs[0] == outs[1]
@@ -75,8 +99,14 @@ def test_graph_json_prediction_at_patch_scale_is_seeded(city, broken_prediction,
 
 def test_pixel_geojson_needs_and_honours_pixels_flag(tmp_path):
     def geojson(path: Path, rows: list[float]) -> Path:
-        features = [{"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": [[10.5, r], [110.5, r]]}}
-                    for r in rows]
+        features = [
+            {
+                "type": "Feature",
+                "properties": {},
+                "geometry": {"type": "LineString", "coordinates": [[10.5, r], [110.5, r]]},
+            }
+            for r in rows
+        ]
         path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
         return path
 
@@ -111,7 +141,9 @@ def test_bad_inputs_raise_input_error_naming_the_file(city, broken_prediction, t
     assert err.value.path == str(not_graph)
 
     far = BoundaryGraph.read_json(broken_prediction)
-    far = BoundaryGraph(far.vertices + 1e6, far.edges, transform=far.transform, crs=far.crs).write_json(tmp_path / "far.json")
+    far = BoundaryGraph(far.vertices + 1e6, far.edges, transform=far.transform, crs=far.crs).write_json(
+        tmp_path / "far.json"
+    )
     with pytest.raises(InputError, match="outside the raster") as err:
         load_pair(far, city)
     assert err.value.path == str(far)

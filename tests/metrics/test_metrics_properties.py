@@ -29,7 +29,9 @@ def jitter(polylines, shifts):
 def pair(draw):
     gt = draw(graph_lines)
     if draw(st.booleans()):
-        pred = jitter(gt, draw(st.lists(st.tuples(st.integers(-6, 6), st.integers(-6, 6)), min_size=len(gt), max_size=len(gt))))
+        pred = jitter(
+            gt, draw(st.lists(st.tuples(st.integers(-6, 6), st.integers(-6, 6)), min_size=len(gt), max_size=len(gt)))
+        )
         pred = pred[: draw(st.integers(0, len(pred)))] + draw(st.lists(polyline, max_size=2))
     else:
         pred = draw(graph_lines)
@@ -44,14 +46,20 @@ SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[Healt
 
 
 @SETTINGS
-@given(pair(), st.tuples(st.integers(-100_000, 100_000), st.integers(-100_000, 100_000)), st.sampled_from(["paper", "symmetric"]),
-       st.integers(0, 3))
+@given(
+    pair(),
+    st.tuples(st.integers(-100_000, 100_000), st.integers(-100_000, 100_000)),
+    st.sampled_from(["paper", "symmetric"]),
+    st.integers(0, 3),
+)
 def test_translating_both_graphs_changes_no_metric(graphs, offset, variant, seed):
     pred, gt = graphs
     here = evaluate_city(build(pred), build(gt), apls=variant, seed=seed)["metrics"]
     there = evaluate_city(build(pred, offset), build(gt, offset), apls=variant, seed=seed)["metrics"]
     assert here.keys() == there.keys()
-    assert all(same(here[k], there[k]) for k in here), {k: (here[k], there[k]) for k in here if not same(here[k], there[k])}
+    assert all(same(here[k], there[k]) for k in here), {
+        k: (here[k], there[k]) for k in here if not same(here[k], there[k])
+    }
 
 
 @SETTINGS

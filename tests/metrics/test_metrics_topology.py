@@ -7,8 +7,7 @@ import pytest
 from scipy.sparse.csgraph import dijkstra
 
 from csboundary.graph import BoundaryGraph
-from csboundary.metrics import MetricConfig, apls_paper, apls_symmetric, evaluate_city, tlts
-from csboundary.metrics import paths
+from csboundary.metrics import MetricConfig, apls_paper, apls_symmetric, evaluate_city, paths, tlts
 from csboundary.metrics.apls import paper_pairs
 from csboundary.metrics.sampling import Segments, boundary_pairs, clip, flatten, resample
 
@@ -98,9 +97,13 @@ def lattice(rng: np.random.Generator, n: int = 14, cell: float = 70.0) -> Bounda
     """A jittered street lattice with a fifth of its links missing, plus loose random walks."""
     xy = np.stack(np.meshgrid(np.arange(n), np.arange(n)), axis=-1).reshape(-1, 2) * cell + rng.normal(0, 8, (n * n, 2))
     idx = np.arange(n * n).reshape(n, n)
-    links = np.concatenate([np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1), np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)])
+    links = np.concatenate(
+        [np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1), np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)]
+    )
     links = links[rng.random(len(links)) > 0.2]
-    walks = [np.cumsum(rng.normal(0, 20, (rng.integers(2, 40), 2)), axis=0) + rng.uniform(0, 3000, 2) for _ in range(20)]
+    walks = [
+        np.cumsum(rng.normal(0, 20, (rng.integers(2, 40), 2)), axis=0) + rng.uniform(0, 3000, 2) for _ in range(20)
+    ]
     return BoundaryGraph.from_polylines([xy[[u, v]] for u, v in links] + walks)
 
 
@@ -211,7 +214,9 @@ def test_gap_exhaustive_by_hand():
     assert apls_paper(GAP, GT, config=EXHAUSTIVE) == pytest.approx(1 - (30 * 1 + 15 / 15) / 55)  # 24/55
     result = tlts(GAP, GT, config=EXHAUSTIVE)
     assert result.n_pairs == 55
-    assert (result.score, result.too_short, result.too_long, result.infeasible) == pytest.approx((10 / 55, 15 / 55, 0, 30 / 55))
+    assert (result.score, result.too_short, result.too_long, result.infeasible) == pytest.approx(
+        (10 / 55, 15 / 55, 0, 30 / 55)
+    )
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 7, 42])

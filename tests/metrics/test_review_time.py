@@ -31,8 +31,18 @@ from hypothesis import strategies as st
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics import evaluate, pixel_scores
 from csboundary.metrics.io import load_pair
-from csboundary.metrics.review_time import (ReviewCosts, boundary_samples, clicks_to_trace, graph_boundaries, keeps_boundary,
-                                            missing_runs, review_draft, review_order, review_report, scratch_clicks)
+from csboundary.metrics.review_time import (
+    ReviewCosts,
+    boundary_samples,
+    clicks_to_trace,
+    graph_boundaries,
+    keeps_boundary,
+    missing_runs,
+    review_draft,
+    review_order,
+    review_report,
+    scratch_clicks,
+)
 from csboundary.pipeline.outputs.prediction_files import write_graph_outputs
 
 HAND = ReviewCosts(look_s=1.0, look_s_per_20m=0.5, delete_s=1.0, vertex_s=1.5, find_s=2.0, trace_tolerance_px=2.0)
@@ -43,8 +53,14 @@ def graph(lines, scores=None) -> BoundaryGraph:
 
 
 GT = graph([[[0, 10], [200, 10]], [[0, 60], [200, 60]]])
-PRED_LINES = [[[0, 11], [50, 11]], [[50, 11], [100, 11]], [[100, 11], [150, 11]], [[150, 11], [200, 11]], [[0, 60], [100, 60]],
-              [[0, 150], [100, 150]]]
+PRED_LINES = [
+    [[0, 11], [50, 11]],
+    [[50, 11], [100, 11]],
+    [[100, 11], [150, 11]],
+    [[150, 11], [200, 11]],
+    [[0, 60], [100, 60]],
+    [[0, 150], [100, 150]],
+]
 
 
 def test_hand_case_costs():
@@ -59,7 +75,9 @@ def test_hand_case_costs():
     assert conf["clicks"] == 1 and conf["draw_minutes"] == pytest.approx(3.975 / 60, abs=0.02 / 60)
     assert conf["minutes_to_target_f1"] == pytest.approx(3.975 / 60, abs=0.02 / 60)  # nothing to delete: draw at once
     assert conf["end_f1"] == pytest.approx(1.0)
-    assert conf["start_f1"] == pytest.approx(pixel_scores(pred.edge_subgraph(np.arange(6) < 5), GT)[5.0][2])  # the draft's F1
+    assert conf["start_f1"] == pytest.approx(
+        pixel_scores(pred.edge_subgraph(np.arange(6) < 5), GT)[5.0][2]
+    )  # the draft's F1
     assert r["orders"]["random"]["minutes"] == pytest.approx(conf["minutes"])
 
 
@@ -77,8 +95,12 @@ def test_a_boundary_with_a_long_detour_gets_a_cut_and_a_delete():
     180 px on the truth), its last ~25 px off it: one cut (it is the boundary's end, so one
     inner end) and a delete; what stays is on the truth."""
     gt = graph([[[0, 10], [200, 10]]])
-    pred = BoundaryGraph(np.array([[0.0, 11.0], [150.0, 40.0]]), [[0, 1]], edge_scores=np.array([0.9]),
-                         edge_polylines=[np.array([[0.0, 11.0], [150.0, 11.0], [150.0, 40.0]])])
+    pred = BoundaryGraph(
+        np.array([[0.0, 11.0], [150.0, 40.0]]),
+        [[0, 1]],
+        edge_scores=np.array([0.9]),
+        edge_polylines=[np.array([[0.0, 11.0], [150.0, 11.0], [150.0, 40.0]])],
+    )
     r = review_report(pred, gt, metres_per_px=0.2, costs=HAND)
     conf = r["orders"]["confidence"]
     assert r["false_boundaries"] == 0 and r["cut_pieces"] == 1
@@ -118,8 +140,9 @@ def test_same_minutes_from_graph_json_geopackage_and_geojson(tmp_path):
         assert other["boundaries"] == first["boundaries"] and other["draft_boundaries"] == first["draft_boundaries"]
         for order in first["orders"]:
             assert other["orders"][order]["minutes"] == pytest.approx(first["orders"][order]["minutes"], rel=1e-9)
-            assert other["orders"][order]["minutes_to_target_f1"] == pytest.approx(first["orders"][order]["minutes_to_target_f1"],
-                                                                                   rel=1e-9)
+            assert other["orders"][order]["minutes_to_target_f1"] == pytest.approx(
+                first["orders"][order]["minutes_to_target_f1"], rel=1e-9
+            )
 
 
 def test_without_a_confidence_only_the_random_order_and_the_whole_prediction():
@@ -131,7 +154,9 @@ def test_without_a_confidence_only_the_random_order_and_the_whole_prediction():
 
 def test_curve_starts_at_the_pixel_f1_and_rises_when_false_edges_go():
     pred = graph(PRED_LINES, [0.9, 0.8, 0.9, 0.7, 0.6, 0.4])
-    r = review_report(pred, GT, costs=dataclasses.replace(HAND, look_s=0.1))  # every boundary pays its look: the false one is shown
+    r = review_report(
+        pred, GT, costs=dataclasses.replace(HAND, look_s=0.1)
+    )  # every boundary pays its look: the false one is shown
     assert r["held_back_boundaries"] == 0
     curve = r["orders"]["confidence"]["curve"]
     assert curve["f1"][0] == pytest.approx(pixel_scores(pred, GT)[5.0][2])
@@ -193,13 +218,21 @@ def test_evaluate_reports_review_effort_at_city_scale():
     review = result["review_effort"]
     assert review["held_back_boundaries"] == 1  # the false line at 0.1: its review starts from the draft without it
     draft_f1 = pixel_scores(pred.edge_subgraph(np.arange(pred.n_edges) < 5), GT)[5.0][2]
-    assert review["orders"]["confidence"]["start_f1"] == pytest.approx(draft_f1) and draft_f1 > result["metrics"]["f1@5"]
+    assert (
+        review["orders"]["confidence"]["start_f1"] == pytest.approx(draft_f1) and draft_f1 > result["metrics"]["f1@5"]
+    )
     assert "review_effort" not in evaluate(pred, GT, scale="city", review=None)
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 120), st.integers(0, 120), st.integers(0, 120), st.integers(0, 120)), min_size=1, max_size=8),
-       st.integers(0, 2**16))
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 120), st.integers(0, 120), st.integers(0, 120), st.integers(0, 120)),
+        min_size=1,
+        max_size=8,
+    ),
+    st.integers(0, 2**16),
+)
 def test_review_ends_near_f1_one_and_starts_at_pixel_f1(segments, seed):
     """Any prediction: the curve starts at the pixel F1@5 of its review draft; after the full review every run of the
     ground truth is drawn, so recall is 1, and what is kept is the true edges plus the traced

@@ -10,14 +10,21 @@ import torch
 
 from csboundary.data.raster import WindowRead
 from csboundary.data.windows import PixelWindow
-from csboundary.models.training.adapt import AdaptConfig, MeanTeacher, paste_roadway, posterior, pseudo_labels, roadway_edge_near
+from csboundary.models.training.adapt import (
+    AdaptConfig,
+    MeanTeacher,
+    paste_roadway,
+    posterior,
+    pseudo_labels,
+    roadway_edge_near,
+)
 from csboundary.models.training.unlabelled import MIN_VALID_SHARE, UnlabelledImagery
 
 
 def _road_stripe(size: int = 64, first: int = 20, last: int = 39) -> torch.Tensor:
     """(1, size, size) surface probabilities: 0.9 on columns first..last, 0.1 elsewhere."""
     surface = torch.full((1, size, size), 0.1)
-    surface[:, :, first:last + 1] = 0.9
+    surface[:, :, first : last + 1] = 0.9
     return surface
 
 
@@ -55,7 +62,9 @@ def test_pseudo_labels_are_confidence_weighted_and_anchored_to_the_roadway():
     target, weight = pseudo_labels(maps, valid, AdaptConfig(anchor_px=3))
     assert torch.allclose(target[0, 0], torch.full((64, 64), 0.3)) and torch.all(weight[0, 0, :60] == 1)
     assert target[0, 1, 10, 20] == pytest.approx(0.9) and weight[0, 1, 10, 20] == pytest.approx(0.8)
-    assert target[0, 1, 11, 18] == pytest.approx(0.05) and weight[0, 1, 11, 18] == pytest.approx(0.9)  # near the edge: as the teacher says
+    assert target[0, 1, 11, 18] == pytest.approx(0.05) and weight[0, 1, 11, 18] == pytest.approx(
+        0.9
+    )  # near the edge: as the teacher says
     for col in (30, 3, 50):  # away from the roadway's edge: background, with full weight
         assert target[0, 1, 10, col] == 0 and weight[0, 1, 10, col] == 1
     assert target[0, 2, 5, 25] == pytest.approx(0.9) and weight[0, 2, 5, 25] == pytest.approx(0.8)
@@ -63,15 +72,23 @@ def test_pseudo_labels_are_confidence_weighted_and_anchored_to_the_roadway():
     loose, _ = pseudo_labels(maps, valid, AdaptConfig(surface_anchor=False))
     assert loose[0, 1, 10, 30] == pytest.approx(0.9) and loose[0, 1, 10, 3] == pytest.approx(0.7)
     hard, _ = pseudo_labels(maps, valid, AdaptConfig(surface_anchor=False, hard_labels=True))
-    assert hard[0, 1, 10, 3] == 1 and hard[0, 1, 11, 18] == 0 and hard[0, 2, 5, 25] == 1 and hard[0, 0, 5, 5] == pytest.approx(0.3)
+    assert (
+        hard[0, 1, 10, 3] == 1
+        and hard[0, 1, 11, 18] == 0
+        and hard[0, 2, 5, 25] == 1
+        and hard[0, 0, 5, 5] == pytest.approx(0.3)
+    )
     _, flat = pseudo_labels(maps, valid, AdaptConfig(confidence_weighting=False))
     assert torch.all(flat[0, :, :60] == 1)
 
 
 def test_mixing_pastes_the_widened_roadway_with_its_labels():
     size = 32
-    image, target, weight = np.zeros((4, size, size), np.float32), np.zeros((3, size, size), np.float32), np.full((3, size, size), 0.2,
-                                                                                                                  np.float32)
+    image, target, weight = (
+        np.zeros((4, size, size), np.float32),
+        np.zeros((3, size, size), np.float32),
+        np.full((3, size, size), 0.2, np.float32),
+    )
     src_image = np.ones((4, size, size), np.float32)
     src_target = np.zeros((3, size, size), np.float32)
     src_target[2, :, 10:14] = 1  # the roadway: columns 10-13
@@ -113,7 +130,9 @@ class _View:
     def read(self, window) -> WindowRead:
         cols = np.arange(window.col_off, window.col_off + window.width)
         rows = np.arange(window.row_off, window.row_off + window.height)
-        inside = ((cols >= 0) & (cols < min(self.valid_cols, self.width)))[None, :] & ((rows >= 0) & (rows < self.height))[:, None]
+        inside = ((cols >= 0) & (cols < min(self.valid_cols, self.width)))[None, :] & (
+            (rows >= 0) & (rows < self.height)
+        )[:, None]
         data = np.where(inside, 200, 0).astype(np.uint8)[None].repeat(4, axis=0)
         return WindowRead(window, data, inside)
 
@@ -126,7 +145,9 @@ def test_windows_of_unlabelled_imagery_avoid_no_data():
         image, valid = imagery.sample(rng, 64)
         assert image.shape == (4, 64, 64) and valid.mean() >= MIN_VALID_SHARE
         assert np.all(image[:, ~valid] == 0) and np.allclose(image[:, valid], 200 / 255)
-    small = UnlabelledImagery([_View(100, 100)], ["b"]).sample(rng, 128)[1]  # a mosaic smaller than the window: all of it
+    small = UnlabelledImagery([_View(100, 100)], ["b"]).sample(rng, 128)[
+        1
+    ]  # a mosaic smaller than the window: all of it
     assert small.sum() == 100 * 100
     with pytest.raises(ValueError, match="no valid pixel"):
         UnlabelledImagery([_View(200, 0)], ["empty"]).sample(rng, 64)

@@ -30,8 +30,12 @@ def test_a_folded_conv_norm_pair_computes_the_same_as_by_hand():
     assert isinstance(folded[1], nn.Identity) and isinstance(model[1], nn.BatchNorm2d)  # the original keeps its norm
     x = torch.randn(1, 2, 8, 8)
     norm = model[1]
-    by_hand = torch.relu((conv(x) - norm.running_mean[:, None, None]) / torch.sqrt(norm.running_var[:, None, None] + norm.eps)
-                         * norm.weight[:, None, None] + norm.bias[:, None, None])
+    by_hand = torch.relu(
+        (conv(x) - norm.running_mean[:, None, None])
+        / torch.sqrt(norm.running_var[:, None, None] + norm.eps)
+        * norm.weight[:, None, None]
+        + norm.bias[:, None, None]
+    )
     with torch.no_grad():
         assert torch.allclose(folded(x), by_hand, atol=1e-5)
 

@@ -18,7 +18,9 @@ def noisy_edges(n: int = 1200, seed: int = 0) -> tuple[np.ndarray, np.ndarray, n
     """Evidence where truth depends on the boundary map's mean and the surface contrast."""
     rng = np.random.default_rng(seed)
     evidence = rng.uniform(0, 1, (n, len(FEATURES)))
-    logit = 6 * (evidence[:, FEATURES.index("boundary_mean")] - 0.5) + 3 * (evidence[:, FEATURES.index("surface_contrast")] - 0.5)
+    logit = 6 * (evidence[:, FEATURES.index("boundary_mean")] - 0.5) + 3 * (
+        evidence[:, FEATURES.index("surface_contrast")] - 0.5
+    )
     positive = rng.uniform(0, 1, n) < 1 / (1 + np.exp(-logit))
     return evidence, positive, np.arange(n) % 6
 
@@ -35,7 +37,9 @@ def test_the_arrays_compute_what_the_fitted_trees_compute():
     from csboundary.models.confidence import from_sklearn
 
     evidence, positive, _ = noisy_edges()
-    model = GradientBoostingClassifier(n_estimators=15, max_depth=3, init="zero", random_state=0).fit(evidence, positive)
+    model = GradientBoostingClassifier(n_estimators=15, max_depth=3, init="zero", random_state=0).fit(
+        evidence, positive
+    )
     arrays = from_sklearn(model, FEATURES, [0.0, 1.0], [0.0, 1.0])
     np.testing.assert_allclose(arrays.raw(evidence), model.decision_function(evidence), atol=1e-9)
 
@@ -61,14 +65,17 @@ def test_plain_numbers_round_trip(fitted):
     np.testing.assert_array_equal(back.probability(evidence), fitted.probability(evidence))
 
 
-@pytest.mark.parametrize("damage, problem", [
-    (lambda d: d.update(version=99), "version"),
-    (lambda d: d.update(features=["no_such_feature"] + d["features"][1:]), "unknown features"),
-    (lambda d: d["left"].__setitem__(0, 0), "not well formed"),  # the root's left child is itself: an endless walk
-    (lambda d: d["threshold"].__setitem__(0, float("nan")), "finite"),
-    (lambda d: d.update(iso_y=[2.0] * len(d["iso_y"])), "isotonic"),
-    (lambda d: d.pop("value"), "incomplete"),
-])
+@pytest.mark.parametrize(
+    "damage, problem",
+    [
+        (lambda d: d.update(version=99), "version"),
+        (lambda d: d.update(features=["no_such_feature"] + d["features"][1:]), "unknown features"),
+        (lambda d: d["left"].__setitem__(0, 0), "not well formed"),  # the root's left child is itself: an endless walk
+        (lambda d: d["threshold"].__setitem__(0, float("nan")), "finite"),
+        (lambda d: d.update(iso_y=[2.0] * len(d["iso_y"])), "isotonic"),
+        (lambda d: d.pop("value"), "incomplete"),
+    ],
+)
 def test_a_damaged_table_is_refused(fitted, damage, problem):
     data = fitted.to_dict()
     damage(data)

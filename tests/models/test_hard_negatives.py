@@ -20,7 +20,7 @@ def step_image(column: int = 32, size: int = 64) -> torch.Tensor:
 def test_image_edges_are_one_on_outlines_and_small_on_texture():
     image = torch.zeros(1, 4, 64, 64)
     for left in range(8, 64, 16):
-        image[..., left:left + 8] = 1.0  # roofs 8 px wide, 8 px apart: outlines on a sixth of the pixels
+        image[..., left : left + 8] = 1.0  # roofs 8 px wide, 8 px apart: outlines on a sixth of the pixels
     image += 0.002 * torch.arange(64)  # faint texture
     edges = image_edges(image)
     # The rising outlines (columns 7, 8, 23, 24, ...) all have a Sobel magnitude of 4.016, up to the
@@ -28,7 +28,9 @@ def test_image_edges_are_one_on_outlines_and_small_on_texture():
     # clip at exactly 1 depends on how the CPU's conv kernel rounds (here columns 7 and 8 come out one
     # ulp apart). Within 1e-3 of 1 holds on any CPU, and still tells them from the falling outlines
     # (0.992) and the texture (0.004).
-    assert edges[0, 0, 10, 7].item() == pytest.approx(1.0, abs=1e-3) and edges[0, 0, 10, 8].item() == pytest.approx(1.0, abs=1e-3)
+    assert edges[0, 0, 10, 7].item() == pytest.approx(1.0, abs=1e-3) and edges[0, 0, 10, 8].item() == pytest.approx(
+        1.0, abs=1e-3
+    )
     assert edges[0, 0, 10, 3] < 0.01 and edges[0, 0, 10, 12] < 0.01
 
 

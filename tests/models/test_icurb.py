@@ -15,7 +15,15 @@ from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.labels.boundaries import Boundary
 from csboundary.models.baselines import icurb
-from csboundary.models.baselines.icurb import Expert, ICurbConfig, Model, border_starts, history_channel, rollout, tracing
+from csboundary.models.baselines.icurb import (
+    Expert,
+    ICurbConfig,
+    Model,
+    border_starts,
+    history_channel,
+    rollout,
+    tracing,
+)
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import CitySpec, TrainingCity
@@ -106,6 +114,7 @@ class ExpertAgent:
         def spy(tensor, history, roi):
             self.histories = history.cpu().numpy()
             return original(tensor, history, roi)
+
         monkeypatch.setattr(tracing, "agent_input", spy)  # where rollout looks it up
 
     def __call__(self, x):
@@ -164,8 +173,15 @@ def test_rollout_with_beta_one_follows_the_teacher_and_labels_states():
     expert = Expert([wave()], (300, 300), config.step_px)
     starts = expert.starts()
     agent = icurb.Agent(config).eval()
-    traces, records = rollout(agent, torch.zeros(5, 300, 300), np.array([s[0] for s in starts]), config,
-                              expert.teacher(starts), beta=1.0, rng=np.random.default_rng(0))
+    traces, records = rollout(
+        agent,
+        torch.zeros(5, 300, 300),
+        np.array([s[0] for s in starts]),
+        config,
+        expert.teacher(starts),
+        beta=1.0,
+        rng=np.random.default_rng(0),
+    )
     x, offsets, stops = records[0]
     assert x.shape == (2, 6, 16, 16) and np.allclose(np.linalg.norm(offsets, axis=1), 20, atol=1e-3) and not stops.any()
     assert max(expert.nearest(v)[2] for v in traces.graph().vertices) < 1e-6
@@ -183,8 +199,18 @@ def test_smoke_training_gives_a_model_the_city_pipeline_runs(tmp_path):
         path = CitySpec(spec["split"], 1, (1, 1), 600).path(cache)
         synthesize_city(path, 1, spec["split"], (1, 1), SynthConfig(tile_size=600, gsd=0.3), progress=False)
     options = {"roi": 32, "widths": [8, 8], "hidden": 16, "window": 256, "batch": 8, "buffer": 512, "max_steps": 15}
-    config = TrainConfig.from_dict({"model": "icurb", "cache": str(cache), "train_city": specs["train"], "valid_city": specs["valid"],
-                                    "steps": 5, "validate_every": 5, "validation_samples": 1, "options": options})
+    config = TrainConfig.from_dict(
+        {
+            "model": "icurb",
+            "cache": str(cache),
+            "train_city": specs["train"],
+            "valid_city": specs["valid"],
+            "steps": 5,
+            "validate_every": 5,
+            "validation_samples": 1,
+            "options": options,
+        }
+    )
     weights = icurb.train(config, tmp_path / "run", torch.device("cpu"), progress=False)
     payload = load_checkpoint(weights, ("icurb",))
     assert payload["step"] == 5 and payload["validation"][0]["step"] == 5 and "optimizer" not in payload

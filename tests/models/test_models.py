@@ -39,7 +39,9 @@ def test_afanet_embedding_is_2050_and_adjacency_is_m_by_m():
 def test_ablation_switches_remove_a_feature():
     assert AfANetConfig(use_global=False).embedding == 1026
     assert AfANetConfig(use_local=False).embedding == 1026
-    model = AfANet(AfANetConfig(use_global=False, **{k: v for k, v in SMALL_AFANET.to_dict().items() if k != "use_global"}))
+    model = AfANet(
+        AfANetConfig(use_global=False, **{k: v for k, v in SMALL_AFANET.to_dict().items() if k != "use_global"})
+    )
     assert model.global_encoder is None and model(torch.rand(6, 64, 64), torch.rand(4, 2) * 64).shape == (4, 4)
     with pytest.raises(ValueError):
         AfANet(AfANetConfig(use_global=False, use_local=False))
@@ -69,7 +71,7 @@ def test_roi_crops_are_centred_on_pixel_centres_and_zero_outside():
 
 
 def test_edges_respect_threshold_degree_and_fixed_edges():
-    p = torch.tensor([[0, .9, .8, .7], [.9, 0, .6, .2], [.8, .6, 0, .95], [.7, .2, .95, 0]])
+    p = torch.tensor([[0, 0.9, 0.8, 0.7], [0.9, 0, 0.6, 0.2], [0.8, 0.6, 0, 0.95], [0.7, 0.2, 0.95, 0]])
     assert edges_from_adjacency(p, 0.5, None) == [(0, 1), (0, 2), (0, 3), (1, 2), (2, 3)]
     # Greedy by probability with degree <= 2: (2,3) .95, (0,1) .9, (0,2) .8; (0,3) and (1,2) would exceed.
     assert edges_from_adjacency(p, 0.5, 2) == [(0, 1), (0, 2), (2, 3)]

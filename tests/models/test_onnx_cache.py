@@ -45,14 +45,21 @@ def key_of(path) -> str:
 def test_the_key_is_the_networks_not_the_file_its_place_or_its_provenance(payload, tmp_path):
     shipped = key_of(shipped_weights())
     copy = resaved(payload, tmp_path / "a" / "copy.pt")
-    other = resaved(payload, tmp_path / "b" / "renamed.pt", provenance={"note": "saved again"}, code_version="9.9.9+other",
-                    inference={**payload["inference"], "note": "other metadata"})
+    other = resaved(
+        payload,
+        tmp_path / "b" / "renamed.pt",
+        provenance={"note": "saved again"},
+        code_version="9.9.9+other",
+        inference={**payload["inference"], "note": "other metadata"},
+    )
     assert copy.read_bytes() != other.read_bytes()  # other files...
     assert key_of(copy) == key_of(other) == shipped  # ...the same networks
     assert key_of(resaved(payload, tmp_path / "c" / "copy.pt", fpn=changed_tensor(payload))) != shipped
     fpn, afanet = load_fpn(payload), load_afanet(payload)
     assert network_key(fpn.to(memory_format=torch.contiguous_format), afanet) == shipped  # the values, not their layout
-    fpn.config = dataclasses.replace(fpn.config, encoder_scale=fpn.config.encoder_scale / 2)  # same tensors, another network
+    fpn.config = dataclasses.replace(
+        fpn.config, encoder_scale=fpn.config.encoder_scale / 2
+    )  # same tensors, another network
     assert network_key(fpn, afanet) != shipped
 
 

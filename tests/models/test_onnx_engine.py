@@ -24,7 +24,9 @@ def patch_image(tmp_path_factory):
     from csboundary.data.raster import Mosaic
 
     city = tmp_path_factory.mktemp("onnx") / "city"
-    done = run_cli("synth", str(city), "--tiles", "1x1", "--tile-size", "2400", "--seed", "5", "--split", "test", "--quiet")
+    done = run_cli(
+        "synth", str(city), "--tiles", "1x1", "--tile-size", "2400", "--seed", "5", "--split", "test", "--quiet"
+    )
     assert done.returncode == 0, done.stderr
     with Mosaic.open(city / "tiles") as mosaic:
         return mosaic.read(PatchGrid.for_mosaic(mosaic).patch(1, 1).expanded).data
@@ -56,7 +58,9 @@ def predictors(tmp_path_factory, cache):
     assert len(list(cache.glob("*.onnx"))) == 2
     assert set(onnx_engine.onnx.levels) == {"fpn", "afanet"}  # timed on this machine and recorded beside the exports
     assert len(list(cache.glob("*-tuning-*.json"))) == 1
-    assert not (weights.parent / ".onnx-cache").exists() and sorted(p.name for p in weights.parent.iterdir()) == ["bundle.pt"]
+    assert not (weights.parent / ".onnx-cache").exists() and sorted(p.name for p in weights.parent.iterdir()) == [
+        "bundle.pt"
+    ]
     return torch_engine, onnx_engine, weights
 
 
@@ -64,10 +68,16 @@ def predictors(tmp_path_factory, cache):
 def test_onnx_probabilities_equal_pytorch_on_a_real_patch(patch_image, predictors, level):
     """At each graph optimisation level the tuning may pick (onnx_tuning)."""
     torch_engine, onnx_engine, _ = predictors
-    onnx_engine.onnx = OnnxNetworks(onnx_engine.onnx.fpn_model, onnx_engine.onnx.afanet_model, levels={"fpn": level, "afanet": level})
+    onnx_engine.onnx = OnnxNetworks(
+        onnx_engine.onnx.fpn_model, onnx_engine.onnx.afanet_model, levels={"fpn": level, "afanet": level}
+    )
     maps_torch = torch_engine.patch_maps([None], [patch_image])[0]
     maps_onnx = onnx_engine.patch_maps([None], [patch_image])[0]
-    assert maps_torch.shape == (3, 1100, 1100)  # keypoint, boundary and (the shipped surface check reads it) road surface
+    assert maps_torch.shape == (
+        3,
+        1100,
+        1100,
+    )  # keypoint, boundary and (the shipped surface check reads it) road surface
     assert np.abs(maps_onnx - maps_torch).max() < 1e-5
 
     found = torch_engine.extract(maps_torch)
@@ -98,8 +108,12 @@ def test_bfloat16_runs_the_fpn_in_pytorch_whatever_the_engine(patch_image, predi
     finally:
         onnx_engine.use_precision("float32")
     assert onnx_engine.folded_fpn is None
-    expected = predict_probabilities(fold_batch_norms(onnx_engine.fpn), patch_image[None], torch.device("cpu"), "bfloat16")[0][: len(half)]
-    assert np.array_equal(half, expected)  # PyTorch's bfloat16 maps (batch norms folded), not ONNX Runtime's float32 ones
+    expected = predict_probabilities(
+        fold_batch_norms(onnx_engine.fpn), patch_image[None], torch.device("cpu"), "bfloat16"
+    )[0][: len(half)]
+    assert np.array_equal(
+        half, expected
+    )  # PyTorch's bfloat16 maps (batch norms folded), not ONNX Runtime's float32 ones
     assert 0 < np.abs(half - full).max() < 0.5
 
 
@@ -180,7 +194,9 @@ def test_auto_precision_runs_whichever_fpn_was_timed_faster_here_and_says_why(pr
     try:
         assert onnx_engine.precision == "auto"  # resolved by the engine
         onnx_engine.use_engine("onnx", weights)
-        seconds = onnx_engine.onnx.fpn_seconds()  # both FPNs timed at their levels on this machine, read back from the record
+        seconds = (
+            onnx_engine.onnx.fpn_seconds()
+        )  # both FPNs timed at their levels on this machine, read back from the record
         assert set(seconds) == {"fpn", "fpn-int8", "afanet"} and all(v > 0 for v in seconds.values())
         faster = "int8" if seconds["fpn-int8"] < seconds["fpn"] else "float32"
         assert onnx_engine.precision == faster and onnx_engine.precision_choice.startswith(f"{faster}: its FPN ran in")
@@ -194,7 +210,10 @@ def test_auto_precision_runs_whichever_fpn_was_timed_faster_here_and_says_why(pr
     finally:
         torch_engine.use_precision("float32")
     assert faster_fpn({"fpn": 0.40, "fpn-int8": 0.15})[0] == "int8"
-    assert faster_fpn({"fpn": 0.15, "fpn-int8": 0.40}) == ("float32", "float32: its FPN ran in 150 ms against 400 ms in int8 on this CPU")
+    assert faster_fpn({"fpn": 0.15, "fpn-int8": 0.40}) == (
+        "float32",
+        "float32: its FPN ran in 150 ms against 400 ms in int8 on this CPU",
+    )
     assert faster_fpn({"fpn": 0.15})[0] == "float32"  # not timed in int8: float32
 
 
@@ -237,7 +256,9 @@ def test_int8_is_refused_where_onnx_runtime_does_not_run_it(predictors, patch_im
             torch_engine.use_engine("torch", weights)
         # an image smaller than the export's window runs in float32 PyTorch, and says so
         torch_engine.onnx = OnnxNetworks(b"", b"")
-        with pytest.warns(UserWarning, match="int8 FPN is made for 1100 px windows: this 600 x 600 px image runs in float32"):
+        with pytest.warns(
+            UserWarning, match="int8 FPN is made for 1100 px windows: this 600 x 600 px image runs in float32"
+        ):
             small = torch_engine.patch_maps([None], [patch_image[:, :600, :600]])[0]
     finally:
         torch_engine.onnx = None

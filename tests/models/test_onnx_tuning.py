@@ -25,8 +25,14 @@ def test_the_fastest_level_wins_and_a_tie_keeps_the_default():
 def test_a_recorded_choice_is_used_without_timing(tmp_path, monkeypatch):
     networks = OnnxNetworks(b"not a model", b"not a model either", threads=2)
     path = tmp_path / "tuning.json"
-    path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "all", "afanet": "extended"}},
-                                machine_key(3): {"levels": {"fpn": "extended", "afanet": "extended"}}}))
+    path.write_text(
+        json.dumps(
+            {
+                machine_key(2): {"levels": {"fpn": "all", "afanet": "extended"}},
+                machine_key(3): {"levels": {"fpn": "extended", "afanet": "extended"}},
+            }
+        )
+    )
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed although recorded"))
     assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "all", "afanet": "extended"}
 
@@ -39,7 +45,9 @@ def test_a_missing_or_damaged_record_is_timed_and_written(tmp_path, monkeypatch,
         path.write_text(content)
     times = {b"fpn": {"all": 0.4, "extended": 0.3}, b"afanet": {"all": 0.02, "extended": 0.03}}
     calls = []
-    monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: calls.append((name, threads)) or times[model])
+    monkeypatch.setattr(
+        onnx_tuning, "time_levels", lambda model, name, threads: calls.append((name, threads)) or times[model]
+    )
     assert tuned_levels(path, networks.models, networks.thread_count) == {"fpn": "extended", "afanet": "all"}
     assert sorted(calls) == [("afanet", 2), ("fpn", 2)]
     assert "timing ONNX Runtime's optimisation levels for fpn, afanet on this machine (once)" in capsys.readouterr().err
@@ -57,7 +65,10 @@ def test_another_machine_keeps_its_own_entry(tmp_path, monkeypatch):
     other = {"levels": {"fpn": "all", "afanet": "all"}, "seconds": {}}
     path.write_text(json.dumps({"another CPU | onnxruntime 0.1 | 64 threads": other}))
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: {"all": 2.0, "extended": 1.0})
-    assert tuned_levels(path, OnnxNetworks(b"f", b"a", threads=1).models, 1) == {"fpn": "extended", "afanet": "extended"}
+    assert tuned_levels(path, OnnxNetworks(b"f", b"a", threads=1).models, 1) == {
+        "fpn": "extended",
+        "afanet": "extended",
+    }
     record = json.loads(path.read_text())
     assert record["another CPU | onnxruntime 0.1 | 64 threads"] == other and machine_key(1) in record
 
@@ -66,15 +77,28 @@ def test_a_network_not_recorded_yet_is_timed_alone_and_added_to_the_entry(tmp_pa
     # the int8 FPN is asked for after the float networks were timed: only it is timed
     networks = OnnxNetworks(b"fpn", b"afanet", threads=2, fpn_int8_model=b"int8")
     path = tmp_path / "tuning.json"
-    path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "extended", "afanet": "all"},
-                                                 "seconds": {"fpn": {"all": 0.4, "extended": 0.3}}}}))
+    path.write_text(
+        json.dumps(
+            {
+                machine_key(2): {
+                    "levels": {"fpn": "extended", "afanet": "all"},
+                    "seconds": {"fpn": {"all": 0.4, "extended": 0.3}},
+                }
+            }
+        )
+    )
     calls = []
-    monkeypatch.setattr(onnx_tuning, "time_levels", lambda model, name, threads: calls.append(name) or {"all": 0.1, "extended": 0.2})
+    monkeypatch.setattr(
+        onnx_tuning, "time_levels", lambda model, name, threads: calls.append(name) or {"all": 0.1, "extended": 0.2}
+    )
     assert tuned_levels(path, networks.models, 2) == {"fpn": "extended", "afanet": "all", "fpn-int8": "all"}
     assert calls == ["fpn-int8"]
     entry = json.loads(path.read_text())[machine_key(2)]
     assert entry["levels"] == {"fpn": "extended", "afanet": "all", "fpn-int8": "all"}
-    assert entry["seconds"]["fpn"] == {"all": 0.4, "extended": 0.3} and entry["seconds"]["fpn-int8"] == {"all": 0.1, "extended": 0.2}
+    assert entry["seconds"]["fpn"] == {"all": 0.4, "extended": 0.3} and entry["seconds"]["fpn-int8"] == {
+        "all": 0.1,
+        "extended": 0.2,
+    }
     # a level that is not one of LEVELS counts as not recorded
     path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "fastest", "afanet": "all", "fpn-int8": "all"}}}))
     calls.clear()
@@ -104,10 +128,19 @@ def test_time_levels_alternates_the_levels_and_keeps_each_ones_fastest_run(monke
 def test_example_inputs_follow_the_session_with_one_window_and_the_tuning_vertex_count():
     from types import SimpleNamespace
 
-    session = SimpleNamespace(get_inputs=lambda: [SimpleNamespace(name="image", shape=["batch", 4, 1100, 1100]),
-                                                  SimpleNamespace(name="rois", shape=["m", 6, 64, 64])])
+    session = SimpleNamespace(
+        get_inputs=lambda: [
+            SimpleNamespace(name="image", shape=["batch", 4, 1100, 1100]),
+            SimpleNamespace(name="rois", shape=["m", 6, 64, 64]),
+        ]
+    )
     inputs = onnx_tuning.example_inputs(session)
-    assert inputs["image"].shape == (1, 4, 1100, 1100) and inputs["rois"].shape == (onnx_tuning.TUNING_VERTICES, 6, 64, 64)
+    assert inputs["image"].shape == (1, 4, 1100, 1100) and inputs["rois"].shape == (
+        onnx_tuning.TUNING_VERTICES,
+        6,
+        64,
+        64,
+    )
     assert all(v.dtype == "float32" and 0 <= v.min() and v.max() < 1 for v in inputs.values())
 
 
@@ -116,15 +149,23 @@ def test_an_instance_moved_to_another_machine_uses_that_machines_levels(tmp_path
     import pickle
 
     path = tmp_path / "tuning.json"
-    path.write_text(json.dumps({machine_key(2): {"levels": {"fpn": "extended", "afanet": "all"}},
-                                machine_key(1): {"levels": {"fpn": "all", "afanet": "extended"}}}))
+    path.write_text(
+        json.dumps(
+            {
+                machine_key(2): {"levels": {"fpn": "extended", "afanet": "all"}},
+                machine_key(1): {"levels": {"fpn": "all", "afanet": "extended"}},
+            }
+        )
+    )
     networks = OnnxNetworks(b"fpn", b"afanet", threads=2)
     networks.tuning_path, networks.tuned_for = path, machine_key(2)
     networks.levels = tuned_levels(path, networks.models, 2)
     opened = []
     monkeypatch.setattr(onnx_tuning, "time_levels", lambda *a, **k: pytest.fail("timed although recorded"))
-    monkeypatch.setattr("csboundary.models.onnx_engine.open_session", lambda model, threads, level, name: opened.append((name, threads,
-                                                                                                                         level)))
+    monkeypatch.setattr(
+        "csboundary.models.onnx_engine.open_session",
+        lambda model, threads, level, name: opened.append((name, threads, level)),
+    )
     moved = pickle.loads(pickle.dumps(networks))
     moved.threads = 1
     moved._session("fpn")

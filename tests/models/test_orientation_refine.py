@@ -13,8 +13,15 @@ from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.data.windows import PixelWindow
 from csboundary.models.baselines import baseline_module
-from csboundary.models.baselines.orientation_refine import (IGNORE, KIND, Model, augment_with_vectors, corrupt,
-                                                            orientation_classes, train)
+from csboundary.models.baselines.orientation_refine import (
+    IGNORE,
+    KIND,
+    Model,
+    augment_with_vectors,
+    corrupt,
+    orientation_classes,
+    train,
+)
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import CitySpec, TrainingCity
@@ -58,16 +65,35 @@ def test_corruption_cuts_gaps_and_keeps_values_in_range():
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
     cache = tmp_path_factory.mktemp("cities")
-    synthesize_city(CitySpec("train", 3, (1, 1), 600).path(cache), 3, "train", (1, 1), SynthConfig(tile_size=600, gsd=0.3), progress=False)
+    synthesize_city(
+        CitySpec("train", 3, (1, 1), 600).path(cache),
+        3,
+        "train",
+        (1, 1),
+        SynthConfig(tile_size=600, gsd=0.3),
+        progress=False,
+    )
     return cache
 
 
 @pytest.fixture(scope="module")
 def run(cache, tmp_path_factory):
     city = {"split": "train", "seed": 3, "tiles": [1, 1], "tile_size": 600}
-    config = TrainConfig.from_dict({"model": KIND, "cache": str(cache), "train_city": city, "valid_city": city, "steps": 4,
-                                    "validate_every": 2, "validation_samples": 1, "crop": 96, "batch": 2, "fpn": TINY_FPN,
-                                    "options": {"refine_fraction": 0.5, "refiner": TINY_FPN}})
+    config = TrainConfig.from_dict(
+        {
+            "model": KIND,
+            "cache": str(cache),
+            "train_city": city,
+            "valid_city": city,
+            "steps": 4,
+            "validate_every": 2,
+            "validation_samples": 1,
+            "crop": 96,
+            "batch": 2,
+            "fpn": TINY_FPN,
+            "options": {"refine_fraction": 0.5, "refiner": TINY_FPN},
+        }
+    )
     out = tmp_path_factory.mktemp("run")
     return out, train(config, out, torch.device("cpu"), progress=False)
 
@@ -77,7 +103,12 @@ def test_training_runs_both_stages_and_checkpoints(run):
     payload = load_checkpoint(weights, (KIND,))
     assert payload["step"] == 4 and [v["stage"] for v in payload["validation"]] == [1, 2]
     assert "val_refined_seg_f1" in payload["validation"][-1] and "val_refined_seg_f1" not in payload["validation"][0]
-    assert [json.loads(line)["event"] for line in (out / "train.log").read_text().splitlines()] == ["start", "validate", "validate", "done"]
+    assert [json.loads(line)["event"] for line in (out / "train.log").read_text().splitlines()] == [
+        "start",
+        "validate",
+        "validate",
+        "done",
+    ]
     assert baseline_module(KIND).train is train
 
 

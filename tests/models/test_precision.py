@@ -33,15 +33,20 @@ def test_bfloat16_maps_are_float32_probabilities_near_the_float32_ones_but_not_e
     assert next(small_fpn.parameters()).dtype == torch.float32  # the weights were not converted
 
 
-@pytest.mark.parametrize("flags, expected", [
-    ("fpu sse avx2 avx512f", False),
-    ("fpu avx512f avx512_bf16", True),
-    ("fpu amx_bf16 amx_tile", True),
-    ("fpu avx512_bf16x", False),  # a whole flag, not a prefix
-])
+@pytest.mark.parametrize(
+    "flags, expected",
+    [
+        ("fpu sse avx2 avx512f", False),
+        ("fpu avx512f avx512_bf16", True),
+        ("fpu amx_bf16 amx_tile", True),
+        ("fpu avx512_bf16x", False),  # a whole flag, not a prefix
+    ],
+)
 def test_bfloat16_hardware_reads_the_cpu_flags(tmp_path, flags, expected):
     cpuinfo = tmp_path / "cpuinfo"
-    cpuinfo.write_text(f"processor\t: 0\nmodel name\t: Some CPU\nflags\t\t: {flags}\n\nprocessor\t: 1\nflags\t\t: {flags}\n")
+    cpuinfo.write_text(
+        f"processor\t: 0\nmodel name\t: Some CPU\nflags\t\t: {flags}\n\nprocessor\t: 1\nflags\t\t: {flags}\n"
+    )
     assert bfloat16_hardware(torch.device("cpu"), str(cpuinfo)) is expected
     assert bfloat16_hardware(torch.device("cpu"), str(tmp_path / "missing")) is False
     assert cpuinfo_value("model name", str(cpuinfo)) == "Some CPU"  # the first processor's, spaces trimmed

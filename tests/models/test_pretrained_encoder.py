@@ -21,7 +21,9 @@ def source():
 def test_every_pretrained_tensor_lands_in_the_encoder(source):
     model = lite.pretrained_lite0(4)  # strict load: every key of the encoder filled
     block_keys = [k for k in source if k.startswith("_blocks.") and not k.endswith("num_batches_tracked")]
-    mine = {k: v for k, v in model.state_dict().items() if k.startswith("stages.") and not k.endswith("num_batches_tracked")}
+    mine = {
+        k: v for k, v in model.state_dict().items() if k.startswith("stages.") and not k.endswith("num_batches_tracked")
+    }
     assert len(block_keys) == len(mine)
     # the last block's projection is the source's last block projection
     assert torch.equal(model.stages[6][0].project[0].weight, source["_blocks.15._project_conv.weight"])
@@ -73,7 +75,9 @@ def test_lite_fpn_keeps_any_input_size(size):
 
 def test_encoder_features_have_the_documented_strides():
     feats = lite.EfficientNetLite0(4)(torch.rand(1, 4, 64, 96))
-    assert [tuple(f.shape[1:]) for f in feats] == [(c, 64 // s, 96 // s) for s, c in sorted(lite.LITE0_CHANNELS.items())]
+    assert [tuple(f.shape[1:]) for f in feats] == [
+        (c, 64 // s, 96 // s) for s, c in sorted(lite.LITE0_CHANNELS.items())
+    ]
 
 
 def test_weights_round_trip_without_reading_imagenet_again(tmp_path, monkeypatch):
@@ -82,7 +86,9 @@ def test_weights_round_trip_without_reading_imagenet_again(tmp_path, monkeypatch
     from csboundary.models.checkpoint import save_checkpoint
 
     save_checkpoint(path, "fpn", fpn=model.state_dict(), fpn_config=LITE.to_dict())
-    monkeypatch.setattr(lite, "pretrained_weights_path", lambda: (_ for _ in ()).throw(AssertionError("read ImageNet weights")))
+    monkeypatch.setattr(
+        lite, "pretrained_weights_path", lambda: (_ for _ in ()).throw(AssertionError("read ImageNet weights"))
+    )
     loaded = load_fpn(path)
     assert isinstance(loaded, LiteFPN)
     x = torch.rand(1, 4, 64, 64)
@@ -128,15 +134,22 @@ def test_light_head_keeps_any_input_size(config, size):
 
 def test_light_head_does_a_fraction_of_the_full_heads_work_at_stride_2():
     """Multiply-adds of the convolutions that run at stride 2 (the stem's second and the head's)."""
+
     def stride2_macs(config):
         model, macs = FPN(config).eval(), []
-        hooks = [m.register_forward_hook(lambda m, i, o: macs.append(o.shape[-1] * o.shape[-2] * m.weight[0].numel() * o.shape[1]))
-                 for name, m in model.named_modules() if isinstance(m, torch.nn.Conv2d) and not name.startswith("encoder")]
+        hooks = [
+            m.register_forward_hook(
+                lambda m, i, o: macs.append(o.shape[-1] * o.shape[-2] * m.weight[0].numel() * o.shape[1])
+            )
+            for name, m in model.named_modules()
+            if isinstance(m, torch.nn.Conv2d) and not name.startswith("encoder")
+        ]
         with torch.no_grad():
             model(torch.rand(1, 4, 128, 128))
         for h in hooks:
             h.remove()
         return sum(v for v in macs)
+
     full, light = stride2_macs(FPNConfig(backbone="efficientnet-lite0", pretrained=False)), stride2_macs(LIGHT)
     assert light < 0.2 * full
 
@@ -148,4 +161,6 @@ def test_an_unknown_head_is_refused():
 
 def test_full_head_keeps_the_parameter_names_of_shipped_weights():
     names = set(FPN(FPNConfig(backbone="efficientnet-lite0", pretrained=False)).state_dict())
-    assert {"head.0.0.weight", "head.1.weight", "head.1.bias"} <= names and not any(n.startswith(("reduce.", "project.")) for n in names)
+    assert {"head.0.0.weight", "head.1.weight", "head.1.bias"} <= names and not any(
+        n.startswith(("reduce.", "project.")) for n in names
+    )

@@ -15,8 +15,18 @@ from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
 from csboundary.models.baselines import baseline_module
 from csboundary.models.baselines.sat2graph import (
-    CHANNELS, Model, Sat2GraphOptions, augment_with_graph, decode_adjacency, decode_edges, edge_slots,
-    encode_graph, owner_map, sat2graph_loss, train, training_sample,
+    CHANNELS,
+    Model,
+    Sat2GraphOptions,
+    augment_with_graph,
+    decode_adjacency,
+    decode_edges,
+    edge_slots,
+    encode_graph,
+    owner_map,
+    sat2graph_loss,
+    train,
+    training_sample,
 )
 from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
@@ -138,8 +148,19 @@ def cache(tmp_path_factory):
 
 def tiny_config(cache, **overrides) -> TrainConfig:
     city = {"split": "train", "seed": 3, "tiles": [1, 1], "tile_size": 600}
-    base = {"model": "sat2graph", "cache": str(cache), "train_city": city, "valid_city": city, "steps": 3, "validate_every": 2,
-            "validation_samples": 1, "crop": 96, "batch": 2, "fpn": TINY_FPN, "options": {"snap_px": 12.0}}
+    base = {
+        "model": "sat2graph",
+        "cache": str(cache),
+        "train_city": city,
+        "valid_city": city,
+        "steps": 3,
+        "validate_every": 2,
+        "validation_samples": 1,
+        "crop": 96,
+        "batch": 2,
+        "fpn": TINY_FPN,
+        "options": {"snap_px": 12.0},
+    }
     return TrainConfig.from_dict({**base, **overrides})
 
 
@@ -153,7 +174,9 @@ def test_training_writes_checkpoint_log_and_validation(run):
     out, weights = run
     payload = load_checkpoint(weights, ("sat2graph",))
     assert payload["step"] == 3 and [v["step"] for v in payload["validation"]] == [2, 3]
-    assert payload["sat2graph_config"]["out_channels"] == CHANNELS and payload["train_config"]["options"] == {"snap_px": 12.0}
+    assert payload["sat2graph_config"]["out_channels"] == CHANNELS and payload["train_config"]["options"] == {
+        "snap_px": 12.0
+    }
     assert {"val_vertex_f1", "val_slot_f1", "val_edge_f1"} <= set(payload["validation"][-1])
     events = [json.loads(line)["event"] for line in (out / "train.log").read_text().splitlines()]
     assert events == ["start", "validate", "validate", "done"]
@@ -163,7 +186,9 @@ def test_training_writes_checkpoint_log_and_validation(run):
 def test_resumed_run_equals_uninterrupted_run(run, cache, tmp_path):
     _, weights = run
     train(tiny_config(cache, steps=2), tmp_path, torch.device("cpu"), progress=False)
-    resumed = train(tiny_config(cache), tmp_path, torch.device("cpu"), resume=str(tmp_path / "sat2graph-last.pt"), progress=False)
+    resumed = train(
+        tiny_config(cache), tmp_path, torch.device("cpu"), resume=str(tmp_path / "sat2graph-last.pt"), progress=False
+    )
     a, b = load_checkpoint(weights, ("sat2graph",))["sat2graph"], load_checkpoint(resumed, ("sat2graph",))["sat2graph"]
     assert all(torch.equal(a[k], b[k]) for k in a)
 
@@ -190,9 +215,13 @@ def test_loss_falls_when_overfitting_one_crop(cache):
     torch.manual_seed(0)
     options = Sat2GraphOptions()
     city = TrainingCity(CitySpec("train", 3, (1, 1), 600).path(cache))
-    window = max((PixelWindow(c, r, 64, 64) for r in range(0, 537, 67) for c in range(0, 537, 67)),
-                 key=lambda w: training_sample(city, w, options)[1][1::3].sum())  # the crop with the most slot pixels
-    image, target, mask, _, _ = (torch.from_numpy(np.ascontiguousarray(a))[None] for a in training_sample(city, window, options))
+    window = max(
+        (PixelWindow(c, r, 64, 64) for r in range(0, 537, 67) for c in range(0, 537, 67)),
+        key=lambda w: training_sample(city, w, options)[1][1::3].sum(),
+    )  # the crop with the most slot pixels
+    image, target, mask, _, _ = (
+        torch.from_numpy(np.ascontiguousarray(a))[None] for a in training_sample(city, window, options)
+    )
     assert target[0, 1::3].sum() > 0
     net = FPN(FPNConfig.from_dict({**TINY_FPN, "out_channels": CHANNELS}))
     optimizer = torch.optim.Adam(net.parameters(), lr=3e-3)

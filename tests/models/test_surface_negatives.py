@@ -77,10 +77,23 @@ def test_augmented_samples_keep_their_targets_and_are_painted_when_asked(probabi
     city = TrainingCity.__new__(TrainingCity)  # no files: the window's sample is given
     city.random_window = lambda rng, size: PixelWindow(0, 0, size, size)
     city.fpn_sample = lambda window, surface: (image.copy(), target.copy(), valid.copy())
-    plain = dict(rotate=False, scale=(1.0, 1.0), brightness=0.0, contrast=(1.0, 1.0), gamma=(1.0, 1.0), hue=0.0,
-                 saturation=(1.0, 1.0), channel_gain=0.0, blur_p=0.0, noise_p=0.0, jpeg_p=0.0, nir_as_green_p=0.0)
-    config = AugmentConfig(**plain, surface_negatives=probability, surface_negatives_margin_px=(8, 8),
-                           surface_negatives_cover=(1.0, 1.0))
+    plain = dict(
+        rotate=False,
+        scale=(1.0, 1.0),
+        brightness=0.0,
+        contrast=(1.0, 1.0),
+        gamma=(1.0, 1.0),
+        hue=0.0,
+        saturation=(1.0, 1.0),
+        channel_gain=0.0,
+        blur_p=0.0,
+        noise_p=0.0,
+        jpeg_p=0.0,
+        nir_as_green_p=0.0,
+    )
+    config = AugmentConfig(
+        **plain, surface_negatives=probability, surface_negatives_margin_px=(8, 8), surface_negatives_cover=(1.0, 1.0)
+    )
     out, out_target, out_valid = city.augmented_fpn_sample(np.random.default_rng(4), SIZE, config, surface=True)
     assert out_target[2].sum() == target[2].sum() and out_valid.sum() == valid.sum()  # flipped or turned, not changed
     changed = np.any(np.abs(out - 0.5) > 1e-6, axis=0)

@@ -33,7 +33,9 @@ def test_networks_of_other_names_or_shapes_and_alpha_outside_0_1_are_refused():
 def test_an_interpolated_checkpoint_records_both_files_and_alpha(tmp_path):
     config = {"backbone": "resnet", "surface": False}
     save_checkpoint(tmp_path / "start.pt", "fpn", fpn={"w": torch.zeros(3)}, fpn_config=config)
-    save_checkpoint(tmp_path / "tuned.pt", "fpn", fpn={"w": torch.ones(3)}, fpn_config=config, train_config={"seed": 0}, step=800)
+    save_checkpoint(
+        tmp_path / "tuned.pt", "fpn", fpn={"w": torch.ones(3)}, fpn_config=config, train_config={"seed": 0}, step=800
+    )
     interpolate_fpn(tmp_path / "start.pt", tmp_path / "tuned.pt", 0.7, tmp_path / "mixed.pt")
     mixed = load_checkpoint(tmp_path / "mixed.pt", ("fpn",))
     assert torch.allclose(mixed["fpn"]["w"], torch.full((3,), 0.7))

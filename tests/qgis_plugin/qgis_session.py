@@ -16,9 +16,22 @@ import time
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-from qgis.core import (QgsApplication, QgsFeature, QgsGeometry, QgsMapRendererSequentialJob,  # noqa: E402
-                       QgsMapSettings, QgsPointXY, QgsProcessingException, QgsProcessingFeedback, QgsProject, QgsRasterLayer,
-                       QgsRectangle, QgsRenderContext, QgsVectorLayer, QgsExpressionContextUtils)
+from qgis.core import (  # noqa: E402
+    QgsApplication,
+    QgsExpressionContextUtils,
+    QgsFeature,
+    QgsGeometry,
+    QgsMapRendererSequentialJob,
+    QgsMapSettings,
+    QgsPointXY,
+    QgsProcessingException,
+    QgsProcessingFeedback,
+    QgsProject,
+    QgsRasterLayer,
+    QgsRectangle,
+    QgsRenderContext,
+    QgsVectorLayer,
+)
 from qgis.PyQt.QtCore import QSize  # noqa: E402
 from qgis.PyQt.QtGui import QColor  # noqa: E402
 
@@ -55,8 +68,12 @@ class Feedback(QgsProcessingFeedback):
     def setProgress(self, value):  # noqa: N802
         self.percents.append(value)
         super().setProgress(value)
-        if (self.cancel_after is not None and self.canceled_at is None and self.stages[-1:] == [self.cancel_stage]
-                and value > self.cancel_after):
+        if (
+            self.cancel_after is not None
+            and self.canceled_at is None
+            and self.stages[-1:] == [self.cancel_stage]
+            and value > self.cancel_after
+        ):
             self.canceled_at = time.monotonic()
             self.cancel()
 
@@ -72,11 +89,22 @@ class Feedback(QgsProcessingFeedback):
 def layer_report(layer):
     renderer = layer.renderer()
     node = QgsProject.instance().layerTreeRoot().findLayer(layer.id())
-    report = {"name": layer.name(), "source": layer.source(), "type": layer.type(), "features": None, "renderer": None,
-              "visible": node.isVisible() if node is not None else None}
+    report = {
+        "name": layer.name(),
+        "source": layer.source(),
+        "type": layer.type(),
+        "features": None,
+        "renderer": None,
+        "visible": node.isVisible() if node is not None else None,
+    }
     if isinstance(layer, QgsVectorLayer):
-        report.update(features=layer.featureCount(), geometry_type=layer.geometryType(), crs=layer.crs().authid(),
-                      fields=[f.name() for f in layer.fields()], renderer=renderer.type())
+        report.update(
+            features=layer.featureCount(),
+            geometry_type=layer.geometryType(),
+            crs=layer.crs().authid(),
+            fields=[f.name() for f in layer.fields()],
+            renderer=renderer.type(),
+        )
         if renderer.type() == "graduatedSymbol":
             report["class_attribute"] = renderer.classAttribute()
             drawn = QgsFeature(layer.fields())  # a line a reviewer drew: every attribute NULL
@@ -88,8 +116,15 @@ def layer_report(layer):
             symbol = renderer.symbolForFeature(drawn, context)
             report["null_colour"] = symbol.color().name() if symbol is not None else None
             renderer.stopRender(context)
-            report["classes"] = [{"lower": r.lowerValue(), "upper": r.upperValue(), "colour": r.symbol().color().name(),
-                                  "label": r.label()} for r in renderer.ranges()]
+            report["classes"] = [
+                {
+                    "lower": r.lowerValue(),
+                    "upper": r.upperValue(),
+                    "colour": r.symbol().color().name(),
+                    "label": r.label(),
+                }
+                for r in renderer.ranges()
+            ]
     return report
 
 
@@ -110,8 +145,13 @@ def detect():
     feedback = Feedback()
     results = processing.runAndLoadResults("csboundary:detect", request["parameters"], feedback=feedback)
     layers = list(QgsProject.instance().mapLayers().values())
-    report = {"results": {k: str(v) for k, v in results.items()}, "layers": [layer_report(layer) for layer in layers],
-              "stages": feedback.stages, "percents": feedback.percents[-3:], "lines": feedback.lines}
+    report = {
+        "results": {k: str(v) for k, v in results.items()},
+        "layers": [layer_report(layer) for layer in layers],
+        "stages": feedback.stages,
+        "percents": feedback.percents[-3:],
+        "lines": feedback.lines,
+    }
     if request.get("picture"):
         tiles = [QgsRasterLayer(path, os.path.basename(path)) for path in request["parameters"]["INPUT"]]
         by_name = {layer.name(): layer for layer in layers}
@@ -131,8 +171,10 @@ def review():
     review."""
     edited = request["edited"]
     refusals = {}
-    for name, parameters in (("same_file", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": edited}),
-                             ("unsaved", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": request["next_review"]})):
+    for name, parameters in (
+        ("same_file", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": edited}),
+        ("unsaved", {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": request["next_review"]}),
+    ):
         open_layer = QgsVectorLayer(f"{edited}|layername=boundaries", "boundaries to review", "ogr")
         QgsProject.instance().addMapLayer(open_layer)
         if name == "unsaved":  # a deletion not saved yet
@@ -142,7 +184,9 @@ def review():
         try:
             processing.run("csboundary:applyreview", parameters, feedback=said)
             refusals[name] = "accepted"
-        except QgsProcessingException as exc:  # what the Processing dialog's log shows: the feedback's errors, else the exception
+        except (
+            QgsProcessingException
+        ) as exc:  # what the Processing dialog's log shows: the feedback's errors, else the exception
             refusals[name] = said.errors[-1] if said.errors else str(exc)
         if open_layer.isEditable():
             open_layer.rollBack()
@@ -171,14 +215,24 @@ def review():
     complete.addFeature(area)
     assert complete.commitChanges(), complete.commitErrors()
     del edges, complete  # close the GeoPackage before csboundary reads it
-    shown = QgsVectorLayer(f"{edited}|layername=boundaries", "boundaries to review", "ogr")  # as Detect left it in the project
+    shown = QgsVectorLayer(
+        f"{edited}|layername=boundaries", "boundaries to review", "ogr"
+    )  # as Detect left it in the project
     QgsProject.instance().addMapLayer(shown)
     feedback = Feedback()
-    results = processing.runAndLoadResults("csboundary:applyreview", {"PREDICTION": request["prediction"], "EDITED": edited,
-                                                                      "NEXT_REVIEW": request["next_review"]}, feedback=feedback)
+    results = processing.runAndLoadResults(
+        "csboundary:applyreview",
+        {"PREDICTION": request["prediction"], "EDITED": edited, "NEXT_REVIEW": request["next_review"]},
+        feedback=feedback,
+    )
     sources = [layer.source() for layer in QgsProject.instance().mapLayers().values()]
-    return {"results": {k: str(v) for k, v in results.items()}, "line_ends_moved": moved, "lines": feedback.lines,
-            "refusals": refusals, "sources_after": sources}
+    return {
+        "results": {k: str(v) for k, v in results.items()},
+        "line_ends_moved": moved,
+        "lines": feedback.lines,
+        "refusals": refusals,
+        "sources_after": sources,
+    }
 
 
 def cancel():
@@ -190,8 +244,12 @@ def cancel():
     except QgsProcessingException as exc:
         outcome = str(exc)
     stopped = time.monotonic()
-    report = {"outcome": outcome, "seconds_to_cancel": feedback.canceled_at and stopped - feedback.canceled_at,
-              "seconds_before_cancel": feedback.canceled_at and feedback.canceled_at - started, "lines": feedback.lines}
+    report = {
+        "outcome": outcome,
+        "seconds_to_cancel": feedback.canceled_at and stopped - feedback.canceled_at,
+        "seconds_before_cancel": feedback.canceled_at and feedback.canceled_at - started,
+        "lines": feedback.lines,
+    }
     again = Feedback()
     processing.run("csboundary:detect", request["parameters"], feedback=again)
     report["again_lines"] = again.lines

@@ -31,7 +31,9 @@ class Seen:
         self.cancel_when, self.canceled_at = cancel_when, None
 
     def progress(self) -> runner.Progress:
-        return runner.Progress(stage=self.stages.append, percent=self.on_percent, line=self.lines.append, canceled=self.canceled)
+        return runner.Progress(
+            stage=self.stages.append, percent=self.on_percent, line=self.lines.append, canceled=self.canceled
+        )
 
     def on_percent(self, value: float) -> None:
         self.percents.append(value)
@@ -43,7 +45,9 @@ class Seen:
 
 
 def test_bars_become_stages_and_percentages_and_other_lines_stay_lines(tmp_path):
-    fake = script(tmp_path / "csboundary", """
+    fake = script(
+        tmp_path / "csboundary",
+        """
 import sys, time
 from tqdm import tqdm
 print("9 patches (3x3)", flush=True)
@@ -52,7 +56,8 @@ for _ in tqdm(range(4), desc="predict patches", unit="patch", mininterval=0):
 for _ in tqdm(range(2), desc="stitch graphs", unit="block", mininterval=0):
     pass
 print("wrote out: graph.json")
-""")
+""",
+    )
     seen = Seen()
     lines = runner.run(fake, [], seen.progress())
     assert seen.stages == ["predict patches", "stitch graphs"]
@@ -61,7 +66,10 @@ print("wrote out: graph.json")
 
 
 def test_a_failure_is_the_command_s_own_error_line_and_a_traceback_names_the_environment(tmp_path):
-    bad_input = script(tmp_path / "a", "import sys\nprint('reading')\nprint('error: x.tif: not a raster', file=sys.stderr)\nsys.exit(2)")
+    bad_input = script(
+        tmp_path / "a",
+        "import sys\nprint('reading')\nprint('error: x.tif: not a raster', file=sys.stderr)\nsys.exit(2)",
+    )
     with pytest.raises(runner.CommandError, match=r"^x\.tif: not a raster$"):
         runner.run(bad_input, [], Seen().progress())
     broken = script(tmp_path / "b", "import torch_that_is_not_there")
@@ -81,29 +89,37 @@ def test_the_command_is_found_checked_or_refused_in_one_line(tmp_path, monkeypat
     assert runner.find_command("") == str(CSBOUNDARY)
     assert runner.check_command(runner.find_command("")).startswith("csboundary ")
     other = script(tmp_path / "python-only", "print('Python 3.11')")
-    with pytest.raises(runner.CommandError, match="python-only: the csboundary environment is broken \\(Python 3.11\\)"):
+    with pytest.raises(
+        runner.CommandError, match="python-only: the csboundary environment is broken \\(Python 3.11\\)"
+    ):
         runner.check_command(other)
 
 
 def test_cancel_sends_sigterm_and_kills_a_command_that_ignores_it(tmp_path):
-    polite = script(tmp_path / "polite", f"""
+    polite = script(
+        tmp_path / "polite",
+        f"""
 import signal, sys, time
 def stop(*_):
-    open({str(tmp_path / 'cleaned')!r}, 'w').close()
+    open({str(tmp_path / "cleaned")!r}, 'w').close()
     sys.exit(143)
 signal.signal(signal.SIGTERM, stop)
 print('started', flush=True)
 while True:
     time.sleep(0.05)
-""")
+""",
+    )
     seen = Seen()
     seen.canceled = lambda: bool(seen.lines)  # cancel once it has said something
     started = time.monotonic()
     with pytest.raises(runner.Canceled):
         runner.run(polite, [], seen.progress())
     assert (tmp_path / "cleaned").exists() and time.monotonic() - started < 5
-    stubborn = script(tmp_path / "stubborn", "import signal, time\nsignal.signal(signal.SIGTERM, signal.SIG_IGN)\n"
-                                             "print('started', flush=True)\nwhile True:\n    time.sleep(0.05)\n")
+    stubborn = script(
+        tmp_path / "stubborn",
+        "import signal, time\nsignal.signal(signal.SIGTERM, signal.SIG_IGN)\n"
+        "print('started', flush=True)\nwhile True:\n    time.sleep(0.05)\n",
+    )
     seen = Seen()
     seen.canceled = lambda: bool(seen.lines)
     started = time.monotonic()
@@ -115,7 +131,9 @@ while True:
 def test_a_canceled_prediction_stops_within_5_s_and_the_same_command_continues_it(demo_run, tmp_path):
     """What the plugin's cancel does to a real run: SIGTERM once the first patch is done; the run
     store keeps it and the same command predicts only the rest."""
-    tile = sorted(str(p) for p in (demo_run / "city" / "tiles").glob("*.tif"))[0]  # one tile of the demo city: 2x2 patches
+    tile = sorted(str(p) for p in (demo_run / "city" / "tiles").glob("*.tif"))[
+        0
+    ]  # one tile of the demo city: 2x2 patches
     args = ["predict", tile, "--out", str(tmp_path / "pred"), "--device", "cpu"]
     seen = Seen(cancel_when=lambda s: s.stages[-1:] == ["predict patches"] and s.percents[-1] > 0)
     with pytest.raises(runner.Canceled):
@@ -132,13 +150,16 @@ def test_a_canceled_prediction_stops_within_5_s_and_the_same_command_continues_i
 
 
 def test_a_stage_with_colons_is_one_stage_and_qgis_s_own_paths_stay_out_of_the_command(tmp_path, monkeypatch):
-    fake = script(tmp_path / "csboundary", """
+    fake = script(
+        tmp_path / "csboundary",
+        """
 import os
 from tqdm import tqdm
 for _ in tqdm(range(2), desc="confidence: labelled cities", mininterval=0):
     pass
 print("PYTHONPATH=" + os.environ.get("PYTHONPATH", "-"), "GDAL_DATA=" + os.environ.get("GDAL_DATA", "-"), "HOME" in os.environ)
-""")
+""",
+    )
     monkeypatch.setenv("PYTHONPATH", "/qgis/python")
     monkeypatch.setenv("GDAL_DATA", "/qgis/share/gdal")
     seen = Seen()
@@ -149,13 +170,16 @@ print("PYTHONPATH=" + os.environ.get("PYTHONPATH", "-"), "GDAL_DATA=" + os.envir
 
 def test_a_failing_callback_never_leaves_the_command_running(tmp_path):
     pid_file = tmp_path / "pid"
-    fake = script(tmp_path / "csboundary", f"""
+    fake = script(
+        tmp_path / "csboundary",
+        f"""
 import os, time
 open({str(pid_file)!r}, "w").write(str(os.getpid()))
 print("started", flush=True)
 while True:
     time.sleep(0.05)
-""")
+""",
+    )
 
     def fail(line):
         raise RuntimeError("the log window is gone")

@@ -43,8 +43,14 @@ def browser():
         pytest.skip(reason)
     options = webdriver.ChromeOptions()
     options.binary_location = str(CHROMIUM)
-    for flag in ("--headless=new", "--no-sandbox", "--disable-background-networking", "--disable-gpu", "--window-size=1400,900",
-                 "--allow-file-access-from-files"):
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-background-networking",
+        "--disable-gpu",
+        "--window-size=1400,900",
+        "--allow-file-access-from-files",
+    ):
         options.add_argument(flag)
     from selenium.webdriver.chrome.service import Service
 
@@ -83,7 +89,9 @@ def test_delete_the_least_sure_boundary_in_the_browser_and_apply_it(reviewed, br
     rows = [li for li in browser.find_elements(By.CSS_SELECTOR, "#edge-list li") if li.is_displayed()]
     assert len(rows) == len(shown) == browser.execute_script("return window.review.boundaryCount()")
     assert sorted(int(k) for k in rows[0].get_attribute("data-edges").split(",")) == sorted(least.edges.tolist())
-    shot = cv2.imdecode(np.frombuffer(browser.find_element(By.ID, "view").screenshot_as_png, np.uint8), cv2.IMREAD_COLOR)
+    shot = cv2.imdecode(
+        np.frombuffer(browser.find_element(By.ID, "view").screenshot_as_png, np.uint8), cv2.IMREAD_COLOR
+    )
     assert shot.std() > 20  # imagery and lines, not an empty canvas
 
     costs = ReviewCosts()
@@ -118,7 +126,9 @@ def test_cut_a_boundary_and_sweep_an_area_in_the_browser(reviewed, browser):
     """Cut splits the selected boundary at the vertex nearest the click: deleting one part
     exports only its edges. Delete below, over the whole imagery at confidence 1.01, deletes
     every boundary shown."""
-    assert run_cli("review", str(reviewed), "--quiet").returncode == 0  # a fresh page: another test may have changed graph.json
+    assert (
+        run_cli("review", str(reviewed), "--quiet").returncode == 0
+    )  # a fresh page: another test may have changed graph.json
     browser.get((reviewed / "review" / "index.html").as_uri())
     _wait(browser, "return window.review && window.review.loadedTiles() > 0")
     r = "window.review"
@@ -148,7 +158,9 @@ def test_mark_the_view_complete_in_the_browser_and_apply_it(reviewed, browser, t
     apply-review records it in review.json, where fine-tuning finds its labels."""
     from selenium.webdriver.common.by import By
 
-    assert run_cli("review", str(reviewed), "--quiet").returncode == 0  # a fresh page: another test may have changed graph.json
+    assert (
+        run_cli("review", str(reviewed), "--quiet").returncode == 0
+    )  # a fresh page: another test may have changed graph.json
     browser.get((reviewed / "review" / "index.html").as_uri())
     _wait(browser, "return window.review && window.review.loadedTiles() > 0")
     browser.find_element(By.ID, "view-complete").click()
@@ -173,22 +185,47 @@ def test_mark_the_view_complete_in_the_browser_and_apply_it(reviewed, browser, t
 
 def _square() -> BoundaryGraph:
     # pixel (col, row) -> world (x, y) = (100 + 0.5 col, 200 - 0.5 row)
-    return BoundaryGraph(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]), [[0, 1], [1, 2]], edge_kinds=["normal", "corner"],
-                         edge_polylines=[None, np.array([[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]])], edge_scores=np.array([0.3, 0.9]),
-                         transform=Affine(0.5, 0, 100, 0, -0.5, 200), crs="EPSG:32618")
+    return BoundaryGraph(
+        np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]),
+        [[0, 1], [1, 2]],
+        edge_kinds=["normal", "corner"],
+        edge_polylines=[None, np.array([[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]])],
+        edge_scores=np.array([0.3, 0.9]),
+        transform=Affine(0.5, 0, 100, 0, -0.5, 200),
+        crs="EPSG:32618",
+    )
 
 
 def test_edits_by_hand():
     features = [
-        {"properties": {"action": "delete", "edge": 0}, "geometry": {"type": "LineString", "coordinates": [[100.0, 200.0], [105.0,
-                                                                                                                            200.0]]}},
-        {"properties": {"action": "accept", "edge": 1},  # drawn from its other end: the pair is checked either way round
-         "geometry": {"type": "LineString", "coordinates": [[105.0, 195.0], [106.0, 197.5], [105.0, 200.0]]}},
-        {"properties": {"action": "move", "vertex": 2}, "geometry": {"type": "Point", "coordinates": [105.0, 194.0]}},  # pixel (10, 12)
-        {"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[100.2, 200.0], [90.0, 190.0]]}},
+        {
+            "properties": {"action": "delete", "edge": 0},
+            "geometry": {"type": "LineString", "coordinates": [[100.0, 200.0], [105.0, 200.0]]},
+        },
+        {
+            "properties": {
+                "action": "accept",
+                "edge": 1,
+            },  # drawn from its other end: the pair is checked either way round
+            "geometry": {"type": "LineString", "coordinates": [[105.0, 195.0], [106.0, 197.5], [105.0, 200.0]]},
+        },
+        {
+            "properties": {"action": "move", "vertex": 2},
+            "geometry": {"type": "Point", "coordinates": [105.0, 194.0]},
+        },  # pixel (10, 12)
+        {
+            "properties": {"action": "add"},
+            "geometry": {"type": "LineString", "coordinates": [[100.2, 200.0], [90.0, 190.0]]},
+        },
     ]
     graph, record = apply_edits(_square(), features)
-    assert graph.n_edges == 2 and record.deleted == [0] and record.accepted == [0] and record.moved == [2] and record.added == [1]
+    assert (
+        graph.n_edges == 2
+        and record.deleted == [0]
+        and record.accepted == [0]
+        and record.moved == [2]
+        and record.added == [1]
+    )
     assert np.allclose(graph.vertices[2], [10, 12])
     assert np.allclose(graph.edge_polylines[0][-1], [10, 12])  # the corner edge's polyline follows its moved end
     assert tuple(graph.edges[1]) == (0, 3)  # starts on vertex 0 (0.4 px away: snapped), ends on a new vertex
@@ -198,22 +235,52 @@ def test_edits_by_hand():
 
 def test_a_complete_area_is_recorded_and_changes_nothing():
     square = [[100.0, 200.0], [104.0, 200.0], [104.0, 196.0], [100.0, 196.0]]  # pixels (0, 0)-(8, 8), given unclosed
-    graph, record = apply_edits(_square(), [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon",
-                                                                                                "coordinates": [square]}}])
+    graph, record = apply_edits(
+        _square(), [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [square]}}]
+    )
     assert record.complete_areas == [[*square, square[0]]]
     assert graph.n_edges == 2 and np.array_equal(graph.vertices, _square().vertices) and record.kept == {0: 0, 1: 1}
 
 
-@pytest.mark.parametrize("feature, message", [
-    ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[100, 200], [101, 199]]]}}, "3 corners"),
-    ({"properties": {"action": "complete"}, "geometry": {"type": "LineString", "coordinates": [[100, 200], [101, 199]]}}, "Polygon"),
-    ({"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [5000, 0], [5000, 5000]]]}},
-     "outside the imagery"),
-    ({"properties": {"action": "delete", "edge": 5}}, "not an edge"),
-    ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}}, "Point"),
-    ({"properties": {"action": "paint"}}, "unknown action"),
-    ({"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[100, 200]]}}, "at least 2"),
-])
+@pytest.mark.parametrize(
+    "feature, message",
+    [
+        (
+            {
+                "properties": {"action": "complete"},
+                "geometry": {"type": "Polygon", "coordinates": [[[100, 200], [101, 199]]]},
+            },
+            "3 corners",
+        ),
+        (
+            {
+                "properties": {"action": "complete"},
+                "geometry": {"type": "LineString", "coordinates": [[100, 200], [101, 199]]},
+            },
+            "Polygon",
+        ),
+        (
+            {
+                "properties": {"action": "complete"},
+                "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [5000, 0], [5000, 5000]]]},
+            },
+            "outside the imagery",
+        ),
+        ({"properties": {"action": "delete", "edge": 5}}, "not an edge"),
+        (
+            {
+                "properties": {"action": "move", "vertex": 0},
+                "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]},
+            },
+            "Point",
+        ),
+        ({"properties": {"action": "paint"}}, "unknown action"),
+        (
+            {"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[100, 200]]}},
+            "at least 2",
+        ),
+    ],
+)
 def test_bad_edits_are_refused(feature, message):
     with pytest.raises(EditError, match=message):
         apply_edits(_square(), [feature])
@@ -222,7 +289,9 @@ def test_bad_edits_are_refused(feature, message):
 def test_review_works_from_another_folder_than_predict_ran_in(tmp_path):
     """predict records its inputs as absolute paths, so the review page finds the imagery from anywhere."""
     city = tmp_path / "work" / "city"
-    assert run_cli("synth", str(city), "--tile-size", "600", "--seed", "2", "--split", "valid", "--quiet").returncode == 0
+    assert (
+        run_cli("synth", str(city), "--tile-size", "600", "--seed", "2", "--split", "valid", "--quiet").returncode == 0
+    )
     tile = next((city / "tiles").glob("*.tif")).relative_to(tmp_path / "work")
     done = run_cli("predict", str(tile), "--out", "pred", "--device", "cpu", "--quiet", cwd=tmp_path / "work")
     assert done.returncode == 0, done.stderr
@@ -246,7 +315,9 @@ def test_a_district_page_names_the_city_s_edges(reviewed, browser, tmp_path):
     city = BoundaryGraph.read_json(pred / "graph.json")
     x0, y0, x1, y1 = _world_bounds(city)
     west = (x0, y0, (x0 + x1) / 2, y1)
-    done = run_cli("review", str(pred), "--bounds", ",".join(map(str, west)), "--out", str(tmp_path / "west"), "--quiet")
+    done = run_cli(
+        "review", str(pred), "--bounds", ",".join(map(str, west)), "--out", str(tmp_path / "west"), "--quiet"
+    )
     assert done.returncode == 0, done.stderr
     inside = [k for k, line in enumerate(city.to_linestrings(world=True)) if line.intersects(box(*west))]
     assert 0 < len(inside) < city.n_edges
@@ -262,7 +333,9 @@ def test_a_district_page_names_the_city_s_edges(reviewed, browser, tmp_path):
     deleted = sorted(f["properties"]["edge"] for f in edits["features"])
     local = sorted(int(k) for k in rows[0].get_attribute("data-edges").split(","))
     ids = browser.execute_script("return REVIEW_DATA.edge_ids")
-    assert deleted == sorted(ids[k] for k in local) and set(deleted) <= set(inside)  # the city's numbers of the boundary's edges
+    assert deleted == sorted(ids[k] for k in local) and set(deleted) <= set(
+        inside
+    )  # the city's numbers of the boundary's edges
 
     (tmp_path / "edits.geojson").write_text(json.dumps(edits))
     done = run_cli("apply-review", str(pred), str(tmp_path / "edits.geojson"))

@@ -14,7 +14,17 @@ from shapely.geometry import LineString, Polygon
 from csboundary.data.synth.buildings import _add_buildings
 from csboundary.data.synth.config import SynthConfig, rng_share
 from csboundary.data.synth.grounds import _add_court, _add_stalls
-from csboundary.data.synth.materials import ASPHALT, CONCRETE, CROP_COLOURS, GRASS, GRAVEL, PARKING, SOIL, Colour, _jitter
+from csboundary.data.synth.materials import (
+    ASPHALT,
+    CONCRETE,
+    CROP_COLOURS,
+    GRASS,
+    GRAVEL,
+    PARKING,
+    SOIL,
+    Colour,
+    _jitter,
+)
 from csboundary.data.synth.objects import Painted, Scene
 from csboundary.data.synth.shapes import _centred_rect, _rect
 from csboundary.data.synth.vegetation import _add_canopy, _add_trees_in, _tree
@@ -41,7 +51,9 @@ def _frontage(ring: LineString, spacing_fn, step_back: float = 3.0):
         t += spacing_fn()
 
 
-def _edge_strips(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, sidewalk_colour: Colour) -> float:
+def _edge_strips(
+    cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, sidewalk_colour: Colour
+) -> float:
     """Paint what lies between the road and a block's interior; return its width in metres.
 
     Raised curb (default): a gutter pan on the road side (``gutter_share``), then the block in
@@ -67,8 +79,14 @@ def _edge_strips(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block
     return verge
 
 
-def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, block: Polygon, roadway,
-                    sidewalk_colour: Colour = CONCRETE) -> None:
+def _populate_block(
+    cfg: SynthConfig,
+    rng: np.random.Generator,
+    scene: Scene,
+    block: Polygon,
+    roadway,
+    sidewalk_colour: Colour = CONCRETE,
+) -> None:
     sidewalk = rng.uniform(*cfg.sidewalk_width)
     if rng_share(rng, cfg.bare_block_share):
         sidewalk = 0.0  # the lawn runs to the curb
@@ -92,7 +110,9 @@ def _populate_block(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, bl
             if part.geom_type != "Polygon" or part.area < 20:
                 continue
             if kind == "field":
-                scene.ground.append(Painted(part, _jitter(rng, CROP_COLOURS[int(rng.integers(len(CROP_COLOURS)))], 0.1), 18))
+                scene.ground.append(
+                    Painted(part, _jitter(rng, CROP_COLOURS[int(rng.integers(len(CROP_COLOURS)))], 0.1), 18)
+                )
                 continue
             ground = {"park": GRASS, "lot": PARKING, "residential": SOIL if rng.random() < 0.4 else GRASS}[kind]
             if kind == "residential" and rng_share(rng, cfg.paved_yard_share):

@@ -16,9 +16,22 @@ from csboundary.data.synth.shapes import _centred_rect, _rect
 from csboundary.data.synth.vehicles import _car
 
 
-def _yard(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, yard: dict[str, list], origin: np.ndarray, d: np.ndarray,
-          left: np.ndarray, width: float, gap: float, setback: float, depth: float, front: float, block: Polygon | None,
-          area: Polygon) -> None:
+def _yard(
+    cfg: SynthConfig,
+    rng: np.random.Generator,
+    scene: Scene,
+    yard: dict[str, list],
+    origin: np.ndarray,
+    d: np.ndarray,
+    left: np.ndarray,
+    width: float,
+    gap: float,
+    setback: float,
+    depth: float,
+    front: float,
+    block: Polygon | None,
+    area: Polygon,
+) -> None:
     """A house's lot (residential knobs): its own lawn shade, a fence or hedge on the lot line,
     a pool behind the house, a driveway from the curb to the house with maybe a car on it.
     ``origin`` is the lot's front corner on the sidewalk side, ``d`` along the street, ``left``
@@ -30,13 +43,22 @@ def _yard(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, yard: dict[s
         yard["lawns"].append(Painted(lot, _jitter(rng, base, 0.16), 14))
     if gap > 1.0 and rng_share(rng, cfg.lot_fence_share):
         start = origin + d * (width + gap / 2)
-        line = LineString([start + left * setback * rng.uniform(0.0, 1.0), start + left * (setback + depth + rng.uniform(2.0, 15.0))])
+        line = LineString(
+            [start + left * setback * rng.uniform(0.0, 1.0), start + left * (setback + depth + rng.uniform(2.0, 15.0))]
+        )
         if rng.random() < 0.4:
-            yard["things"].append(Painted(line.buffer(rng.uniform(0.5, 0.9)).intersection(area), _jitter(rng, HEDGE, 0.12), 22))
+            yard["things"].append(
+                Painted(line.buffer(rng.uniform(0.5, 0.9)).intersection(area), _jitter(rng, HEDGE, 0.12), 22)
+            )
         else:
             fence = FENCES[int(rng.integers(len(FENCES)))]
-            yard["things"].append(Painted(line.buffer(rng.uniform(0.07, 0.15), cap_style="flat").intersection(area), _jitter(rng, fence,
-                                                                                                                             0.08), 3))
+            yard["things"].append(
+                Painted(
+                    line.buffer(rng.uniform(0.07, 0.15), cap_style="flat").intersection(area),
+                    _jitter(rng, fence, 0.08),
+                    3,
+                )
+            )
     if rng_share(rng, cfg.pool_share):
         centre = origin + d * width * rng.uniform(0.3, 0.7) + left * (setback + depth + rng.uniform(3.5, 7.0))
         pool = _centred_rect(centre, d, rng.uniform(5.0, 10.0), rng.uniform(3.0, 5.0))
@@ -50,11 +72,21 @@ def _yard(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, yard: dict[s
         paving = paving.intersection(block) if block is not None else paving.intersection(area)
         yard["paved"].append(Painted(paving, _jitter(rng, DRIVEWAYS[int(rng.integers(len(DRIVEWAYS)))], 0.08), 5))
         if setback > 5.5 and rng.random() < 0.4:
-            scene.cars.append(_car(rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left, cfg.car_detail))
+            scene.cars.append(
+                _car(rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left, cfg.car_detail)
+            )
 
 
-def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon, kind: str, keep_clear: list[Polygon],
-                   block: Polygon | None = None, front: float = 0.0) -> None:
+def _add_buildings(
+    cfg: SynthConfig,
+    rng: np.random.Generator,
+    scene: Scene,
+    area: Polygon,
+    kind: str,
+    keep_clear: list[Polygon],
+    block: Polygon | None = None,
+    front: float = 0.0,
+) -> None:
     """Row of buildings along each side of the lot, set back from the sidewalk (``front`` wide,
     between ``area`` and the curb, ``block``'s outline); with their yards where the style has them."""
     usable = area.buffer(-0.5)
@@ -62,7 +94,9 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
         return
     shapely.prepare(usable)
     placed: list[Polygon] = [g for g in keep_clear if not g.is_empty]
-    ring = LineString(shapely.orient_polygons(area.simplify(1.0)).exterior.coords) if area.geom_type == "Polygon" else None
+    ring = (
+        LineString(shapely.orient_polygons(area.simplify(1.0)).exterior.coords) if area.geom_type == "Polygon" else None
+    )
     if ring is None:
         return
     coords = np.asarray(ring.coords)
@@ -91,18 +125,24 @@ def _add_buildings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, are
             if cfg.building_share < 1 and rng.random() >= cfg.building_share:
                 continue
             placed.append(footprint)
-            roof = _roof(rng, cfg.roof_palette) if cfg.roof_palette != "tar" else _jitter(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))],
-                                                                                          0.1)
+            roof = (
+                _roof(rng, cfg.roof_palette)
+                if cfg.roof_palette != "tar"
+                else _jitter(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))], 0.1)
+            )
             height = rng.uniform(8, 40) if wide else rng.uniform(*cfg.house_height)
             if rng_share(rng, cfg.tower_share):
                 height = rng.uniform(*cfg.tower_height)
             building = Building(footprint, height, roof)
             if not wide and rng_share(rng, cfg.pitched_roof_share):
-                building.facets, building.ridge = roof_facets(a + d * t0 + left * setback, d, left, fw, depth, rng.random() < 0.5,
-                                                              scene.sun)
+                building.facets, building.ridge = roof_facets(
+                    a + d * t0 + left * setback, d, left, fw, depth, rng.random() < 0.5, scene.sun
+                )
             elif rng.random() < 0.35:
                 c = np.array(footprint.centroid.coords[0]) + rng.uniform(-0.2, 0.2, 2) * min(w, depth)
-                building.detail = _centred_rect(c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35))
+                building.detail = _centred_rect(
+                    c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35)
+                )
                 building.detail_colour = _jitter(rng, roof, 0.3)  # type: ignore[arg-type]
             if not building.facets and rng_share(rng, cfg.flat_roof_detail):
                 _roof_details(rng, building, d, scene.sun)

@@ -38,7 +38,9 @@ def _unit(angle: float) -> np.ndarray:
     return np.array([math.cos(angle), math.sin(angle)])
 
 
-def _line(centre: np.ndarray, along: np.ndarray, across: np.ndarray, offset: float, half: float, bend=None) -> LineString:
+def _line(
+    centre: np.ndarray, along: np.ndarray, across: np.ndarray, offset: float, half: float, bend=None
+) -> LineString:
     """A line through ``centre + across*offset`` in direction ``along``; ``bend(t)`` shifts it sideways."""
     t = np.arange(-half, half + 5.0, 5.0) if bend is not None else np.array([-half, half])
     shift = bend(t) if bend is not None else 0.0

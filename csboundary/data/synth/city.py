@@ -16,21 +16,20 @@ from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
+import shapely
 from affine import Affine
 from tqdm import tqdm
 
 from csboundary import __version__
-from csboundary.data.folder_lock import locked_folder
 from csboundary.data import city as layout
+from csboundary.data.folder_lock import locked_folder
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
-from csboundary.data.units import GroundUnits, ground_units
 from csboundary.data.synth.config import SynthConfig, city_rng
 from csboundary.data.synth.render import CameraLook, TileFrame, apply_look, render_tile, resample
 from csboundary.data.synth.scene import Scene, build_scene
 from csboundary.data.synth.streets import build_network
-
-import shapely
+from csboundary.data.units import GroundUnits, ground_units
 
 
 @dataclass
@@ -72,7 +71,14 @@ class SyntheticCity:
         ground, whatever unit the CRS counts in."""
         f = self.frame(row, col)
         east, north = self.units.metres_per_unit
-        return Affine(f.gsd / east, 0.0, self.config.origin_x + f.x0 / east, 0.0, -f.gsd / north, self.config.origin_y + f.y1 / north)
+        return Affine(
+            f.gsd / east,
+            0.0,
+            self.config.origin_x + f.x0 / east,
+            0.0,
+            -f.gsd / north,
+            self.config.origin_y + f.y1 / north,
+        )
 
     def ground_truth(self) -> gpd.GeoDataFrame:
         """Road boundaries in world coordinates, one LineString per row, with kind and closedness."""
@@ -113,7 +119,9 @@ def crs_units(config: SynthConfig) -> GroundUnits:
     except CRSError as exc:
         raise ValueError(f"unknown CRS {config.crs!r}") from exc
     if crs.is_geographic and not (abs(config.origin_x) <= 180 and abs(config.origin_y) < 90):
-        raise ValueError(f"origin ({config.origin_x:g}, {config.origin_y:g}) is no place in the geographic CRS {config.crs}")
+        raise ValueError(
+            f"origin ({config.origin_x:g}, {config.origin_y:g}) is no place in the geographic CRS {config.crs}"
+        )
     return ground_units(crs, (config.origin_x, config.origin_y))
 
 
@@ -125,9 +133,13 @@ def in_crs(config: SynthConfig, crs: str) -> SynthConfig:
 
     try:
         target = CRS.from_user_input(crs)
-        x, y = Transformer.from_crs(config.crs, target, always_xy=True).transform(config.origin_x, config.origin_y, errcheck=True)
+        x, y = Transformer.from_crs(config.crs, target, always_xy=True).transform(
+            config.origin_x, config.origin_y, errcheck=True
+        )
     except (CRSError, ProjError) as exc:
-        raise ValueError(f"cannot place the city in {crs!r} ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
+        raise ValueError(
+            f"cannot place the city in {crs!r} ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
+        ) from exc
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"the city's place has no coordinates in {crs!r}")
     name = f"{target.to_authority()[0]}:{target.to_authority()[1]}" if target.to_authority() else target.to_wkt()
@@ -147,7 +159,9 @@ def draw_look(config: SynthConfig, split: str, seed: int) -> CameraLook:
     blur = float(rng.uniform(*config.photo_blur)) if config.photo_blur[1] > 0 else 0.0
     jpeg = int(rng.integers(config.jpeg_quality[0], config.jpeg_quality[1] + 1)) if config.jpeg_quality[1] > 0 else 0
     # type: ignore[arg-type]
-    return CameraLook(source_gsd=source, haze=haze, saturation=saturation, gamma=gamma, gains=gains, blur=blur, jpeg=jpeg)
+    return CameraLook(
+        source_gsd=source, haze=haze, saturation=saturation, gamma=gamma, gains=gains, blur=blur, jpeg=jpeg
+    )
 
 
 def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]) -> SyntheticCity:
@@ -164,7 +178,12 @@ def plan_city(config: SynthConfig, split: str, seed: int, tiles: tuple[int, int]
 
 
 def synthesize_city(
-    out_dir: str | Path, seed: int, split: str, tiles: tuple[int, int] = (1, 1), config: SynthConfig = SynthConfig(), progress: bool = True
+    out_dir: str | Path,
+    seed: int,
+    split: str,
+    tiles: tuple[int, int] = (1, 1),
+    config: SynthConfig = SynthConfig(),
+    progress: bool = True,
 ) -> dict:
     """Write a city directory (tiles, ground truth, city.json) and return its metadata.
 
@@ -176,21 +195,35 @@ def synthesize_city(
         return _synthesize_city(out_dir, seed, split, tiles, config, progress)
 
 
-def _synthesize_city(out_dir: str | Path, seed: int, split: str, tiles: tuple[int, int], config: SynthConfig, progress: bool) -> dict:
+def _synthesize_city(
+    out_dir: str | Path, seed: int, split: str, tiles: tuple[int, int], config: SynthConfig, progress: bool
+) -> dict:
     out_dir = layout.begin_city(out_dir)
     start = time.perf_counter()
     city = plan_city(config, split, seed, tiles)
     planned = time.perf_counter() - start
     rows, cols = tiles
     records, render_seconds = [], []
-    for row, col in tqdm([(r, c) for r in range(rows) for c in range(cols)], desc="render tiles", unit="tile", disable=not progress):
+    for row, col in tqdm(
+        [(r, c) for r in range(rows) for c in range(cols)], desc="render tiles", unit="tile", disable=not progress
+    ):
         t0 = time.perf_counter()
         image = city.render(row, col)
         render_seconds.append(time.perf_counter() - t0)
         name = layout.tile_name(row, col)
-        write_geotiff(layout.tiles_dir(out_dir) / name, image, city.transform(row, col), config.crs,
-                      tags={"generator": f"csboundary {__version__} synth", "split": split, "seed": str(seed), "tile_row": str(row),
-                            "tile_col": str(col)})
+        write_geotiff(
+            layout.tiles_dir(out_dir) / name,
+            image,
+            city.transform(row, col),
+            config.crs,
+            tags={
+                "generator": f"csboundary {__version__} synth",
+                "split": split,
+                "seed": str(seed),
+                "tile_row": str(row),
+                "tile_col": str(col),
+            },
+        )
         records.append({"path": f"{layout.TILES_DIR}/{name}", "row": row, "col": col})
     gt = city.ground_truth()
     write_ground_truth(layout.ground_truth_path(out_dir), gt, city.road_surface())
@@ -210,7 +243,9 @@ def _synthesize_city(out_dir: str | Path, seed: int, split: str, tiles: tuple[in
         "config": config.to_dict(),
         "counts": {
             "boundaries": len(gt),
-            "boundary_km": round(sum(line.length for line, _ in city.scene.network.boundaries) / 1000, 3),  # metres, in any CRS
+            "boundary_km": round(
+                sum(line.length for line, _ in city.scene.network.boundaries) / 1000, 3
+            ),  # metres, in any CRS
             "blocks": len(city.scene.network.blocks),
             "islands": len(city.scene.network.islands),
             "medians": len(city.scene.network.medians),

@@ -20,6 +20,7 @@ SPLITS = ("train", "valid", "test")
 class SynthConfig(Config):
     """Everything that shapes one synthetic city. All fields are plain numbers, so a config is
     recorded in ``city.json`` and a city is reproduced from (config, split, seed)."""
+
     config_name = "synth"
 
     # raster
@@ -119,7 +120,9 @@ class SynthConfig(Config):
     relief_lean: tuple[float, float] = (0.0, 0.0)  # roofs shifted away from their footprints, m per m of height
     house_depth: tuple[float, float] = (10.0, 24.0)  # depth of a (non-lot) building from its front
     bare_tree_share: float = 0.0  # trees drawn leafless: a see-through crown of grey-brown branches
-    bus_lane_share: float = 0.0  # avenues (18 m or wider) with a red bus lane or a green bike lane beside the parking lane
+    bus_lane_share: float = (
+        0.0  # avenues (18 m or wider) with a red bus lane or a green bike lane beside the parking lane
+    )
     tree_pits: bool = False  # a soil square at the foot of every street tree
     court_share: float = 0.0  # parks that are sports fields or courts with painted white lines
     lot_stalls: bool = False  # parking lots are painted stalls with cars in them, not big buildings

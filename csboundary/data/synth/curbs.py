@@ -35,7 +35,9 @@ def _roundabouts(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stree
             continue
         outer = rng.uniform(*cfg.roundabout_radius)
         inner = outer - rng.uniform(6.0, 8.0)
-        if inner < 3.0 or any(hit.distance(o.centroid) < outer + o_r + 30 for o, o_r in ((d, math.sqrt(d.area / math.pi)) for d, _ in out)):
+        if inner < 3.0 or any(
+            hit.distance(o.centroid) < outer + o_r + 30 for o, o_r in ((d, math.sqrt(d.area / math.pi)) for d, _ in out)
+        ):
             continue
         out.append((hit.buffer(outer, quad_segs=QUAD_SEGS), hit.buffer(inner, quad_segs=QUAD_SEGS)))
     return out
@@ -46,7 +48,9 @@ def _bulb_islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stre
     out = []
     for s in streets:
         if s.bulb_radius >= 8.0 and rng_share(rng, cfg.bulb_island_share):
-            out.append(Point(s.centreline.coords[-1]).buffer(s.bulb_radius - rng.uniform(5.5, 6.5), quad_segs=QUAD_SEGS))
+            out.append(
+                Point(s.centreline.coords[-1]).buffer(s.bulb_radius - rng.uniform(5.5, 6.5), quad_segs=QUAD_SEGS)
+            )
     return [p for p in out if p.area > math.pi * 2.0**2]
 
 
@@ -71,8 +75,13 @@ def _islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], 
                 continue
             side = rng.uniform(3.5, 7.0)
             theta = rng.uniform(0, 2 * math.pi)
-            corners = [(hit.x + side * 0.58 * math.cos(theta + k * 2 * math.pi / 3),
-                        hit.y + side * 0.58 * math.sin(theta + k * 2 * math.pi / 3)) for k in range(3)]
+            corners = [
+                (
+                    hit.x + side * 0.58 * math.cos(theta + k * 2 * math.pi / 3),
+                    hit.y + side * 0.58 * math.sin(theta + k * 2 * math.pi / 3),
+                )
+                for k in range(3)
+            ]
             island = Polygon(corners).buffer(0.8, quad_segs=QUAD_SEGS)
             if inside.contains(island) and not any(island.distance(o) < 3.0 for o in islands):
                 islands.append(island)
@@ -89,7 +98,9 @@ def _medians(streets: list[Street], road_by_street: list[Polygon], roadway, avoi
         if s.median <= 0:
             continue
         strip = s.centreline.buffer(s.median / 2, cap_style="flat")
-        if s.kind == "highway":  # crossed by few streets: its pieces must not run out of the domain (they would fail `inside`)
+        if (
+            s.kind == "highway"
+        ):  # crossed by few streets: its pieces must not run out of the domain (they would fail `inside`)
             strip = strip.intersection(box(*roadway.bounds).buffer(-2.0, join_style="mitre"))
         crossing = [road_by_street[j] for j in tree.query(strip) if j != i] + [a for a in avoid if a.intersects(strip)]
         if crossing:

@@ -41,20 +41,39 @@ def _add_court(rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
         length, width = rng.uniform(24.0, 30.0), rng.uniform(13.0, 16.0)
         colour = COURTS[int(rng.integers(1, len(COURTS)))]
         nu, nv = max(1, int(lu // (length + 2.0))), max(1, int(lv // (width + 2.0)))
-        courts = [(c + u * (i - (nu - 1) / 2) * (length + 2.0) + v * (j - (nv - 1) / 2) * (width + 2.0), length, width, colour)
-                  for i in range(nu) for j in range(nv)]
+        courts = [
+            (
+                c + u * (i - (nu - 1) / 2) * (length + 2.0) + v * (j - (nv - 1) / 2) * (width + 2.0),
+                length,
+                width,
+                colour,
+            )
+            for i in range(nu)
+            for j in range(nv)
+        ]
     for centre, length, width, colour in courts:
         court = _centred_rect(centre, u, length, width).intersection(area)
         if court.is_empty or court.area < 50:
             continue
         scene.ground.append(Painted(court, _jitter(rng, colour, 0.08), 7))
         inset = _centred_rect(centre, u, length - 1.0, width - 1.0)
-        lines = [inset.exterior, LineString([centre - v * (width / 2 - 0.5), centre + v * (width / 2 - 0.5)]),
-                 shapely.Point(centre).buffer(min(width, length) * 0.13).exterior]
+        lines = [
+            inset.exterior,
+            LineString([centre - v * (width / 2 - 0.5), centre + v * (width / 2 - 0.5)]),
+            shapely.Point(centre).buffer(min(width, length) * 0.13).exterior,
+        ]
         for side in (-1, 1):  # goal boxes or keys at both ends
             end = centre + u * side * (length / 2 - 0.5)
-            lines.append(LineString([end - v * width * 0.2, end - v * width * 0.2 - u * side * length * 0.14,
-                                     end + v * width * 0.2 - u * side * length * 0.14, end + v * width * 0.2]))
+            lines.append(
+                LineString(
+                    [
+                        end - v * width * 0.2,
+                        end - v * width * 0.2 - u * side * length * 0.14,
+                        end + v * width * 0.2 - u * side * length * 0.14,
+                        end + v * width * 0.2,
+                    ]
+                )
+            )
         for line in lines:
             scene.ground.append(Painted(line.buffer(0.07).intersection(area), WHITE_PAINT, 3))
 

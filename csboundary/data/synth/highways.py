@@ -15,8 +15,9 @@ from csboundary.data.synth.centrelines import Street, _line, _unit
 from csboundary.data.synth.config import SynthConfig, rng_share
 
 
-def with_highways(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], centre: np.ndarray, half: float,
-                  bearing: float) -> list[Street]:
+def with_highways(
+    cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], centre: np.ndarray, half: float, bearing: float
+) -> list[Street]:
     """``streets`` crossed by ``cfg.highways`` motorways: a wide, gently curving road with a
     median at an angle to the grid. Only avenues and boulevards cross it; every other street
     stops ``highway_frontage`` metres short of it (a dead end). Where an avenue crosses, a share
@@ -28,7 +29,9 @@ def with_highways(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stre
         through = centre + rng.uniform(-0.25, 0.25, 2) * 2 * centre
         amp, wavelength = rng.uniform(0.0, 40.0), rng.uniform(1200.0, 2500.0)
         bend = lambda t, a=amp, wl=wavelength: a * np.sin(2 * math.pi * t / wl)  # noqa: E731
-        line = _line(through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + float(np.linalg.norm(through - centre)), bend)
+        line = _line(
+            through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + float(np.linalg.norm(through - centre)), bend
+        )
         median = rng.uniform(*cfg.highway_median)
         width = 2 * rng.uniform(*cfg.highway_carriageway) + median
         corridor = line.buffer(width / 2 + cfg.highway_frontage)
@@ -42,8 +45,15 @@ def with_highways(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stre
             for part in as_linestrings(street.centreline.difference(corridor)):
                 touching = [j for j in tree.query(part.buffer(1.0), predicate="intersects") if j != k]
                 if part.length > 30.0 and touching:  # a piece cut off from every other street would float
-                    kept.append(Street(part, street.width, street.kind, street.median,
-                                       street.bulb_radius if part.coords[-1] == end else 0.0))
+                    kept.append(
+                        Street(
+                            part,
+                            street.width,
+                            street.kind,
+                            street.median,
+                            street.bulb_radius if part.coords[-1] == end else 0.0,
+                        )
+                    )
         ramps: list[Street] = []
         for street in kept:
             if street.kind not in ("avenue", "boulevard"):
@@ -64,8 +74,9 @@ def _direction_at(line: LineString, point: Point) -> np.ndarray:
     return (b - a) / max(float(np.linalg.norm(b - a)), 1e-9)
 
 
-def _diamond_ramps(cfg: SynthConfig, rng: np.random.Generator, highway: LineString, avenue: Street, crossing: Point,
-                   width: float) -> list[Street]:
+def _diamond_ramps(
+    cfg: SynthConfig, rng: np.random.Generator, highway: LineString, avenue: Street, crossing: Point, width: float
+) -> list[Street]:
     """The four ramps of a diamond interchange where ``avenue`` crosses ``highway``: each a
     quadratic Bezier curve from the highway's outer lane, ``reach`` metres before or after the
     crossing and heading towards it, to the avenue, ``out`` metres beyond the highway's edge."""
@@ -89,7 +100,9 @@ def _diamond_ramps(cfg: SynthConfig, rng: np.random.Generator, highway: LineStri
             reach, out = rng.uniform(130.0, 220.0), rng.uniform(45.0, 90.0)
             p0 = lane_point(along * reach, side * (width / 2 - ramp_width / 2))
             p1 = lane_point(along * 0.45 * reach, side * (width / 2 - ramp_width / 2))
-            sine = max(abs(float(outward @ n)), 0.3)  # the avenue may cross obliquely: reach the same distance from the highway
+            sine = max(
+                abs(float(outward @ n)), 0.3
+            )  # the avenue may cross obliquely: reach the same distance from the highway
             p2 = x + (width / 2 + out) / sine * outward
             t = np.linspace(0.0, 1.0, 32)[:, None]
             curve = (1 - t) ** 2 * p0 + 2 * (1 - t) * t * p1 + t**2 * p2

@@ -58,11 +58,22 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     streets: list[Street] = []
     avenues: list[LineString] = []
     for offset in _spaced_offsets(rng, half, cfg.avenue_spacing):
-        bend = _bend(rng, cfg.curve_amplitude, 0.22 * cfg.avenue_spacing[0]) if rng_share(rng, cfg.avenue_curve_share) else None
+        bend = (
+            _bend(rng, cfg.curve_amplitude, 0.22 * cfg.avenue_spacing[0])
+            if rng_share(rng, cfg.avenue_curve_share)
+            else None
+        )
         line = _line(centre, along, across, offset, half, bend)
         w = rng.uniform(*cfg.avenue_width)
         if rng.random() < cfg.boulevard_share:
-            streets.append(Street(line, w + rng.uniform(*cfg.boulevard_extra_width), "boulevard", median=rng.uniform(*cfg.median_width)))
+            streets.append(
+                Street(
+                    line,
+                    w + rng.uniform(*cfg.boulevard_extra_width),
+                    "boulevard",
+                    median=rng.uniform(*cfg.median_width),
+                )
+            )
         else:
             streets.append(Street(line, w, "avenue"))
         avenues.append(line)
@@ -72,7 +83,11 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         skew = math.radians(rng.uniform(-cfg.cross_street_skew_deg, cfg.cross_street_skew_deg))
         direction = _unit(bearing + math.pi / 2 + skew)
         normal = _unit(bearing + skew)
-        gap = min(abs(offset - offsets[j]) for j in (i - 1, i + 1) if 0 <= j < len(offsets)) if len(offsets) > 1 else 100.0
+        gap = (
+            min(abs(offset - offsets[j]) for j in (i - 1, i + 1) if 0 <= j < len(offsets))
+            if len(offsets) > 1
+            else 100.0
+        )
         bend, kind = None, "street"
         if rng.random() < cfg.curved_street_share:
             bend, kind = _bend(rng, cfg.curve_amplitude, 0.22 * gap), "curved"
@@ -101,7 +116,9 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         if rng.random() < 0.5:
             amp, wl = rng.uniform(15, 40), rng.uniform(700, 1400)
             bend = lambda t, a=amp, wl=wl: a * np.sin(2 * math.pi * t / wl)  # noqa: E731
-        line = _line(through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + np.linalg.norm(through - centre), bend)
+        line = _line(
+            through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + np.linalg.norm(through - centre), bend
+        )
         streets.append(Street(line, rng.uniform(*cfg.street_width) + 1.0, "diagonal"))
 
     if cfg.highways > 0:
@@ -118,5 +135,13 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     for s in streets:
         line = s.centreline.intersection(domain)
         for part in as_linestrings(line):
-            clipped.append(Street(part, s.width, s.kind, s.median, s.bulb_radius if part.coords[-1] == s.centreline.coords[-1] else 0.0))
+            clipped.append(
+                Street(
+                    part,
+                    s.width,
+                    s.kind,
+                    s.median,
+                    s.bulb_radius if part.coords[-1] == s.centreline.coords[-1] else 0.0,
+                )
+            )
     return clipped

@@ -136,7 +136,9 @@ def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> 
             u = rng.random()
             if u < 0.35:  # a patch of newer or older asphalt (a utility cut, a resurfaced lane)
                 patch = _centred_rect(p + n * off, d, rng.uniform(2.0, 25.0), rng.uniform(1.0, max(1.2, s.width / 2)))
-                scene.markings.append(Painted(patch, _scaled_colour(road, rng.uniform(0.7, 1.3)), int(rng.integers(3, 8))))
+                scene.markings.append(
+                    Painted(patch, _scaled_colour(road, rng.uniform(0.7, 1.3)), int(rng.integers(3, 8)))
+                )
             elif u < 0.8:  # a crack or tar seam: a thin dark wandering line
                 pts = [p + n * off]
                 heading = d * rng.choice([-1, 1]) if rng.random() < 0.6 else n
@@ -150,6 +152,10 @@ def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> 
                 seam = _centred_rect(p + n * off, d, rng.uniform(15.0, 60.0), rng.uniform(0.1, 0.25))
                 scene.markings.append(Painted(seam, _scaled_colour(road, rng.uniform(0.45, 0.7)), 2))
             else:  # a manhole cover
-                scene.markings.append(Painted(shapely.Point(p + n * off).buffer(0.35, quad_segs=4), _scaled_colour(road, rng.uniform(0.5,
-                                                                                                                                     0.8)),
-                                              3))
+                scene.markings.append(
+                    Painted(
+                        shapely.Point(p + n * off).buffer(0.35, quad_segs=4),
+                        _scaled_colour(road, rng.uniform(0.5, 0.8)),
+                        3,
+                    )
+                )

@@ -169,8 +169,14 @@ def _car_axes(car) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
 
 def _band(centre, along, across, a0: float, a1: float, width: float) -> Polygon:
     """The part of a car between fractions ``a0`` and ``a1`` of its length (0 = rear), ``width`` wide."""
-    return Polygon([centre + along * a0 - across * width / 2, centre + along * a1 - across * width / 2,
-                    centre + along * a1 + across * width / 2, centre + along * a0 + across * width / 2])
+    return Polygon(
+        [
+            centre + along * a0 - across * width / 2,
+            centre + along * a1 - across * width / 2,
+            centre + along * a1 + across * width / 2,
+            centre + along * a0 + across * width / 2,
+        ]
+    )
 
 
 def _draw_detailed_car(canvas: _Canvas, car) -> None:
@@ -253,7 +259,15 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             shade = local.uniform(0.8, 1.15)
             colour = _scaled(t.colour, shade)
             p = frame.to_pixels(np.array([[t.x + off[0], t.y + off[1]]]))[0]
-            cv2.circle(canvas.image, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), colour, -1, lineType=cv2.LINE_AA, shift=SHIFT)
+            cv2.circle(
+                canvas.image,
+                (int(p[0]), int(p[1])),
+                int(r / frame.gsd * SCALE),
+                colour,
+                -1,
+                lineType=cv2.LINE_AA,
+                shift=SHIFT,
+            )
             cv2.circle(canvas.rough, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), 22, -1, shift=SHIFT)
 
 
@@ -269,7 +283,15 @@ def _draw_bare_crown(canvas: _Canvas, t: Tree, local: np.random.Generator) -> No
         return
     mask = np.zeros((y1 - y0, x1 - x0), np.float32)
     centre = (c[0] - x0, c[1] - y0)
-    cv2.circle(mask, (int(centre[0] * SCALE), int(centre[1] * SCALE)), int(r_px * SCALE), 0.35, -1, lineType=cv2.LINE_AA, shift=SHIFT)
+    cv2.circle(
+        mask,
+        (int(centre[0] * SCALE), int(centre[1] * SCALE)),
+        int(r_px * SCALE),
+        0.35,
+        -1,
+        lineType=cv2.LINE_AA,
+        shift=SHIFT,
+    )
     for _ in range(int(local.integers(7, 13))):
         angle, reach = local.uniform(0, 2 * math.pi), local.uniform(0.6, 1.0) * r_px
         end = (centre[0] + reach * math.cos(angle), centre[1] + reach * math.sin(angle))
@@ -280,8 +302,15 @@ def _draw_bare_crown(canvas: _Canvas, t: Tree, local: np.random.Generator) -> No
             pts.append(mid)
             pts.append((mid[0] + 0.45 * reach * math.cos(a2), mid[1] + 0.45 * reach * math.sin(a2)))
         for a, b in zip(pts[0::2], pts[1::2]):
-            cv2.line(mask, (int(a[0] * SCALE), int(a[1] * SCALE)), (int(b[0] * SCALE), int(b[1] * SCALE)), 0.8,
-                     max(1, int(0.12 / frame.gsd)), lineType=cv2.LINE_AA, shift=SHIFT)
+            cv2.line(
+                mask,
+                (int(a[0] * SCALE), int(a[1] * SCALE)),
+                (int(b[0] * SCALE), int(b[1] * SCALE)),
+                0.8,
+                max(1, int(0.12 / frame.gsd)),
+                lineType=cv2.LINE_AA,
+                shift=SHIFT,
+            )
     mask = cv2.GaussianBlur(mask, (0, 0), max(0.6, 0.08 / frame.gsd))[..., None]
     roi = canvas.image[y0:y1, x0:x1].astype(np.float32)
     colour = np.asarray(t.colour, np.float32)
@@ -333,8 +362,12 @@ def _photo_texture(canvas: _Canvas, rng: np.random.Generator, amplitude: float) 
     paint. Pixel scales are those of the frame (metres / gsd), so a coarse sensor sees the same."""
     size, gsd = canvas.frame.size, canvas.frame.gsd
     weight = np.minimum(canvas.rough, 10).astype(np.float32) / 6.0
-    field = (0.9 * _smooth_noise(rng, size, 18.0 / gsd) + 0.7 * _smooth_noise(rng, size, 5.0 / gsd)
-             + 0.5 * _smooth_noise(rng, size, 1.2 / gsd) + 0.35 * _smooth_noise(rng, size, 0.45 / gsd))
+    field = (
+        0.9 * _smooth_noise(rng, size, 18.0 / gsd)
+        + 0.7 * _smooth_noise(rng, size, 5.0 / gsd)
+        + 0.5 * _smooth_noise(rng, size, 1.2 / gsd)
+        + 0.35 * _smooth_noise(rng, size, 0.45 / gsd)
+    )
     speck = rng.random((size, size), dtype=np.float32)
     field += np.where(speck < 0.015, 3.0, 0.0) - np.where(speck > 0.985, 3.0, 0.0)
     return field * weight * amplitude
@@ -367,8 +400,14 @@ class CameraLook:
 
     @property
     def is_identity(self) -> bool:
-        return (self.haze == 0 and self.saturation == 1 and self.gamma == 1 and self.gains == (1.0, 1.0, 1.0, 1.0)
-                and self.blur == 0 and self.jpeg == 0)
+        return (
+            self.haze == 0
+            and self.saturation == 1
+            and self.gamma == 1
+            and self.gains == (1.0, 1.0, 1.0, 1.0)
+            and self.blur == 0
+            and self.jpeg == 0
+        )
 
 
 HAZE_VEIL = np.array([196, 202, 212, 180], np.float32)  # a bright, slightly blue veil (NIR less)

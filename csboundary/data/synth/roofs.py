@@ -33,8 +33,15 @@ def _roof(rng: np.random.Generator, palette: str) -> Colour:
     return (*roof, int(np.clip(grey * 0.9, 0, 255)))  # type: ignore[return-value]
 
 
-def roof_facets(origin: np.ndarray, along: np.ndarray, across: np.ndarray, length: float, width: float, hip: bool,
-                sun: tuple[float, float]) -> tuple[list[tuple[Polygon, float]], Polygon | None]:
+def roof_facets(
+    origin: np.ndarray,
+    along: np.ndarray,
+    across: np.ndarray,
+    length: float,
+    width: float,
+    hip: bool,
+    sun: tuple[float, float],
+) -> tuple[list[tuple[Polygon, float]], Polygon | None]:
     """The facets of a pitched roof over the rectangle ``origin + along*[0, length] +
     across*[0, width]`` (unit ``along``, ``across``) and its ridge.
 
@@ -97,13 +104,19 @@ def _roof_details(rng: np.random.Generator, b: Building, d: np.ndarray, sun: tup
             continue
         unit = _centred_rect(p, d, rng.uniform(0.8, 3.0), rng.uniform(0.8, 2.2))
         tall = rng.uniform(0.6, 2.0)
-        b.roof_items.append((shapely.affinity.translate(unit, *(sun_v * tall)).intersection(b.footprint), _scaled_colour(roof, 0.5)))
-        b.roof_items.append((unit, _jitter(rng, (188, 190, 192, 170) if rng.random() < 0.7 else (120, 122, 126, 110), 0.1)))
+        b.roof_items.append(
+            (shapely.affinity.translate(unit, *(sun_v * tall)).intersection(b.footprint), _scaled_colour(roof, 0.5))
+        )
+        b.roof_items.append(
+            (unit, _jitter(rng, (188, 190, 192, 170) if rng.random() < 0.7 else (120, 122, 126, 110), 0.1))
+        )
     if b.height > 14 and rng.random() < 0.3:  # a timber water tank on its stand
         p = spot()
         if p is not None:
             r = rng.uniform(1.4, 2.4)
             tank = shapely.Point(p).buffer(r, quad_segs=6)
-            b.roof_items.append((shapely.affinity.translate(tank, *(sun_v * 5.0)).intersection(b.footprint), _scaled_colour(roof, 0.45)))
+            b.roof_items.append(
+                (shapely.affinity.translate(tank, *(sun_v * 5.0)).intersection(b.footprint), _scaled_colour(roof, 0.45))
+            )
             b.roof_items.append((tank, _jitter(rng, (118, 100, 82, 100), 0.12)))
             b.roof_items.append((shapely.Point(p).buffer(r * 0.55, quad_segs=6), _jitter(rng, (96, 82, 68, 80), 0.1)))

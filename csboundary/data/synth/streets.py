@@ -101,7 +101,9 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     return network
 
 
-def boundary_lines(roadway, islands: list[Polygon], medians: list[Polygon], width: float, height: float) -> list[tuple[LineString, str]]:
+def boundary_lines(
+    roadway, islands: list[Polygon], medians: list[Polygon], width: float, height: float
+) -> list[tuple[LineString, str]]:
     """The roadway's rings clipped to the city, merged into LineStrings, each with its kind."""
     rings = []
     for polygon in getattr(roadway, "geoms", [roadway]):

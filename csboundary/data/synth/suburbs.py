@@ -14,7 +14,9 @@ from csboundary.data.synth.centrelines import Street, _unit
 from csboundary.data.synth.config import SynthConfig
 
 
-def local_streets(cfg: SynthConfig, rng: np.random.Generator, parents: list[Street], existing: list[Street]) -> list[Street]:
+def local_streets(
+    cfg: SynthConfig, rng: np.random.Generator, parents: list[Street], existing: list[Street]
+) -> list[Street]:
     """Suburban local streets: curvy branches leaving a parent street at a T-junction and ending
     in a dead end or cul-de-sac bulb, and crescents that come back to the same parent.
 

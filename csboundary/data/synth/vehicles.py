@@ -19,12 +19,19 @@ def _car(rng: np.random.Generator, centre: np.ndarray, direction: np.ndarray, de
     if detail:
         weights = np.array([w for _, w in CAR_PHOTO_COLOURS])
         colour = _jitter(rng, CAR_PHOTO_COLOURS[int(rng.choice(len(weights), p=weights / weights.sum()))][0], 0.06)
-        return Car(_centred_rect(centre, direction, length, width), colour, _centred_rect(centre, direction, length * 0.5, width * 0.8),
-                   True)
+        return Car(
+            _centred_rect(centre, direction, length, width),
+            colour,
+            _centred_rect(centre, direction, length * 0.5, width * 0.8),
+            True,
+        )
     colour = _jitter(rng, CAR_COLOURS[rng.integers(len(CAR_COLOURS))], 0.05)
     cabin_colour_centre = centre + direction * rng.uniform(-0.3, 0.1) * length
-    return Car(_centred_rect(centre, direction, length, width), colour, _centred_rect(cabin_colour_centre, direction, length * 0.5,
-                                                                                      width * 0.8))
+    return Car(
+        _centred_rect(centre, direction, length, width),
+        colour,
+        _centred_rect(cabin_colour_centre, direction, length * 0.5, width * 0.8),
+    )
 
 
 def _add_moving_cars(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:

@@ -177,19 +177,40 @@ def write_split_cities(tiles: list[AssembledTile], out_dir: Path, index: TopoBou
             link.symlink_to(Path("..", "..", tile.tile_id, "tiles", name))
             names.append(name)
         frame, lines, sources = join_tiles(members)
-        gt = gpd.GeoDataFrame({"source_tiles": np.array([",".join(s) for s in sources], dtype=object)},
-                              geometry=gpd.GeoSeries(lines, crs=FALLBACK_CRS), crs=FALLBACK_CRS)
+        gt = gpd.GeoDataFrame(
+            {"source_tiles": np.array([",".join(s) for s in sources], dtype=object)},
+            geometry=gpd.GeoSeries(lines, crs=FALLBACK_CRS),
+            crs=FALLBACK_CRS,
+        )
         write_ground_truth(ground_truth_path(city_dir), gt)
         continuity = border_continuity(members)
         if continuity["share"] is not None and continuity["share"] < 0.5:
-            warnings.warn(f"{city_dir}: only {continuity['matched']} of {continuity['border_ends']} boundary ends at shared tile edges "
-                          "continue in the neighbour: the placement from tile ids is probably wrong (--no-placement)", InputWarning,
-                          stacklevel=2)
-        write_meta(city_dir, {
-            "source": SOURCE, "split": split, "crs": FALLBACK_CRS, "gsd": FALLBACK_GSD, "units": "US survey foot",
-            "tiles": names, "tile_ids": [t.tile_id for t in members], "boundaries": len(lines),
-            "placement": "from tile ids (an inference: csboundary.data.topo_boundary.tile_origin_ft)",
-            "border_continuity": continuity, "transform": list(frame)[:6],
-        })
-        report[split] = {"city_dir": str(city_dir), "tiles": len(members), "boundaries": len(lines), "border_continuity": continuity}
+            warnings.warn(
+                f"{city_dir}: only {continuity['matched']} of {continuity['border_ends']} boundary ends at shared tile edges "
+                "continue in the neighbour: the placement from tile ids is probably wrong (--no-placement)",
+                InputWarning,
+                stacklevel=2,
+            )
+        write_meta(
+            city_dir,
+            {
+                "source": SOURCE,
+                "split": split,
+                "crs": FALLBACK_CRS,
+                "gsd": FALLBACK_GSD,
+                "units": "US survey foot",
+                "tiles": names,
+                "tile_ids": [t.tile_id for t in members],
+                "boundaries": len(lines),
+                "placement": "from tile ids (an inference: csboundary.data.topo_boundary.tile_origin_ft)",
+                "border_continuity": continuity,
+                "transform": list(frame)[:6],
+            },
+        )
+        report[split] = {
+            "city_dir": str(city_dir),
+            "tiles": len(members),
+            "boundaries": len(lines),
+            "border_continuity": continuity,
+        }
     return report

@@ -18,10 +18,10 @@ from typing import Iterable
 
 import numpy as np
 import rasterio
+import shapely
 from affine import Affine
 from rasterio.crs import CRS
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
-import shapely
 from shapely.geometry import LineString
 
 from csboundary.data.raster import BANDS, NIR_FILL_BAND
@@ -113,7 +113,9 @@ def scan(root: str | Path, *, split_file: str | Path | None = None) -> TopoBound
             labels[path.stem] = path
 
     if split_file is None:
-        candidates = sorted((p for p in _walk(root) if p.name == SPLIT_FILE and p.is_file()), key=lambda p: (len(p.parts), str(p)))
+        candidates = sorted(
+            (p for p in _walk(root) if p.name == SPLIT_FILE and p.is_file()), key=lambda p: (len(p.parts), str(p))
+        )
         if len(candidates) > 1:
             warnings.warn(
                 f"{candidates[0]}: using this {SPLIT_FILE}; also found {', '.join(map(str, candidates[1:]))}",
@@ -182,7 +184,9 @@ def read_patch(path: str | Path, row: int, col: int, patch_size: int = PATCH_SIZ
                 count, dtype, width, height = ds.count, ds.dtypes[0], ds.width, ds.height
                 crs, transform = ds.crs, ds.transform
                 if (width, height) != (patch_size, patch_size):
-                    raise InputError(path, f"is {width}x{height} px; Topo-boundary patches are {patch_size}x{patch_size}")
+                    raise InputError(
+                        path, f"is {width}x{height} px; Topo-boundary patches are {patch_size}x{patch_size}"
+                    )
                 if count < 3:
                     raise InputError(path, f"has {count} band(s); need 4 (R, G, B, NIR) or at least 3 (R, G, B)")
                 if dtype != "uint8":
@@ -244,4 +248,8 @@ def clip_to_patch(seq: np.ndarray, patch_size: int) -> list[np.ndarray]:
         return []
     low, high = -LABEL_MARGIN, patch_size + LABEL_MARGIN
     clipped = shapely.clip_by_rect(LineString(seq), low, low, high, high)
-    return [np.asarray(part.coords) for part in getattr(clipped, "geoms", [clipped]) if isinstance(part, LineString) and not part.is_empty]
+    return [
+        np.asarray(part.coords)
+        for part in getattr(clipped, "geoms", [clipped])
+        if isinstance(part, LineString) and not part.is_empty
+    ]

@@ -48,8 +48,10 @@ def border_continuity(tiles: list[AssembledTile], tolerance: float = 3.0, band: 
     shared = np.zeros(len(ends), dtype=bool)
     for i in np.flatnonzero(near_edge):  # only ends on an edge some other tile lies beyond
         r, c = ends[i]
-        shared[i] = any(k != owner[i] and b[0] - band - 1 <= r <= b[2] + band and b[1] - band - 1 <= c <= b[3] + band for k,
-                        b in boxes.items())
+        shared[i] = any(
+            k != owner[i] and b[0] - band - 1 <= r <= b[2] + band and b[1] - band - 1 <= c <= b[3] + band
+            for k, b in boxes.items()
+        )
     if not shared.any():
         return {"border_ends": 0, "matched": 0, "share": None}
     tree = cKDTree(ends)

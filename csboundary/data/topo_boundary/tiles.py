@@ -72,8 +72,9 @@ class AssembledTile:
         )
 
 
-def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATCH_SIZE, splits: int = SPLITS,
-                  placement: bool = True) -> AssembledTile:
+def assemble_tile(
+    index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATCH_SIZE, splits: int = SPLITS, placement: bool = True
+) -> AssembledTile:
     """Reassemble tile ``tile_id``: patch (R, C) goes to rows R*ps.., cols C*ps..; boundaries re-joined.
     Without a georeference in the files, ``placement`` puts it on the map from its id."""
     _check_grid(patch_size, splits)
@@ -118,12 +119,29 @@ def assemble_tile(index: TopoBoundaryIndex, tile_id: str, patch_size: int = PATC
             kept = [part for seq in seqs if len(seq) for part in clip_to_patch(seq, patch_size)]
             outside = sum(int((~_inside_patch(seq, patch_size)).sum()) for seq in seqs)
             if outside:
-                warnings.warn(f"{index.labels[pid]}: {outside} label point(s) lie more than {LABEL_MARGIN:g} px outside the "
-                              f"{patch_size} px patch; the boundaries are clipped to it", InputWarning, stacklevel=2)
+                warnings.warn(
+                    f"{index.labels[pid]}: {outside} label point(s) lie more than {LABEL_MARGIN:g} px outside the "
+                    f"{patch_size} px patch; the boundaries are clipped to it",
+                    InputWarning,
+                    stacklevel=2,
+                )
             pieces.extend(Piece(pid, part + offset) for part in kept)
     joined = join_pieces(pieces)
     lines = [pixels_to_line(transform, points) for points, _ in joined]
     return AssembledTile(
-        tile_id, image, valid, transform, crs, georeferenced, patch_size, splits, present, missing, unlabelled,
-        lines, [sources for _, sources in joined], [points for points, _ in joined], placed,
+        tile_id,
+        image,
+        valid,
+        transform,
+        crs,
+        georeferenced,
+        patch_size,
+        splits,
+        present,
+        missing,
+        unlabelled,
+        lines,
+        [sources for _, sources in joined],
+        [points for points, _ in joined],
+        placed,
     )

@@ -118,7 +118,9 @@ def _batch(city, rng, config: TrainConfig, options: Options, train: bool):
 
 
 def _seg_loss(logit: torch.Tensor, seg: torch.Tensor, valid: torch.Tensor, pos_weight: float) -> torch.Tensor:
-    loss = F.binary_cross_entropy_with_logits(logit, seg, pos_weight=torch.tensor(pos_weight, device=logit.device), reduction="none")
+    loss = F.binary_cross_entropy_with_logits(
+        logit, seg, pos_weight=torch.tensor(pos_weight, device=logit.device), reduction="none"
+    )
     mask = valid.to(loss.dtype)
     return (loss * mask).sum() / mask.sum().clamp(min=1)
 
@@ -145,7 +147,9 @@ def validate(stage1: FPN, refiner: FPN | None, batches, device) -> dict[str, flo
         truth = (seg > 0.5).to(device)
         f1_1.append(_f1(prob[:, 0] > 0.5, truth, valid.to(device)))
         known = orient.to(device) != IGNORE
-        acc.append(float((out[:, 1:].argmax(1)[known] == orient.to(device)[known]).float().mean()) if known.any() else 0.0)
+        acc.append(
+            float((out[:, 1:].argmax(1)[known] == orient.to(device)[known]).float().mean()) if known.any() else 0.0
+        )
         if refiner is not None:
             refiner.eval()
             refined = torch.sigmoid(refiner(torch.cat([image.to(device), prob], 1)))[:, 0]
@@ -161,7 +165,9 @@ def validate(stage1: FPN, refiner: FPN | None, batches, device) -> dict[str, flo
 # -- training ---------------------------------------------------------------------------------------
 
 
-def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+def train(
+    config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True
+) -> Path:
     """Stage 1 for the first (1 - refine_fraction) of the steps, then stage 2 on its outputs and on
     corrupted ground truth. One checkpoint holds both networks (kind ``orientation-refine``)."""
     options = Options.from_dict(config.options)
@@ -176,7 +182,13 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     valid_batches = [_batch(valid_city, valid_rng, config, options, False) for _ in range(config.validation_samples)]
     step, history = resume_run(resume, KIND, model, optimizer, rng)
     stage2_from = round(config.steps * (1 - options.refine_fraction))
-    log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    log.write(
+        event="start",
+        model=KIND,
+        step=step,
+        parameters=sum(p.numel() for p in model.parameters()),
+        config=config.to_dict(),
+    )
 
     def loss_at(step: int):
         image, seg, orient, valid = (t.to(device) for t in _batch(train_city, rng, config, options, True))
@@ -192,7 +204,9 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     def check(step: int) -> dict:  # the refiner is judged once it has been trained
         return validate(model.stage1, model.refiner if step > stage2_from else None, valid_batches, device)
 
-    return optimize(KIND, model, model.config, config, out_dir, optimizer, rng, step, history, log, loss_at, check, progress)
+    return optimize(
+        KIND, model, model.config, config, out_dir, optimizer, rng, step, history, log, loss_at, check, progress
+    )
 
 
 @dataclass

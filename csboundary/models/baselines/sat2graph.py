@@ -36,6 +36,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from csboundary.config import Config
 from csboundary.data.units import MODEL_GSD
 from csboundary.data.windows import PixelWindow
 from csboundary.graph import BoundaryGraph
@@ -43,15 +44,13 @@ from csboundary.graph.settings import GraphSettings
 from csboundary.graph.vertex_extraction import extract_vertices
 from csboundary.labels.patch_graph import window_graph
 from csboundary.models.afanet import edges_from_adjacency
-from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model
-from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
-from csboundary.models.training.config import TrainConfig, model_config_with
-from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
-from csboundary.config import Config
-from csboundary.models.training.data import TrainingCity, augment
-from csboundary.models.maps import image_tensor, unit_bands
-from csboundary.models.checkpoint import shipped_weights
+from csboundary.models.checkpoint import load_checkpoint, load_fpn, restore_model, shipped_weights
 from csboundary.models.decoding import graph_from_adjacency
+from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
+from csboundary.models.maps import image_tensor, unit_bands
+from csboundary.models.training.config import TrainConfig, model_config_with
+from csboundary.models.training.data import TrainingCity, augment
+from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
 
 KIND = "sat2graph"
 SLOTS = 6
@@ -65,6 +64,7 @@ VECTOR_BETA = 0.01  # smooth-L1 knee (2.5 px at 250 px): L1-like, so small offse
 @dataclass(frozen=True)
 class Sat2GraphOptions(Config):
     """Method settings, from ``TrainConfig.options`` (stored in the checkpoint, used at inference)."""
+
     config_name = "sat2graph"
 
     radius_px: float = 3.0  # vertex disc radius (pixel centres within it)
@@ -117,8 +117,9 @@ def edge_slots(vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:
     return slots
 
 
-def encode_graph(vertices: np.ndarray, edges: np.ndarray, shape: tuple[int, int], options: Sat2GraphOptions) -> tuple[np.ndarray,
-                                                                                                                      np.ndarray]:
+def encode_graph(
+    vertices: np.ndarray, edges: np.ndarray, shape: tuple[int, int], options: Sat2GraphOptions
+) -> tuple[np.ndarray, np.ndarray]:
     """The (19, h, w) float32 graph tensor of a graph in the map's pixel frame, and its loss mask.
 
     target[0] = 1 on vertex discs; on the disc of vertex u, for each slot k holding neighbour v:
@@ -159,7 +160,9 @@ def decode_adjacency(vertices: np.ndarray, tensor: np.ndarray, options: Sat2Grap
     sel = owner >= 0
     counts = np.bincount(owner[sel], minlength=m)
     flat = tensor.reshape(CHANNELS, -1)[:, sel]
-    means = np.stack([np.bincount(owner[sel], weights=flat[c], minlength=m) for c in range(1, CHANNELS)]) / np.maximum(counts, 1)
+    means = np.stack([np.bincount(owner[sel], weights=flat[c], minlength=m) for c in range(1, CHANNELS)]) / np.maximum(
+        counts, 1
+    )
     exist = means[0::3].T  # (m, 6)
     tips = vertices[:, None] + np.stack([means[1::3].T, means[2::3].T], -1) * options.max_edge_px  # (m, 6, 2)
     dist = np.linalg.norm(tips[:, :, None] - vertices[None, None], axis=-1)  # (m, 6, m)
@@ -172,12 +175,16 @@ def decode_adjacency(vertices: np.ndarray, tensor: np.ndarray, options: Sat2Grap
     return probs
 
 
-def decode_edges(vertices: np.ndarray, tensor: np.ndarray, options: Sat2GraphOptions, fixed=()) -> list[tuple[int, int]]:
+def decode_edges(
+    vertices: np.ndarray, tensor: np.ndarray, options: Sat2GraphOptions, fixed=()
+) -> list[tuple[int, int]]:
     """Sorted (u < v) edges decoded from ``tensor``, degree-capped like csBoundary's adjacency."""
     probs = decode_adjacency(vertices, tensor, options)
     if len(probs) < 2:
         return sorted(tuple(sorted(map(int, e))) for e in fixed)
-    return edges_from_adjacency(torch.as_tensor(probs, dtype=torch.float32), options.edge_threshold, options.max_degree, fixed=list(fixed))
+    return edges_from_adjacency(
+        torch.as_tensor(probs, dtype=torch.float32), options.edge_threshold, options.max_degree, fixed=list(fixed)
+    )
 
 
 def augment_with_graph(rng: np.random.Generator, vertices: np.ndarray, *arrays: np.ndarray):
@@ -204,21 +211,33 @@ def to_maps(logits: torch.Tensor) -> torch.Tensor:
     return torch.where(is_vector[:, None, None], torch.tanh(logits), torch.sigmoid(logits))
 
 
-def sat2graph_loss(logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, options: Sat2GraphOptions) -> torch.Tensor:
+def sat2graph_loss(
+    logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, options: Sat2GraphOptions
+) -> torch.Tensor:
     """Masked means of: vertexness BCE + slot existence BCE + weighted smooth-L1 on the vectors."""
 
     def masked(loss, m):
         return (loss * m).sum() / m.sum().clamp(min=1)
 
     pw = torch.tensor(options.pos_weight_vertex, device=logits.device)
-    vertex = masked(F.binary_cross_entropy_with_logits(logits[:, 0], target[:, 0], pos_weight=pw, reduction="none"), mask[:, 0])
+    vertex = masked(
+        F.binary_cross_entropy_with_logits(logits[:, 0], target[:, 0], pos_weight=pw, reduction="none"), mask[:, 0]
+    )
     pw = torch.tensor(options.pos_weight_slot, device=logits.device)
-    exist = masked(F.binary_cross_entropy_with_logits(logits[:, EXIST], target[:, EXIST], pos_weight=pw, reduction="none"), mask[:, EXIST])
-    vector = masked(F.smooth_l1_loss(torch.tanh(logits[:, VECTOR]), target[:, VECTOR], beta=VECTOR_BETA, reduction="none"), mask[:, VECTOR])
+    exist = masked(
+        F.binary_cross_entropy_with_logits(logits[:, EXIST], target[:, EXIST], pos_weight=pw, reduction="none"),
+        mask[:, EXIST],
+    )
+    vector = masked(
+        F.smooth_l1_loss(torch.tanh(logits[:, VECTOR]), target[:, VECTOR], beta=VECTOR_BETA, reduction="none"),
+        mask[:, VECTOR],
+    )
     return vertex + exist + options.vector_weight * vector
 
 
-def training_sample(city: TrainingCity, window: PixelWindow, options: Sat2GraphOptions, rng: np.random.Generator | None = None):
+def training_sample(
+    city: TrainingCity, window: PixelWindow, options: Sat2GraphOptions, rng: np.random.Generator | None = None
+):
     """Image (4, s, s), target and mask (19, s, s), window-frame vertices (M, 2) and edges (E, 2).
 
     The graph comes from a window ``max_edge_px`` larger on each side, so a vertex near the crop's
@@ -226,7 +245,9 @@ def training_sample(city: TrainingCity, window: PixelWindow, options: Sat2GraphO
     the sample is flipped/rotated, graph first, then encoded. Pixels without imagery are masked.
     """
     margin = math.ceil(options.max_edge_px)
-    context = PixelWindow(window.col_off - margin, window.row_off - margin, window.width + 2 * margin, window.height + 2 * margin)
+    context = PixelWindow(
+        window.col_off - margin, window.row_off - margin, window.width + 2 * margin, window.height + 2 * margin
+    )
     graph, _ = window_graph(city.labels.keypoints, city.labels.bounds, context)
     vertices = graph.vertices - margin
     read = city.mosaic.read(window)
@@ -238,7 +259,10 @@ def training_sample(city: TrainingCity, window: PixelWindow, options: Sat2GraphO
 
 
 def _batch(city: TrainingCity, rng: np.random.Generator, config: TrainConfig, options: Sat2GraphOptions, train: bool):
-    samples = [training_sample(city, city.random_window(rng, config.crop), options, rng if train else None) for _ in range(config.batch)]
+    samples = [
+        training_sample(city, city.random_window(rng, config.crop), options, rng if train else None)
+        for _ in range(config.batch)
+    ]
     images, targets, masks = (torch.from_numpy(np.stack([s[i] for s in samples])) for i in range(3))
     return images, targets, masks, [(s[3], s[4]) for s in samples]
 
@@ -255,7 +279,11 @@ def validate(model: FPN, batches, device, options: Sat2GraphOptions) -> dict[str
     losses, counts = [], {name: np.zeros(3, np.int64) for name in ("vertex", "slot", "edge")}
 
     def add(name, pred, truth, where):
-        counts[name] += [int((pred & truth & where).sum()), int((pred & ~truth & where).sum()), int((~pred & truth & where).sum())]
+        counts[name] += [
+            int((pred & truth & where).sum()),
+            int((pred & ~truth & where).sum()),
+            int((~pred & truth & where).sum()),
+        ]
 
     for image, target, mask, graphs in batches:
         logits = model(image.to(device))
@@ -272,7 +300,9 @@ def validate(model: FPN, batches, device, options: Sat2GraphOptions) -> dict[str
     return {"val_loss": float(np.mean(losses)), **{f"val_{name}_f1": _f1(*c) for name, c in counts.items()}}
 
 
-def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+def train(
+    config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True
+) -> Path:
     """Train the 19-channel FPN on random crops of the train city (loop and checkpoints as
     :func:`~csboundary.models.training.fpn.train_fpn`); returns the final ``sat2graph.pt``."""
     options = Sat2GraphOptions.from_dict(config.options)
@@ -285,16 +315,37 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
-    valid_batches = [_batch(valid_city, valid_rng, config, options, train=False) for _ in range(config.validation_samples)]
+    valid_batches = [
+        _batch(valid_city, valid_rng, config, options, train=False) for _ in range(config.validation_samples)
+    ]
     step, history = resume_run(resume, KIND, model, optimizer, rng)
-    log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in model.parameters()), config=config.to_dict())
+    log.write(
+        event="start",
+        model=KIND,
+        step=step,
+        parameters=sum(p.numel() for p in model.parameters()),
+        config=config.to_dict(),
+    )
 
     def loss_at(step: int):
         image, target, mask, _ = _batch(train_city, rng, config, options, train=True)
         return sat2graph_loss(model(image.to(device)), target.to(device), mask.to(device), options), {}
 
-    return optimize(KIND, model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
-                    lambda step: validate(model, valid_batches, device, options), progress)
+    return optimize(
+        KIND,
+        model,
+        model_config,
+        config,
+        out_dir,
+        optimizer,
+        rng,
+        step,
+        history,
+        log,
+        loss_at,
+        lambda step: validate(model, valid_batches, device, options),
+        progress,
+    )
 
 
 # -- inference ------------------------------------------------------------------------------------

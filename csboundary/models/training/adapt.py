@@ -51,14 +51,19 @@ from csboundary.models.training.unlabelled import UnlabelledImagery
 class AdaptConfig(Config):
     """The self-training method's settings (module doc); the budget and the source recipe are
     the run's :class:`TrainConfig`. Stored in the run's ``options``."""
+
     config_name = "adapt"
 
     source_batch: int = 2  # synthetic labelled windows per step
     target_batch: int = 2  # windows of the user's imagery per step
     ema_decay: float = 0.99  # teacher = decay x teacher + (1 - decay) x student, every step
-    target_weight: float = 0.3  # the pseudo-label loss's weight beside the source loss: 0.3 kept APLS on both real sets (docs/adapt.md)
+    target_weight: float = (
+        0.3  # the pseudo-label loss's weight beside the source loss: 0.3 kept APLS on both real sets (docs/adapt.md)
+    )
     confidence_weighting: bool = True  # weight each pseudo-label by the teacher's confidence |2q - 1|; else 1
-    hard_labels: bool = False  # boundary and surface targets 0/1 (q > 0.5) rather than q: sharpens, and thins weak boundaries
+    hard_labels: bool = (
+        False  # boundary and surface targets 0/1 (q > 0.5) rather than q: sharpens, and thins weak boundaries
+    )
     strong_augment: bool = True  # the student sees the target re-lit and degraded; else as the teacher does
     mix: bool = True  # paste synthetic roadway (with its labels) into the target windows
     mix_widen_px: int = 8  # the pasted roadway is widened by this to carry its curb and boundary along
@@ -112,13 +117,14 @@ def posterior(maps: torch.Tensor, pos_weights: tuple[float, ...]) -> torch.Tenso
     weighted ``pos_weights[c]`` (1 for channels beyond the tuple), turned back into posteriors:
     q = p / (w - (w - 1) p)."""
     w = torch.ones(maps.shape[1], dtype=maps.dtype, device=maps.device)
-    w[:len(pos_weights)] = torch.tensor(pos_weights, dtype=maps.dtype, device=maps.device)
+    w[: len(pos_weights)] = torch.tensor(pos_weights, dtype=maps.dtype, device=maps.device)
     w = w.view(1, -1, 1, 1)
     return maps / (w - (w - 1) * maps)
 
 
-def pseudo_labels(maps: torch.Tensor, valid: torch.Tensor, settings: AdaptConfig,
-                  pos_weights: tuple[float, ...] = (1.0, 1.0)) -> tuple[torch.Tensor, torch.Tensor]:
+def pseudo_labels(
+    maps: torch.Tensor, valid: torch.Tensor, settings: AdaptConfig, pos_weights: tuple[float, ...] = (1.0, 1.0)
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Targets and per-pixel weights (B, C, H, W) from teacher probabilities ``maps`` (module
     doc): posteriors (hard for boundary and surface with ``hard_labels``), weighted by their
     confidence except the keypoint heat; boundary pixels away from the roadway's edge taught as
@@ -136,10 +142,14 @@ def pseudo_labels(maps: torch.Tensor, valid: torch.Tensor, settings: AdaptConfig
     return target, weight * valid[:, None].to(maps.dtype)
 
 
-def pseudo_label_loss(logits: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, config: TrainConfig) -> torch.Tensor:
+def pseudo_label_loss(
+    logits: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, config: TrainConfig
+) -> torch.Tensor:
     """Weighted BCE of keypoint and boundary (with the recipe's positive weights) plus
     ``surface_weight`` x the surface BCE, each normalised by its weights' sum."""
-    pos = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
+    pos = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(
+        1, 2, 1, 1
+    )
     maps = F.binary_cross_entropy_with_logits(logits[:, :2], target[:, :2], pos_weight=pos, reduction="none")
     total = (maps * weight[:, :2]).sum() / weight[:, :2].sum().clamp(min=1)
     if logits.shape[1] > 2 and target.shape[1] > 2:
@@ -165,7 +175,9 @@ def paste_roadway(image: np.ndarray, target: np.ndarray, weight: np.ndarray, sou
     return float(paste.mean())
 
 
-def _target_batch(imagery: UnlabelledImagery, rng: np.random.Generator, count: int, crop: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _target_batch(
+    imagery: UnlabelledImagery, rng: np.random.Generator, count: int, crop: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``count`` target windows as the teacher sees them: read, then flipped or turned."""
     images, valids = [], []
     for _ in range(count):
@@ -176,8 +188,14 @@ def _target_batch(imagery: UnlabelledImagery, rng: np.random.Generator, count: i
     return torch.from_numpy(np.stack(images)), torch.from_numpy(np.stack(valids))
 
 
-def train_adapt(config: TrainConfig, imagery: UnlabelledImagery, out_dir: Path, device: torch.device, resume: str | None = None,
-                progress: bool = True) -> Path:
+def train_adapt(
+    config: TrainConfig,
+    imagery: UnlabelledImagery,
+    out_dir: Path,
+    device: torch.device,
+    resume: str | None = None,
+    progress: bool = True,
+) -> Path:
     """Self-train the FPN ``config.init_fpn`` on ``imagery`` (settings in ``config.options["method"]``);
     writes the run (``adapt-last.pt`` to resume, ``train.log``) and returns the adapted FPN
     checkpoint ``fpn.pt`` (the teacher, or the student, as ``export`` says)."""
@@ -197,8 +215,15 @@ def train_adapt(config: TrainConfig, imagery: UnlabelledImagery, out_dir: Path, 
     valid_batches = [_fpn_batch([valid_city], valid_rng, config, None, True) for _ in range(config.validation_samples)]
     augmentation = model_config_with(AugmentConfig, config.augment)
     step, history = resume_run(resume, "adapt", model, optimizer, rng)
-    log.write(event="start", model="adapt", step=step, code_version=run_code_version(), config=config.to_dict(),
-              init_fpn_sha256=file_sha256(config.init_fpn), target_pixels=imagery.pixels)
+    log.write(
+        event="start",
+        model="adapt",
+        step=step,
+        code_version=run_code_version(),
+        config=config.to_dict(),
+        init_fpn_sha256=file_sha256(config.init_fpn),
+        target_pixels=imagery.pixels,
+    )
     source_config = copy.copy(config)
     source_config.batch = settings.source_batch
 
@@ -213,32 +238,61 @@ def train_adapt(config: TrainConfig, imagery: UnlabelledImagery, out_dir: Path, 
             loss = loss + fpn_loss(logits.float(), target.to(device), valid.to(device), config, image)
         image, valid = _target_batch(imagery, rng, settings.target_batch, config.crop)
         maps = model.pseudo_maps(image.to(device))
-        target, weight = pseudo_labels(maps, valid.to(device), settings, (config.pos_weight_keypoint, config.pos_weight_segmentation))
+        target, weight = pseudo_labels(
+            maps, valid.to(device), settings, (config.pos_weight_keypoint, config.pos_weight_segmentation)
+        )
         image, target, weight = image.numpy().copy(), target.cpu().numpy(), weight.cpu().numpy()
         pasted = []
         for k in range(len(image)):
             if settings.mix:
-                source = source_cities[int(rng.integers(len(source_cities)))].augmented_fpn_sample(rng, config.crop, augmentation, True)
+                source = source_cities[int(rng.integers(len(source_cities)))].augmented_fpn_sample(
+                    rng, config.crop, augmentation, True
+                )
                 pasted.append(paste_roadway(image[k], target[k], weight[k], source, settings.mix_widen_px))
             if settings.strong_augment:
                 image[k] = photometric(rng, image[k], augmentation)
         with autocast(config, device):
             logits = student(torch.from_numpy(image).to(device))
-        loss = loss + settings.target_weight * pseudo_label_loss(logits.float(), torch.from_numpy(target).to(device),
-                                                                 torch.from_numpy(weight).to(device), config)
-        extras = {"pseudo_boundary": float((target[:, 1] > 0.5).mean()), "confident": float((weight[:, 1] > 0.8).mean())}
+        loss = loss + settings.target_weight * pseudo_label_loss(
+            logits.float(), torch.from_numpy(target).to(device), torch.from_numpy(weight).to(device), config
+        )
+        extras = {
+            "pseudo_boundary": float((target[:, 1] > 0.5).mean()),
+            "confident": float((weight[:, 1] > 0.8).mean()),
+        }
         if pasted:
             extras["pasted"] = float(np.mean(pasted))
         return loss, extras
 
     try:
-        optimize("adapt", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
-                 lambda step: validate_fpn(getattr(model, settings.export), valid_batches, device, config), progress)
+        optimize(
+            "adapt",
+            model,
+            model_config,
+            config,
+            out_dir,
+            optimizer,
+            rng,
+            step,
+            history,
+            log,
+            loss_at,
+            lambda step: validate_fpn(getattr(model, settings.export), valid_batches, device, config),
+            progress,
+        )
     finally:
         for city in (*source_cities, valid_city):
             city.close()
     model.teacher.eval()  # validate_fpn leaves the network it scored in train mode
     final = out_dir / "fpn.pt"
-    save_checkpoint(final, "fpn", fpn=getattr(model, settings.export).state_dict(), fpn_config=model_config.to_dict(),
-                    train_config=config.to_dict(), step=config.steps, validation=history, code_version_at_start=run_code_version())
+    save_checkpoint(
+        final,
+        "fpn",
+        fpn=getattr(model, settings.export).state_dict(),
+        fpn_config=model_config.to_dict(),
+        train_config=config.to_dict(),
+        step=config.steps,
+        validation=history,
+        code_version_at_start=run_code_version(),
+    )
     return final

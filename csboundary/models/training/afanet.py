@@ -30,8 +30,15 @@ def adjacency_loss(logits: torch.Tensor, label: torch.Tensor, max_pos_weight: fl
     return F.binary_cross_entropy_with_logits(logits[off], label[off], pos_weight=pos_weight)
 
 
-def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: str, config: TrainConfig, vertex_config: VertexConfig,
-                   augmentation: AugmentConfig | None = None):
+def _afanet_sample(
+    city: TrainingCity,
+    window,
+    rng: np.random.Generator,
+    stage: str,
+    config: TrainConfig,
+    vertex_config: VertexConfig,
+    augmentation: AugmentConfig | None = None,
+):
     """One AfANet example: the 6-channel tensor (image bands re-lit by ``augmentation`` when given;
     the FPN maps as predicted), vertices in window pixels and their adjacency label."""
     tensor = city.afanet_tensor(window)
@@ -42,14 +49,20 @@ def _afanet_sample(city: TrainingCity, window, rng: np.random.Generator, stage: 
         vertices = vertices + rng.normal(0, config.vertex_jitter_px, vertices.shape)
     else:
         graph = extract_vertices(tensor[4], vertex_config)
-        local = np.concatenate([graph.vertices, added_crossings(graph, tensor[5], CrossingConfig(spacing_px=config.crossing_spacing_px))])
+        local = np.concatenate(
+            [graph.vertices, added_crossings(graph, tensor[5], CrossingConfig(spacing_px=config.crossing_spacing_px))]
+        )
         vertices = local + np.array([window.col_off, window.row_off])
     vertices = vertices[city.labelled(vertices)]  # a vertex outside a reviewed city's complete area has no known edges
     if len(vertices) > config.max_vertices:
         vertices = vertices[np.sort(rng.choice(len(vertices), config.max_vertices, replace=False))]
     label = city.adjacency(vertices, window)
     local = vertices - np.array([window.col_off, window.row_off])
-    return torch.from_numpy(tensor), torch.from_numpy(local.astype(np.float32)), torch.from_numpy(label.astype(np.float32))
+    return (
+        torch.from_numpy(tensor),
+        torch.from_numpy(local.astype(np.float32)),
+        torch.from_numpy(label.astype(np.float32)),
+    )
 
 
 @torch.no_grad()
@@ -69,8 +82,12 @@ def validate_afanet(model: AfANet, samples, device, max_pos_weight: float) -> di
         fn += len(truth - edges)
     model.train()
     precision, recall = tp / max(tp + fp, 1), tp / max(tp + fn, 1)
-    return {"val_loss": float(np.mean(losses)) if losses else float("nan"), "val_edge_precision": precision,
-            "val_edge_recall": recall, "val_edge_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+    return {
+        "val_loss": float(np.mean(losses)) if losses else float("nan"),
+        "val_edge_precision": precision,
+        "val_edge_recall": recall,
+        "val_edge_f1": 2 * precision * recall / max(precision + recall, 1e-9),
+    }
 
 
 def starting_afanet(config: TrainConfig, device: torch.device) -> tuple[AfANet, AfANetConfig]:
@@ -83,7 +100,9 @@ def starting_afanet(config: TrainConfig, device: torch.device) -> tuple[AfANet, 
     return model, model.config
 
 
-def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+def train_afanet(
+    config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True
+) -> Path:
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
     if not config.fpn_weights:
@@ -100,16 +119,26 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
     vertex_config = VertexConfig(threshold=config.vertex_threshold)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_windows = [cities["valid"].random_window(valid_rng, config.window) for _ in range(config.validation_samples)]
-    valid_sets = {stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config,
-                                         vertex_config) for w in valid_windows] for stage in ("gt", "pred")}
+    valid_sets = {
+        stage: [_afanet_sample(cities["valid"], w, valid_rng, stage, config, vertex_config) for w in valid_windows]
+        for stage in ("gt", "pred")
+    }
     rng = np.random.default_rng(config.seed)
     step, history = resume_run(resume, "afanet", model, optimizer, rng)
     init = {"init_afanet_sha256": file_sha256(config.init_afanet)} if config.init_afanet else {}
-    log.write(event="start", model="afanet", step=step, code_version=run_code_version(),
-              parameters=sum(p.numel() for p in model.parameters()),
-              config=config.to_dict(), **init)
+    log.write(
+        event="start",
+        model="afanet",
+        step=step,
+        code_version=run_code_version(),
+        parameters=sum(p.numel() for p in model.parameters()),
+        config=config.to_dict(),
+        **init,
+    )
 
-    probabilities = city_probabilities(train_cities, extra_parts(train_cities, config), config.extra_share, by_area=False)
+    probabilities = city_probabilities(
+        train_cities, extra_parts(train_cities, config), config.extra_share, by_area=False
+    )
 
     def loss_at(step: int):
         stage = "gt" if step < config.gt_steps else "pred"
@@ -119,21 +148,40 @@ def train_afanet(config: TrainConfig, out_dir: Path, device: torch.device, resum
             city = train_cities[int(rng.choice(len(train_cities), p=probabilities))]
         else:  # as recorded runs drew their cities
             city = train_cities[int(rng.integers(len(train_cities)))]
-        tensor, vertices, label = _afanet_sample(city, city.random_window(rng, config.window), rng, stage, config, vertex_config,
-                                                 augmentation)
+        tensor, vertices, label = _afanet_sample(
+            city, city.random_window(rng, config.window), rng, stage, config, vertex_config, augmentation
+        )
         extras = {"stage": stage, "m": len(vertices)}
         if len(vertices) < 2:  # nothing to connect in this window
             return None, extras
-        return adjacency_loss(model(tensor.to(device), vertices.to(device)), label.to(device), config.max_pos_weight), extras
+        return adjacency_loss(
+            model(tensor.to(device), vertices.to(device)), label.to(device), config.max_pos_weight
+        ), extras
 
     def validate(step: int) -> dict:
         metrics = {}
         for name, samples in valid_sets.items():
-            metrics.update({f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()})
+            metrics.update(
+                {f"{k}_{name}": v for k, v in validate_afanet(model, samples, device, config.max_pos_weight).items()}
+            )
         return metrics
 
     try:
-        return optimize("afanet", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at, validate, progress)
+        return optimize(
+            "afanet",
+            model,
+            model_config,
+            config,
+            out_dir,
+            optimizer,
+            rng,
+            step,
+            history,
+            log,
+            loss_at,
+            validate,
+            progress,
+        )
     finally:
         for city in (*train_cities, cities["valid"]):
             city.close()

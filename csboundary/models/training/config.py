@@ -16,6 +16,7 @@ from csboundary.models.training.data import CitySpec, TrainingCity, WorldsConfig
 @dataclass
 class TrainConfig(Config):
     """Everything a run depends on; stored in every checkpoint and in the log."""
+
     config_name = "training"
     config_nested = {"train_city": CitySpec, "valid_city": CitySpec}
 
@@ -34,17 +35,29 @@ class TrainConfig(Config):
     extra_train_cities: list = field(default_factory=list)
     # share of samples drawn from extra_train_cities (fine-tuning on a user's city); 0 = every city by its area (FPN) or alike (AfANet)
     extra_share: float = 0.0
-    augment: dict = field(default_factory=lambda: {"enabled": False})  # AugmentConfig overrides; {} = every augmentation at its defaults
-    snapshots: bool = False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
-    encoder_lr_scale: float = 1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
-    freeze_encoder_bn: bool = False  # pretrained FPN encoder: keep its batch-norm statistics (ImageNet's, not the synthetic cities')
+    augment: dict = field(
+        default_factory=lambda: {"enabled": False}
+    )  # AugmentConfig overrides; {} = every augmentation at its defaults
+    snapshots: bool = (
+        False  # also keep <kind>-step<N>.pt (weights only) at every validation, for selecting a model on other data
+    )
+    encoder_lr_scale: float = (
+        1.0  # pretrained FPN encoder: its learning rate relative to lr (a small one keeps ImageNet features)
+    )
+    freeze_encoder_bn: bool = (
+        False  # pretrained FPN encoder: keep its batch-norm statistics (ImageNet's, not the synthetic cities')
+    )
     # pretrained FPN encoder: probability per batch of mixing early feature statistics between samples (MixStyle); 0 = off
     style_mix: float = 0.0
     style_mix_alpha: float = 0.1  # Beta(alpha, alpha) of the mixing weight
-    autocast_bf16: bool = False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
+    autocast_bf16: bool = (
+        False  # bfloat16 autocast of forward passes (CPUs with AVX-512 BF16, GPUs); float32 when false
+    )
     # fpn
     fpn: dict = field(default_factory=dict)  # FPNConfig overrides
-    init_fpn: str = ""  # start from this trained FPN (fpn checkpoint or bundle; its architecture, not ``fpn``): fine-tuning
+    init_fpn: str = (
+        ""  # start from this trained FPN (fpn checkpoint or bundle; its architecture, not ``fpn``): fine-tuning
+    )
     surface: bool = False  # add (or keep) the road-surface head; with init_fpn, a network without one gains a new head
     # train the surface head alone: every other weight frozen, so the keypoint and boundary maps stay as they were
     surface_only: bool = False
@@ -65,8 +78,12 @@ class TrainConfig(Config):
     window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
     gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
     vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1
-    vertex_threshold: float = 0.5  # stage 2: keypoint probability of the FPN's extracted vertices (as the bundle will infer)
-    crossing_spacing_px: int = 0  # AfANet stage 2: also the FPN segmentation's grid-crossing vertices (csboundary.graph.crossings)
+    vertex_threshold: float = (
+        0.5  # stage 2: keypoint probability of the FPN's extracted vertices (as the bundle will infer)
+    )
+    crossing_spacing_px: int = (
+        0  # AfANet stage 2: also the FPN segmentation's grid-crossing vertices (csboundary.graph.crossings)
+    )
     max_vertices: int = 160
     max_pos_weight: float = 30.0
     # baselines (csboundary.models.baselines): method-specific settings, documented per method
@@ -100,7 +117,9 @@ def training_pixel_size(config: dict) -> float | None:
     sizes = set()
     for path in [*paths, *map(Path, cfg.extra_train_cities)]:
         if layout.is_city_dir(path):
-            metres = layout.pixel_metres(layout.read_meta(path))  # not city.json's gsd: that is in CRS units (feet in NYC)
+            metres = layout.pixel_metres(
+                layout.read_meta(path)
+            )  # not city.json's gsd: that is in CRS units (feet in NYC)
             if metres is not None:
                 sizes.add(round(metres, 6))
     return sizes.pop() if len(sizes) == 1 else None
@@ -114,10 +133,14 @@ def training_cities(config: TrainConfig, progress: bool = True) -> list[Training
         specs += WorldsConfig.from_dict(config.worlds).specs()
     if not specs and not config.extra_train_cities:
         raise ValueError("the training config names no training city (train_city, worlds or extra_train_cities)")
-    paths = [spec.ensure(config.cache, progress=progress and len(specs) == 1) for spec in specs] + list(config.extra_train_cities)
+    paths = [spec.ensure(config.cache, progress=progress and len(specs) == 1) for spec in specs] + list(
+        config.extra_train_cities
+    )
     for path in config.extra_train_cities:
         if not layout.is_city_dir(path):
-            raise InputError(path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)")
+            raise InputError(
+                path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)"
+            )
     return [city for p in paths for city in TrainingCity.parts(p)]
 
 

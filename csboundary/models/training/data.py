@@ -24,7 +24,14 @@ from csboundary.labels.adjacency import adjacency_label
 from csboundary.labels.config import LabelConfig
 from csboundary.labels.patch_graph import window_graph
 from csboundary.labels.writer import CityLabels
-from csboundary.models.augmentation import AugmentConfig, draw_geometry, paint_surface_negatives, photometric, source_side, warp
+from csboundary.models.augmentation import (
+    AugmentConfig,
+    draw_geometry,
+    paint_surface_negatives,
+    photometric,
+    source_side,
+    warp,
+)
 from csboundary.models.augmentation import flip_rotate90 as augment  # also the baselines' flips
 from csboundary.models.maps import unit_bands
 
@@ -55,8 +62,14 @@ class CitySpec:
             path.mkdir(parents=True, exist_ok=True)
             with folder_lock(path, wait=True):  # a training building this city now: wait for it, then use its city
                 if not layout.is_city_dir(path):
-                    synthesize_city(path, self.seed, self.split, tuple(self.tiles), style_config(self.style, tile_size=self.tile_size),
-                                    progress)
+                    synthesize_city(
+                        path,
+                        self.seed,
+                        self.split,
+                        tuple(self.tiles),
+                        style_config(self.style, tile_size=self.tile_size),
+                        progress,
+                    )
         return path
 
 
@@ -68,6 +81,7 @@ class WorldsConfig(Config):
     it from ``styles`` (name -> weight), so the set is reproducible and a style left out of the
     mix is never seen; cities are built under the training cache on first use.
     """
+
     config_name = "worlds"
 
     styles: dict = field(default_factory=dict)  # style -> weight; {} = csboundary.data.synth.styles.DEFAULT_MIX
@@ -76,13 +90,14 @@ class WorldsConfig(Config):
     tile_size: int = 2500
     first_seed: int = 1000
 
-
     def specs(self) -> list[CitySpec]:
         from csboundary.data.synth.styles import draw_style
 
         weights = self.styles or None
-        return [CitySpec("train", seed, self.tiles, self.tile_size, draw_style("train", seed, weights))
-                for seed in range(self.first_seed, self.first_seed + self.cities)]
+        return [
+            CitySpec("train", seed, self.tiles, self.tile_size, draw_style("train", seed, weights))
+            for seed in range(self.first_seed, self.first_seed + self.cities)
+        ]
 
 
 def _polygon_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
@@ -94,7 +109,14 @@ def _polygon_raster(polygons: list | None, mosaic: Mosaic) -> np.ndarray | None:
 
     if not polygons:
         return np.zeros((mosaic.height, mosaic.width), np.uint8)
-    return rasterize(polygons, out_shape=(mosaic.height, mosaic.width), transform=mosaic.transform, fill=0, default_value=1, dtype="uint8")
+    return rasterize(
+        polygons,
+        out_shape=(mosaic.height, mosaic.width),
+        transform=mosaic.transform,
+        fill=0,
+        default_value=1,
+        dtype="uint8",
+    )
 
 
 def covers_imagery(polygons: list, mosaic: Mosaic) -> bool:
@@ -111,8 +133,16 @@ def covers_imagery(polygons: list, mosaic: Mosaic) -> bool:
     if window is None:
         return False
     transform = mosaic.transform @ Affine.translation(window.col_off, window.row_off)
-    return bool(rasterize(polygons, out_shape=(window.height, window.width), transform=transform, fill=0, default_value=1,
-                          dtype="uint8").any())
+    return bool(
+        rasterize(
+            polygons,
+            out_shape=(window.height, window.width),
+            transform=transform,
+            fill=0,
+            default_value=1,
+            dtype="uint8",
+        ).any()
+    )
 
 
 def city_probabilities(cities: list, extra: int, extra_share: float, by_area: bool) -> np.ndarray:
@@ -143,8 +173,12 @@ class TrainingCity:
         self.mosaic = mosaic if mosaic is not None else Mosaic.open(layout.tiles_dir(city_dir))
         gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
-        self.surface = _polygon_raster(read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
-        self.complete = _polygon_raster(read_complete_area(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic)
+        self.surface = _polygon_raster(
+            read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic
+        )
+        self.complete = _polygon_raster(
+            read_complete_area(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic
+        )
         if self.complete is not None and not self.complete.any():
             self.close()
             raise InputError(city_dir, NO_COMPLETE_AREA)
@@ -197,8 +231,12 @@ class TrainingCity:
                 return window
         rows, cols = np.nonzero(self.complete[::8, ::8])  # a small area: centre the window on one of its pixels
         k = int(rng.integers(len(rows)))
-        col = int(np.clip(int(cols[k]) * 8 - size // 2, min(0, self.mosaic.width - size), max(0, self.mosaic.width - size)))
-        row = int(np.clip(int(rows[k]) * 8 - size // 2, min(0, self.mosaic.height - size), max(0, self.mosaic.height - size)))
+        col = int(
+            np.clip(int(cols[k]) * 8 - size // 2, min(0, self.mosaic.width - size), max(0, self.mosaic.width - size))
+        )
+        row = int(
+            np.clip(int(rows[k]) * 8 - size // 2, min(0, self.mosaic.height - size), max(0, self.mosaic.height - size))
+        )
         return PixelWindow(col, row, size, size)
 
     def _complete_at(self, col: int, row: int) -> bool:
@@ -216,7 +254,11 @@ class TrainingCity:
 
     def known(self, window: PixelWindow) -> np.ndarray:
         """(s, s) bool: where the window's labels are known (inside the city and its complete area)."""
-        inside = np.broadcast_to(np.True_, (self.mosaic.height, self.mosaic.width)) if self.complete is None else self.complete
+        inside = (
+            np.broadcast_to(np.True_, (self.mosaic.height, self.mosaic.width))
+            if self.complete is None
+            else self.complete
+        )
         return self._cut(inside, window, False, bool)
 
     def fpn_sample(self, window: PixelWindow, surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -236,8 +278,9 @@ class TrainingCity:
             return np.full((window.height, window.width), -1.0, np.float32)
         return self._cut(self.surface, window, -1.0, np.float32)
 
-    def augmented_fpn_sample(self, rng: np.random.Generator, crop: int, config: AugmentConfig,
-                             surface: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def augmented_fpn_sample(
+        self, rng: np.random.Generator, crop: int, config: AugmentConfig, surface: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``fpn_sample`` of a random ``crop`` window, rotated by any angle, scaled, flipped and
         re-lit (see :mod:`csboundary.models.augmentation`): the source window is read large
         enough that the rotated crop holds imagery wherever the city does. With a road surface and

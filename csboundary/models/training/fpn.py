@@ -27,15 +27,19 @@ def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
         return [{"params": list(model.parameters()), "lr_scale": 1.0}]
     model.freeze_encoder_bn = config.freeze_encoder_bn
     inside = {id(p) for p in encoder.parameters()}
-    return [{"params": list(encoder.parameters()), "lr_scale": config.encoder_lr_scale},
-            {"params": [p for p in model.parameters() if id(p) not in inside], "lr_scale": 1.0}]
+    return [
+        {"params": list(encoder.parameters()), "lr_scale": config.encoder_lr_scale},
+        {"params": [p for p in model.parameters() if id(p) not in inside], "lr_scale": 1.0},
+    ]
 
 
 def image_edges(image: torch.Tensor) -> torch.Tensor:
     """(B, 1, H, W) in [0, 1]: the Sobel gradient magnitude of each sample's mean band, divided
     by its 95th percentile and clipped: 1 on every strong outline of the scene."""
     gray = image[:, :3].mean(dim=1, keepdim=True)
-    kx = torch.tensor([[-1.0, 0.0, 1.0], [-2.0, 0.0, 2.0], [-1.0, 0.0, 1.0]], device=image.device, dtype=gray.dtype).view(1, 1, 3, 3)
+    kx = torch.tensor(
+        [[-1.0, 0.0, 1.0], [-2.0, 0.0, 2.0], [-1.0, 0.0, 1.0]], device=image.device, dtype=gray.dtype
+    ).view(1, 1, 3, 3)
     padded = F.pad(gray, (1, 1, 1, 1), mode="replicate")
     magnitude = torch.sqrt(F.conv2d(padded, kx) ** 2 + F.conv2d(padded, kx.transpose(2, 3)) ** 2)
     scale = torch.quantile(magnitude.flatten(1), 0.95, dim=1).clamp(min=1e-6).view(-1, 1, 1, 1)
@@ -53,13 +57,20 @@ def hard_negative_weights(image: torch.Tensor, target: torch.Tensor, config: Tra
     return 1.0 + config.hard_negative_weight * image_edges(image) * (1.0 - near)
 
 
-def fpn_loss(logits: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, config: TrainConfig,
-             image: torch.Tensor | None = None) -> torch.Tensor:
+def fpn_loss(
+    logits: torch.Tensor,
+    target: torch.Tensor,
+    valid: torch.Tensor,
+    config: TrainConfig,
+    image: torch.Tensor | None = None,
+) -> torch.Tensor:
     """Weighted BCE of the keypoint and boundary maps on valid pixels (negatives on the image's
     outlines weighted up when ``hard_negative_weight`` and ``image`` are given); with a surface
     channel (logits and target (B, 3, ...)), plus ``surface_weight`` x the surface BCE on valid
     pixels whose surface is known (target >= 0); with ``surface_only``, the surface term alone."""
-    weights = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(1, 2, 1, 1)
+    weights = torch.tensor([config.pos_weight_keypoint, config.pos_weight_segmentation], device=logits.device).view(
+        1, 2, 1, 1
+    )
     mask = valid[:, None].to(logits.dtype)
     total = logits.new_zeros(())
     if not config.surface_only:
@@ -84,17 +95,23 @@ def starting_fpn(config: TrainConfig, device: torch.device):
     if config.init_fpn:
         trained = load_fpn(config.init_fpn, device).to(memory_format=torch.contiguous_format)
         recorded = load_checkpoint(config.init_fpn, ("fpn", "bundle"))["fpn_config"]
-        model_config = dataclasses.replace(trained.config, pretrained=bool(recorded.get("pretrained", True)))  # how it began, as recorded
+        model_config = dataclasses.replace(
+            trained.config, pretrained=bool(recorded.get("pretrained", True))
+        )  # how it began, as recorded
         if config.surface and not model_config.surface:
             model_config = dataclasses.replace(model_config, surface=True)
-            model = FPN(dataclasses.replace(model_config, pretrained=False)).to(device)  # its weights come from init_fpn
+            model = FPN(dataclasses.replace(model_config, pretrained=False)).to(
+                device
+            )  # its weights come from init_fpn
             missing, unexpected = model.load_state_dict(trained.state_dict(), strict=False)
             if unexpected or any(not k.startswith("surface_head.") for k in missing):
                 raise ValueError(f"{config.init_fpn}: weights do not fit the FPN with a surface head")
         else:
             model = trained
     else:
-        model_config = model_config_with(FPNConfig, {**config.fpn, "surface": config.surface or config.fpn.get("surface", False)})
+        model_config = model_config_with(
+            FPNConfig, {**config.fpn, "surface": config.surface or config.fpn.get("surface", False)}
+        )
         model = FPN(model_config).to(device)
     if config.surface_only:
         if not model_config.surface:
@@ -104,8 +121,13 @@ def starting_fpn(config: TrainConfig, device: torch.device):
     return model, model_config
 
 
-def _fpn_batch(cities: list[TrainingCity], rng: np.random.Generator, config: TrainConfig, augmentation: AugmentConfig | None,
-               surface: bool = False):
+def _fpn_batch(
+    cities: list[TrainingCity],
+    rng: np.random.Generator,
+    config: TrainConfig,
+    augmentation: AugmentConfig | None,
+    surface: bool = False,
+):
     """``config.batch`` samples, each from a city drawn in proportion to its area; augmented
     (:mod:`csboundary.models.augmentation`) when ``augmentation`` is given (training), as they are
     otherwise (validation)."""
@@ -142,14 +164,20 @@ def validate_fpn(model: FPN, batches, device, config: TrainConfig) -> dict[str, 
         fn += int((~pred & truth).sum())
     model.train()
     precision, recall = tp / max(tp + fp, 1), tp / max(tp + fn, 1)
-    scores = {"val_loss": float(np.mean(losses)), "val_seg_precision": precision, "val_seg_recall": recall,
-              "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9)}
+    scores = {
+        "val_loss": float(np.mean(losses)),
+        "val_seg_precision": precision,
+        "val_seg_recall": recall,
+        "val_seg_f1": 2 * precision * recall / max(precision + recall, 1e-9),
+    }
     if road[2]:
         scores["val_surface_iou"] = float(road[0] / max(road[1], 1))
     return scores
 
 
-def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+def train_fpn(
+    config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True
+) -> Path:
     seed_everything(config.seed)
     log = RunLog(out_dir / "train.log")
     train_cities = training_cities(config, progress)
@@ -157,20 +185,34 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
     model, model_config = starting_fpn(config, device)
     add_style_mixing(model, config.style_mix, config.style_mix_alpha)
     anchor = FeatureAnchor(model) if config.feature_distance_weight > 0 else None
-    groups = [{"params": [p for p in model.parameters() if p.requires_grad],
-               "lr_scale": 1.0}] if config.surface_only else fpn_parameter_groups(model, config)
+    groups = (
+        [{"params": [p for p in model.parameters() if p.requires_grad], "lr_scale": 1.0}]
+        if config.surface_only
+        else fpn_parameter_groups(model, config)
+    )
     optimizer = torch.optim.Adam(groups, lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     with_surface = bool(model_config.surface)
     if with_surface and all(city.surface is None for city in train_cities):
-        raise ValueError("the surface head needs cities with a road_surface layer (synthetic cities built by this version)")
-    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None, with_surface) for _ in range(config.validation_samples)]
+        raise ValueError(
+            "the surface head needs cities with a road_surface layer (synthetic cities built by this version)"
+        )
+    valid_batches = [
+        _fpn_batch([valid_city], valid_rng, config, None, with_surface) for _ in range(config.validation_samples)
+    ]
     augmentation = model_config_with(AugmentConfig, config.augment)
     step, history = resume_run(resume, "fpn", model, optimizer, rng)
     init = {"init_fpn_sha256": file_sha256(config.init_fpn)} if config.init_fpn else {}
-    log.write(event="start", model="fpn", step=step, code_version=run_code_version(), parameters=sum(p.numel() for p in model.parameters()),
-              config=config.to_dict(), **init)
+    log.write(
+        event="start",
+        model="fpn",
+        step=step,
+        code_version=run_code_version(),
+        parameters=sum(p.numel() for p in model.parameters()),
+        config=config.to_dict(),
+        **init,
+    )
 
     def loss_at(step: int):
         if config.surface_only:  # frozen layers keep their batch statistics: the maps stay the trained FPN's
@@ -187,8 +229,21 @@ def train_fpn(config: TrainConfig, out_dir: Path, device: torch.device, resume: 
         return loss + config.feature_distance_weight * distance, {"feature_distance": float(distance)}
 
     try:
-        return optimize("fpn", model, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
-                        lambda step: validate_fpn(model, valid_batches, device, config), progress)
+        return optimize(
+            "fpn",
+            model,
+            model_config,
+            config,
+            out_dir,
+            optimizer,
+            rng,
+            step,
+            history,
+            log,
+            loss_at,
+            lambda step: validate_fpn(model, valid_batches, device, config),
+            progress,
+        )
     finally:
         if anchor is not None:
             anchor.close()

@@ -54,8 +54,21 @@ class RunLog:
         tqdm.write(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in record.items()))
 
 
-def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path, optimizer, rng: np.random.Generator, step: int,
-             history: list, log: RunLog, loss_at, validate, progress: bool = True) -> Path:
+def optimize(
+    kind: str,
+    model,
+    model_config,
+    config: TrainConfig,
+    out_dir: Path,
+    optimizer,
+    rng: np.random.Generator,
+    step: int,
+    history: list,
+    log: RunLog,
+    loss_at,
+    validate,
+    progress: bool = True,
+) -> Path:
     """The loop every trainer shares (the FPN, AfANet, the dense baselines): cosine learning
     rate, one optimizer step per ``loss_at(step) -> (loss, extras)`` (a ``None`` loss, e.g. an
     AfANet window with fewer than two vertices, counts the step without an update), a validation
@@ -77,7 +90,9 @@ def optimize(kind: str, model, model_config, config: TrainConfig, out_dir: Path,
         step += 1
         bar.update(1)
         if last is not None:
-            bar.set_postfix(loss=f"{last:.4f}", **{k: f"{v:.3g}" if isinstance(v, float) else v for k, v in extras.items()})
+            bar.set_postfix(
+                loss=f"{last:.4f}", **{k: f"{v:.3g}" if isinstance(v, float) else v for k, v in extras.items()}
+            )
         if step % config.validate_every == 0 or step == config.steps:
             metrics = {"step": step, "train_loss": last, "lr": lr, **extras, **validate(step)}
             _record(out_dir, kind, metrics, model, model_config, config, step, history, optimizer, rng, log)
@@ -94,7 +109,9 @@ def _cosine_lr(config: TrainConfig, step: int) -> float:
     return config.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, t))))
 
 
-def _record(out_dir: Path, kind: str, metrics: dict, model, model_config, config, step, history, optimizer, rng, log: RunLog) -> None:
+def _record(
+    out_dir: Path, kind: str, metrics: dict, model, model_config, config, step, history, optimizer, rng, log: RunLog
+) -> None:
     """Log one validation and write the resumable ``<kind>-last.pt``."""
     history.append(metrics)
     log.write(event="validate", **metrics)
@@ -111,7 +128,9 @@ def _finish(out_dir: Path, kind: str, model, model_config, config, step, history
     return final
 
 
-def _save(path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer, rng=None) -> None:
+def _save(
+    path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer, rng=None
+) -> None:
     content = {
         kind: model.state_dict(),
         f"{kind}_config": model_config.to_dict(),

@@ -18,8 +18,17 @@ from csboundary.models.training.fpn import train_fpn
 MODELS = ("fpn", "afanet", *METHODS)
 
 
-def train_from_file(model: str, config: str | Path, out: str | Path, *, resume: str | Path | None = None, steps: int | None = None,
-                    fpn_weights: str | Path | None = None, device: str = "auto", progress: bool = True) -> tuple[Path, TrainConfig]:
+def train_from_file(
+    model: str,
+    config: str | Path,
+    out: str | Path,
+    *,
+    resume: str | Path | None = None,
+    steps: int | None = None,
+    fpn_weights: str | Path | None = None,
+    device: str = "auto",
+    progress: bool = True,
+) -> tuple[Path, TrainConfig]:
     """Train ``model`` (one of :data:`MODELS`) as the JSON ``config`` says into the run folder
     ``out`` (config.json, train.log, checkpoints), resuming from the checkpoint ``resume``;
     ``steps`` and ``fpn_weights`` override the config's. Returns the final weights' path and the

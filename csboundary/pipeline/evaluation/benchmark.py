@@ -35,8 +35,19 @@ import numpy as np
 
 from csboundary.data.atomic import atomic_path
 
-TABLE_METRICS = ["precision@2", "precision@5", "precision@10", "recall@2", "recall@5", "recall@10",
-                 "f1@2", "f1@5", "f1@10", "apls", "tlts"]
+TABLE_METRICS = [
+    "precision@2",
+    "precision@5",
+    "precision@10",
+    "recall@2",
+    "recall@5",
+    "recall@10",
+    "f1@2",
+    "f1@5",
+    "f1@10",
+    "apls",
+    "tlts",
+]
 
 
 @dataclass
@@ -55,7 +66,9 @@ def _csboundary(weights_dir: Path, device):
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     predictor = PatchPredictor.load(weights_dir / "csboundary-synthetic.pt", device)
-    predictor.settings = dataclasses.replace(predictor.settings, outline=dataclasses.replace(predictor.settings.outline, sure=0.0))
+    predictor.settings = dataclasses.replace(
+        predictor.settings, outline=dataclasses.replace(predictor.settings.outline, sure=0.0)
+    )
     return predictor
 
 
@@ -63,8 +76,10 @@ def _repository_weights(path: Path) -> Path:
     """A baseline's or ablation's weights: they come with a checkout of the repository, not with
     the wheel (``predict`` never loads them)."""
     if not path.exists():
-        raise FileNotFoundError(f"{path} is not in this installation: the benchmark's baseline and ablation weights come with "
-                                "the repository (git clone; csboundary/weights/ablation and baselines), not with the wheel")
+        raise FileNotFoundError(
+            f"{path} is not in this installation: the benchmark's baseline and ablation weights come with "
+            "the repository (git clone; csboundary/weights/ablation and baselines), not with the wheel"
+        )
     return path
 
 
@@ -75,13 +90,20 @@ FIRST_INFERENCE = {"edge_threshold": 0.3, "max_degree": 2}  # that bundle's sett
 def _ablation(variant: str):
     """Table IV's AfANets on the FPN they were trained on, with that bundle's inference settings:
     the ablation studies AfANet's two features and stays comparable across FPN upgrades."""
+
     def load(weights_dir: Path, device):
         from csboundary.pipeline.prediction.patch import PatchPredictor
 
-        predictor = PatchPredictor.load(_repository_weights(weights_dir / "ablation" / f"afanet-{variant}.pt"), device,
-                                       fpn_weights=_repository_weights(weights_dir / FIRST_FPN))
-        predictor.settings = dataclasses.replace(predictor.settings, edge_threshold=FIRST_INFERENCE["edge_threshold"],
-                                                 max_degree=FIRST_INFERENCE["max_degree"])
+        predictor = PatchPredictor.load(
+            _repository_weights(weights_dir / "ablation" / f"afanet-{variant}.pt"),
+            device,
+            fpn_weights=_repository_weights(weights_dir / FIRST_FPN),
+        )
+        predictor.settings = dataclasses.replace(
+            predictor.settings,
+            edge_threshold=FIRST_INFERENCE["edge_threshold"],
+            max_degree=FIRST_INFERENCE["max_degree"],
+        )
         return predictor
 
     return load
@@ -91,30 +113,73 @@ def _baseline(method: str):
     def load(weights_dir: Path, device):
         from csboundary.models.baselines import baseline_module
 
-        return baseline_module(method).Model.load(_repository_weights(weights_dir / "baselines" / f"{method}.pt"), device)
+        return baseline_module(method).Model.load(
+            _repository_weights(weights_dir / "baselines" / f"{method}.pt"), device
+        )
 
     return load
 
 
 METHODS = [
-    Method("OrientationRefine", "orientation-refine", "segmentation", _baseline("orientation-refine"),
-           ["baselines/orientation-refine-train.log"]),
+    Method(
+        "OrientationRefine",
+        "orientation-refine",
+        "segmentation",
+        _baseline("orientation-refine"),
+        ["baselines/orientation-refine-train.log"],
+    ),
     # Sat2Graph's vertices and iCurb's segmentation input come from csBoundary's FPN: its training counts too
-    Method("Sat2Graph", "sat2graph", "graph generation", _baseline("sat2graph"), ["start-fpn-train.log", "start-surface-train.log",
-                                                                                  "fpn-train.log", "baselines/sat2graph-train.log"]),
-    Method("Enhanced-iCurb", "icurb", "iterative", _baseline("icurb"), ["start-fpn-train.log", "start-surface-train.log", "fpn-train.log",
-                                                                        "baselines/icurb-train.log"]),
-    Method("csBoundary", "csboundary", "graph generation (ours)", _csboundary, ["start-fpn-train.log", "start-surface-train.log",
-                                                                                "fpn-train.log", "surface-negatives-train.log",
-                                                                                "afanet-train.log"]),
-    Method("csBoundary (ablation budget)", "ablation-full", "ablation", _ablation("ablation-full"),
-           ["ablation/fpn-first-train.log", "ablation/afanet-ablation-full-train.log"], "ablation"),
-    Method("csBoundary w/o global feature", "no-global", "ablation", _ablation("no-global"), ["ablation/fpn-first-train.log",
-                                                                                              "ablation/afanet-no-global-train.log"],
-           "ablation"),
-    Method("csBoundary w/o local feature", "no-local", "ablation", _ablation("no-local"), ["ablation/fpn-first-train.log",
-                                                                                           "ablation/afanet-no-local-train.log"],
-           "ablation"),
+    Method(
+        "Sat2Graph",
+        "sat2graph",
+        "graph generation",
+        _baseline("sat2graph"),
+        ["start-fpn-train.log", "start-surface-train.log", "fpn-train.log", "baselines/sat2graph-train.log"],
+    ),
+    Method(
+        "Enhanced-iCurb",
+        "icurb",
+        "iterative",
+        _baseline("icurb"),
+        ["start-fpn-train.log", "start-surface-train.log", "fpn-train.log", "baselines/icurb-train.log"],
+    ),
+    Method(
+        "csBoundary",
+        "csboundary",
+        "graph generation (ours)",
+        _csboundary,
+        [
+            "start-fpn-train.log",
+            "start-surface-train.log",
+            "fpn-train.log",
+            "surface-negatives-train.log",
+            "afanet-train.log",
+        ],
+    ),
+    Method(
+        "csBoundary (ablation budget)",
+        "ablation-full",
+        "ablation",
+        _ablation("ablation-full"),
+        ["ablation/fpn-first-train.log", "ablation/afanet-ablation-full-train.log"],
+        "ablation",
+    ),
+    Method(
+        "csBoundary w/o global feature",
+        "no-global",
+        "ablation",
+        _ablation("no-global"),
+        ["ablation/fpn-first-train.log", "ablation/afanet-no-global-train.log"],
+        "ablation",
+    ),
+    Method(
+        "csBoundary w/o local feature",
+        "no-local",
+        "ablation",
+        _ablation("no-local"),
+        ["ablation/fpn-first-train.log", "ablation/afanet-no-local-train.log"],
+        "ablation",
+    ),
 ]
 
 
@@ -163,8 +228,16 @@ def unknown_methods(methods) -> list[str]:
     return sorted(set(methods or []) - {m.key for m in METHODS})
 
 
-def benchmark_to_folder(out: Path, city_dir: Path | None = None, weights_dir: Path | None = None, device=None, methods=None, seed: int = 0,
-                        progress: bool = True, command: str = "") -> dict:
+def benchmark_to_folder(
+    out: Path,
+    city_dir: Path | None = None,
+    weights_dir: Path | None = None,
+    device=None,
+    methods=None,
+    seed: int = 0,
+    progress: bool = True,
+    command: str = "",
+) -> dict:
     """``csboundary benchmark``: :func:`run_benchmark` on ``city_dir`` (default: the test-split
     city seed 1, 1x1 tile of 5000 px, built on first use under data/cities) with the weights in
     ``weights_dir`` (default: the shipped ones), plus OUT/benchmark.json recording the
@@ -182,17 +255,35 @@ def benchmark_to_folder(out: Path, city_dir: Path | None = None, weights_dir: Pa
     weights_dir = Path(weights_dir or shipped_weights().parent)
     version = code_version()  # before the run: its own tables, tracked in docs/benchmark/, would mark the tree dirty
     results = run_benchmark(city_dir, out, weights_dir, device or torch.device("cpu"), methods, seed, progress=progress)
-    record = {"command": command or "csboundary " + " ".join(sys.argv[1:]), "code_version": version, "city": str(city_dir),
-              "weights": str(weights_dir),
-              "results": {k: {"method": r["method"].name, **({"missing": r["missing"]} if "missing" in r else
-                              {"scores": {s: v["metrics"] for s, v in r["scores"].items()}, "training": r["training"],
-                               "inference_seconds": r["summary"]["seconds"]})} for k, r in results.items()}}
+    record = {
+        "command": command or "csboundary " + " ".join(sys.argv[1:]),
+        "code_version": version,
+        "city": str(city_dir),
+        "weights": str(weights_dir),
+        "results": {
+            k: {
+                "method": r["method"].name,
+                **(
+                    {"missing": r["missing"]}
+                    if "missing" in r
+                    else {
+                        "scores": {s: v["metrics"] for s, v in r["scores"].items()},
+                        "training": r["training"],
+                        "inference_seconds": r["summary"]["seconds"],
+                    }
+                ),
+            }
+            for k, r in results.items()
+        },
+    }
     with atomic_path(out / "benchmark.json") as tmp:
         tmp.write_text(json.dumps(record, indent=1, default=float) + "\n")
     return results
 
 
-def run_benchmark(city_dir: Path, out: Path, weights_dir: Path, device, methods=None, seed: int = 0, progress: bool = True) -> dict:
+def run_benchmark(
+    city_dir: Path, out: Path, weights_dir: Path, device, methods=None, seed: int = 0, progress: bool = True
+) -> dict:
     """Predict ``city_dir`` with every method, score it, write the tables; returns the results."""
     from csboundary.data import city as layout
     from csboundary.data.ground_truth import read_ground_truth
@@ -209,10 +300,21 @@ def run_benchmark(city_dir: Path, out: Path, weights_dir: Path, device, methods=
             except Exception as exc:  # noqa: BLE001 - a missing or broken weights file is a row note, not a crash
                 results[method.key] = {"method": method, "missing": f"{type(exc).__name__}: {exc}".splitlines()[0]}
                 continue
-            result, summary = run_prediction(mosaic, model, out / "predictions" / method.key, progress=progress,
-                                             settings={"method": method.name}, ground_truth=lines)
-            results[method.key] = {"method": method, "scores": evaluate_run(result, lines, seed), "summary": summary,
-                                   "graph": result.graph, "training": [training_time(weights_dir / log) for log in method.logs]}
+            result, summary = run_prediction(
+                mosaic,
+                model,
+                out / "predictions" / method.key,
+                progress=progress,
+                settings={"method": method.name},
+                ground_truth=lines,
+            )
+            results[method.key] = {
+                "method": method,
+                "scores": evaluate_run(result, lines, seed),
+                "summary": summary,
+                "graph": result.graph,
+                "training": [training_time(weights_dir / log) for log in method.logs],
+            }
         write_figure(mosaic, lines, results, out / "fig7-comparison.png")
     write_tables(results, out, city_dir)
     return results
@@ -234,15 +336,25 @@ def write_tables(results: dict, out: Path, city_dir: Path) -> None:
             train_epoch = sum(t["seconds_per_epoch"] for t in times) if all(times) else None
             train_total = sum(t["seconds"] for t in times) if all(times) else None
             s = r["summary"]
-            rows["III"].append([m.name, train_epoch, train_total, s["seconds"]["total"] / s["patches"], s["seconds"]["total"]])
+            rows["III"].append(
+                [m.name, train_epoch, train_total, s["seconds"]["total"] / s["patches"], s["seconds"]["total"]]
+            )
     header = ["method", *TABLE_METRICS]
     specs = {
         "I": ("Table I: patch scale (each patch's own graph on its core, averaged)", header),
         "II": ("Table II: city scale (the stitched graph)", header),
-        "III": ("Table III: time (2 CPU cores)", ["method", "train s/epoch", "train s total", "inference s/patch", "inference s/city"]),
+        "III": (
+            "Table III: time (2 CPU cores)",
+            ["method", "train s/epoch", "train s total", "inference s/patch", "inference s/city"],
+        ),
         "IV": ("Table IV: ablation, city scale", header),
     }
-    md = [f"# Comparison on `{city_dir}`", "", "Made by `csboundary benchmark` (command and versions in `benchmark.json`).", ""]
+    md = [
+        f"# Comparison on `{city_dir}`",
+        "",
+        "Made by `csboundary benchmark` (command and versions in `benchmark.json`).",
+        "",
+    ]
     for table, (title, head) in specs.items():
         with atomic_path(out / f"table{table}.csv") as tmp, open(tmp, "w", newline="") as fh:
             writer = csv.writer(fh)
@@ -286,7 +398,12 @@ def write_figure(mosaic, lines, results: dict, path: Path, panel: int = 500) -> 
     for r in results.values():
         if "graph" in r:
             predicted = r["graph"].to_linestrings(world=True)
-            panels.append((r["method"].name, render_window(mosaic, window, [], max_size=panel, layers=[(predicted, (255, 140, 0))])))
+            panels.append(
+                (
+                    r["method"].name,
+                    render_window(mosaic, window, [], max_size=panel, layers=[(predicted, (255, 140, 0))]),
+                )
+            )
     cols = min(4, len(panels))
     rows = -(-len(panels) // cols)
     h, w = panels[0][1].shape[:2]
@@ -294,5 +411,7 @@ def write_figure(mosaic, lines, results: dict, path: Path, panel: int = 500) -> 
     for i, (name, image) in enumerate(panels):
         r, c = divmod(i, cols)
         canvas[r * (h + 28) + 28 : r * (h + 28) + 28 + h, c * w : c * w + w] = image[:h, :w]
-        cv2.putText(canvas, name, (c * w + 6, r * (h + 28) + 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA)
+        cv2.putText(
+            canvas, name, (c * w + 6, r * (h + 28) + 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA
+        )
     write_png(path, canvas)

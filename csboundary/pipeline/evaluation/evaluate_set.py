@@ -22,8 +22,8 @@ from csboundary.data.model_view import model_view
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph.stitching import StitchConfig
 from csboundary.labels.mask_import import SET_FILE
-from csboundary.pipeline.prediction.city_job import CityResult, PatchModel
 from csboundary.pipeline.prediction.city import predict_city
+from csboundary.pipeline.prediction.city_job import CityResult, PatchModel
 from csboundary.pipeline.prediction.run import evaluate_run
 
 HEADLINE = ("precision@5", "recall@5", "f1@2", "f1@5", "f1@10", "apls", "tlts")
@@ -51,8 +51,15 @@ def set_cities(set_dir: str | Path) -> list[Path]:
     return cities
 
 
-def predicted_city(city_dir: str | Path, model: PatchModel, *, assume_model_gsd: bool = False, batch_size: int = 1,
-                   progress: bool = False, stitch: StitchConfig = StitchConfig()) -> tuple[CityResult, list]:
+def predicted_city(
+    city_dir: str | Path,
+    model: PatchModel,
+    *,
+    assume_model_gsd: bool = False,
+    batch_size: int = 1,
+    progress: bool = False,
+    stitch: StitchConfig = StitchConfig(),
+) -> tuple[CityResult, list]:
     """``model``'s prediction of a labelled city directory, read as ``predict`` reads it, and the
     city's ground-truth lines. ``assume_model_gsd``: imagery without a pixel size is taken to be
     at the model's (imported crops), and RGB is read without warnings (NIR := green is the
@@ -76,7 +83,9 @@ def evaluate_city_dir(city_dir: Path, model: PatchModel, seed: int = 0) -> dict[
     return scores
 
 
-def evaluate_city(city_dir: str | Path, model: PatchModel, seed: int = 0, batch_size: int = 1, progress: bool = True) -> dict[str, dict]:
+def evaluate_city(
+    city_dir: str | Path, model: PatchModel, seed: int = 0, batch_size: int = 1, progress: bool = True
+) -> dict[str, dict]:
     """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
     ``model`` on a city directory with ground truth, without writing the prediction."""
     result, lines = predicted_city(city_dir, model, batch_size=batch_size, progress=progress)
@@ -115,7 +124,9 @@ def set_review_effort(reviews: list[dict]) -> dict[str, float]:
         out[f"{order}_ratio_to_scratch"] = minutes / scratch if scratch else math.nan
         hit = [r for r in reviews if math.isfinite(r["orders"][order]["minutes_to_target_f1"])]
         hit_km = sum(r["true_boundary_km"] or 0.0 for r in hit)
-        out[f"{order}_to_target_min_per_km"] = sum(r["orders"][order]["minutes_to_target_f1"] for r in hit) / hit_km if hit_km else math.nan
+        out[f"{order}_to_target_min_per_km"] = (
+            sum(r["orders"][order]["minutes_to_target_f1"] for r in hit) / hit_km if hit_km else math.nan
+        )
         out[f"{order}_cities_reaching_target"] = len(hit)
     return out
 
@@ -138,10 +149,15 @@ def format_set(result: dict[str, Any]) -> str:
         lines.append(f"{name:{width}s}" + "".join(f"{m.get(h, float('nan')):13.3f}" for h in HEADLINE))
     review = result.get("review_effort")
     if review:
-        lines.append(f"review effort over {review['true_boundary_km']:.2f} km of true boundary: from scratch "
-                     f"{review['scratch_min_per_km']:.1f} min/km; corrected draft " + ", ".join(
-                         f"{o} order {review[o + '_min_per_km']:.1f} min/km = {review[o + '_ratio_to_scratch']:.2f}x "
-                         f"(to the target F1@5 {review[o + '_to_target_min_per_km']:.1f} "
-                         f"min/km, {review[o + '_cities_reaching_target']} of {review['cities']} cities reach it)"
-                         for o in ("confidence", "random") if o + "_min_per_km" in review))
+        lines.append(
+            f"review effort over {review['true_boundary_km']:.2f} km of true boundary: from scratch "
+            f"{review['scratch_min_per_km']:.1f} min/km; corrected draft "
+            + ", ".join(
+                f"{o} order {review[o + '_min_per_km']:.1f} min/km = {review[o + '_ratio_to_scratch']:.2f}x "
+                f"(to the target F1@5 {review[o + '_to_target_min_per_km']:.1f} "
+                f"min/km, {review[o + '_cities_reaching_target']} of {review['cities']} cities reach it)"
+                for o in ("confidence", "random")
+                if o + "_min_per_km" in review
+            )
+        )
     return "\n".join(lines)

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from csboundary.data.grid import Patch
-from csboundary.data.units import MODEL_GSD
 from csboundary.data.raster import Mosaic
+from csboundary.data.units import MODEL_GSD
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.settings import GraphSettings
 from csboundary.graph.vertex_extraction import extract_vertices
@@ -28,7 +28,9 @@ from csboundary.models.decoding import graph_from_adjacency
 @dataclass
 class OracleModel:
     labels: CityLabels
-    settings: GraphSettings = field(default_factory=lambda: GraphSettings(max_degree=None))  # every labelled edge, no degree cap
+    settings: GraphSettings = field(
+        default_factory=lambda: GraphSettings(max_degree=None)
+    )  # every labelled edge, no degree cap
     confidence = None  # the labels are sure
     collect_evidence = False
     pixel_size_m = MODEL_GSD
@@ -47,5 +49,9 @@ class OracleModel:
     def connect(self, patch: Patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
         offset = np.array([patch.expanded.col_off, patch.expanded.row_off], float)
         lab = self.labels
-        adjacency = adjacency_label(found.vertices + offset, lab.boundaries, lab.bounds, patch.expanded, lab.config.snap_tolerance_px)
-        return graph_from_adjacency(found, adjacency.astype(np.float32), self.settings.edge_threshold, self.settings.max_degree)
+        adjacency = adjacency_label(
+            found.vertices + offset, lab.boundaries, lab.bounds, patch.expanded, lab.config.snap_tolerance_px
+        )
+        return graph_from_adjacency(
+            found, adjacency.astype(np.float32), self.settings.edge_threshold, self.settings.max_degree
+        )

@@ -86,14 +86,20 @@ def write_lanelet2(graph: BoundaryGraph, path: str | Path, origin: tuple[float, 
         try:
             local = local_xy(projector, lon, lat)
         except Exception as exc:  # lanelet2 / pyproj raise their own types for points its zone cannot hold
-            raise InputError(path, f"the boundaries (near {float(lat[0]):.4f}, {float(lon[0]):.4f}) lie too far from the origin "
-                                   f"{origin[0]:.4f}, {origin[1]:.4f} for a UTM projector: give an --origin near them") from exc
+            raise InputError(
+                path,
+                f"the boundaries (near {float(lat[0]):.4f}, {float(lon[0]):.4f}) lie too far from the origin "
+                f"{origin[0]:.4f}, {origin[1]:.4f} for a UTM projector: give an --origin near them",
+            ) from exc
         if not np.isfinite(local).all():
-            raise InputError(path, f"the boundaries lie too far from the origin {origin[0]:.4f}, {origin[1]:.4f} for a UTM projector: "
-                                   "give an --origin near them")
+            raise InputError(
+                path,
+                f"the boundaries lie too far from the origin {origin[0]:.4f}, {origin[1]:.4f} for a UTM projector: "
+                "give an --origin near them",
+            )
         closed = len(coords) > 2 and np.allclose(coords[0], coords[-1], rtol=0, atol=1e-9)
         points = []
-        for x, y in (local[:-1] if closed else local):
+        for x, y in local[:-1] if closed else local:
             points.append(Point3d(next_id, float(x), float(y), 0.0))
             next_id += 1
         if closed:
@@ -105,12 +111,17 @@ def write_lanelet2(graph: BoundaryGraph, path: str | Path, origin: tuple[float, 
                 attributes["confidence" if name == "confidence_mean" else name] = f"{value:.4f}"
         lmap.add(LineString3d(next_id, points, AttributeMap(attributes)))
         next_id += 1
-    with naming_full_disk(path), atomic_path(path) as tmp:  # lanelet2 says a full disk as "Pugixml failed to write the map"
+    with (
+        naming_full_disk(path),
+        atomic_path(path) as tmp,
+    ):  # lanelet2 says a full disk as "Pugixml failed to write the map"
         lanelet2.io.write(str(tmp), lmap, projector)
     info = path.with_name(PROJECTOR_INFO)
     with naming_full_disk(info), atomic_path(info) as tmp:
-        tmp.write_text(f"projector_type: LocalCartesianUTM\nvertical_datum: WGS84\nmap_origin:\n  latitude: {origin[0]:.10f}\n"
-                       f"  longitude: {origin[1]:.10f}\n  altitude: 0.0\n")
+        tmp.write_text(
+            f"projector_type: LocalCartesianUTM\nvertical_datum: WGS84\nmap_origin:\n  latitude: {origin[0]:.10f}\n"
+            f"  longitude: {origin[1]:.10f}\n  altitude: 0.0\n"
+        )
     return {"path": path, "projector_info": info, "origin": origin, "linestrings": len(frame)}
 
 

@@ -36,10 +36,26 @@ def write_maps_cog(path: str | Path, mosaic: Mosaic, grid: PatchGrid, store: Run
     bands = BANDS[: min(len(BANDS), store.channels or 2)]
     scratch = path.with_name(f".{path.stem}.scratch-{os.getpid()}.tif")
     try:  # GDAL says a full disk as "Write failed" or "Write error at scanline": named as such
-        with naming_full_disk(path), rasterio.open(
-                scratch, "w", driver="GTiff", width=mosaic.width, height=mosaic.height, count=len(bands), dtype="uint8", crs=mosaic.crs,
-                transform=mosaic.transform, tiled=True, blockxsize=512, blockysize=512, compress="deflate", BIGTIFF="IF_SAFER",
-                SPARSE_OK=grid.planned is not None) as dst:
+        with (
+            naming_full_disk(path),
+            rasterio.open(
+                scratch,
+                "w",
+                driver="GTiff",
+                width=mosaic.width,
+                height=mosaic.height,
+                count=len(bands),
+                dtype="uint8",
+                crs=mosaic.crs,
+                transform=mosaic.transform,
+                tiled=True,
+                blockxsize=512,
+                blockysize=512,
+                compress="deflate",
+                BIGTIFF="IF_SAFER",
+                SPARSE_OK=grid.planned is not None,
+            ) as dst,
+        ):
             for patch in grid:
                 core = patch.core
                 values = store.load_core(patch.index)

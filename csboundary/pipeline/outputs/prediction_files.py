@@ -42,8 +42,9 @@ EDGES_LAYER = "edges"
 TRANSFORM_KEY = "csboundary_transform"  # the graph's pixel -> world transform, in the edges layer's metadata
 
 
-def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "boundaries", units: GroundUnits | None = None) -> dict[str,
-                                                                                                                                       Path]:
+def write_graph_outputs(
+    graph: BoundaryGraph, out_dir: str | Path, stem: str = "boundaries", units: GroundUnits | None = None
+) -> dict[str, Path]:
     """Write ``{stem}.gpkg``, ``{stem}.geojson`` and ``graph.json`` of a whole graph into ``out_dir``.
 
     The graph goes through :class:`GraphWriter` as one piece (its vertices keep their order;
@@ -55,7 +56,11 @@ def write_graph_outputs(graph: BoundaryGraph, out_dir: str | Path, stem: str = "
     if graph.transform is None:
         raise ValueError("graph has no transform: world coordinates are unknown")
     out_dir = Path(out_dir)
-    paths = {"gpkg": out_dir / f"{stem}.gpkg", "geojson": out_dir / f"{stem}.geojson", "graph_json": out_dir / "graph.json"}
+    paths = {
+        "gpkg": out_dir / f"{stem}.gpkg",
+        "geojson": out_dir / f"{stem}.geojson",
+        "graph_json": out_dir / "graph.json",
+    }
     with ExitStack() as stack:
         tmp = {key: stack.enter_context(atomic_path(path)) for key, path in paths.items()}
         writer = GraphWriter(tmp, graph.crs, graph.transform, units or graph_units(graph), stem, shown=paths)
@@ -88,8 +93,15 @@ class GraphWriter:
     ``graph_json``; ``shown``: their names in messages (a full disk names the file it could not
     write, by its final name rather than a temporary one; default ``paths``)."""
 
-    def __init__(self, paths: dict[str, Path], crs: str | None, transform, units: GroundUnits, stem: str = "boundaries",
-                 shown: dict[str, Path] | None = None):
+    def __init__(
+        self,
+        paths: dict[str, Path],
+        crs: str | None,
+        transform,
+        units: GroundUnits,
+        stem: str = "boundaries",
+        shown: dict[str, Path] | None = None,
+    ):
         if transform is None:
             raise ValueError("graph has no transform: world coordinates are unknown")
         self.paths, self.crs, self.transform, self.units, self.stem = paths, crs, transform, units, stem
@@ -128,7 +140,7 @@ class GraphWriter:
             self._append(*boundary_frames([], 0, self.crs, self.transform, self.units))
         with self._writing("graph_json"):
             self._edges_part.seek(0)
-            self._json.write("], \"edges\": [")
+            self._json.write('], "edges": [')
             shutil.copyfileobj(self._edges_part, self._json)
             self._json.write("]}")
             self._json.close()  # the buffer's last bytes reach the disk here: a full disk shows now
@@ -147,8 +159,11 @@ class GraphWriter:
                 file.close()
 
     def _add_piece(self, piece: StreamPiece) -> None:
-        world = np.stack(pixel_to_world(self.transform, piece.vertices[:, 0], piece.vertices[:, 1]),
-                         axis=1) if len(piece.vertices) else None
+        world = (
+            np.stack(pixel_to_world(self.transform, piece.vertices[:, 0], piece.vertices[:, 1]), axis=1)
+            if len(piece.vertices)
+            else None
+        )
         self.counts["vertices"] += len(piece.vertices)
         for item in vertex_items(piece.vertices, world, piece.vertex_kinds):
             self._json.write(("" if self._first_vertex else ", ") + json.dumps(item))
@@ -168,8 +183,14 @@ class GraphWriter:
         append = self._layers_started
         with self._writing("gpkg"):
             _write_layer(boundaries, self.paths["gpkg"], BOUNDARIES_LAYER, "GPKG", append)
-            _write_layer(edges, self.paths["gpkg"], EDGES_LAYER, "GPKG", append,
-                         None if append else {TRANSFORM_KEY: ",".join(repr(float(x)) for x in list(self.transform)[:6])})
+            _write_layer(
+                edges,
+                self.paths["gpkg"],
+                EDGES_LAYER,
+                "GPKG",
+                append,
+                None if append else {TRANSFORM_KEY: ",".join(repr(float(x)) for x in list(self.transform)[:6])},
+            )
         with self._writing("geojson"):
             self._geojson.add(boundaries)
         self._layers_started = True
@@ -193,8 +214,11 @@ class _GeoJSONWriter:
         columns = [c for c in frame.columns if c != frame.geometry.name]
         for values, geometry in zip(frame[columns].itertuples(index=False, name=None), frame.geometry):
             properties = {c: _json_value(v) for c, v in zip(columns, values)}
-            feature = {"type": "Feature", "properties": properties,
-                       "geometry": {"type": "LineString", "coordinates": np.asarray(geometry.coords)[:, :2].tolist()}}
+            feature = {
+                "type": "Feature",
+                "properties": properties,
+                "geometry": {"type": "LineString", "coordinates": np.asarray(geometry.coords)[:, :2].tolist()},
+            }
             self._file.write(("" if self._first else ",\n") + json.dumps(feature))
             self._first = False
 
@@ -279,10 +303,17 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
         raise InputError(gpkg, f"its pixel grid ({TRANSFORM_KEY} = {values!r}) is not six numbers") from None
     if bounds is not None:
         extent = prediction_extent(gpkg, transform, info)
-        if extent is not None and not (bounds[0] < extent[2] and extent[0] < bounds[2] and bounds[1] < extent[3] and extent[1] < bounds[3]):
-            raise InputError(source, f"--bounds {','.join(f'{v:g}' for v in bounds)} lies outside the prediction "
-                                     f"({', '.join(f'{v:.6g}' for v in extent)} in {info.get('crs') or 'pixels'})")
-    missing = [c for c in ("edge_id", "u", "v", "kind", "confidence", "patch_row", "patch_col") if c not in frame.columns]
+        if extent is not None and not (
+            bounds[0] < extent[2] and extent[0] < bounds[2] and bounds[1] < extent[3] and extent[1] < bounds[3]
+        ):
+            raise InputError(
+                source,
+                f"--bounds {','.join(f'{v:g}' for v in bounds)} lies outside the prediction "
+                f"({', '.join(f'{v:.6g}' for v in extent)} in {info.get('crs') or 'pixels'})",
+            )
+    missing = [
+        c for c in ("edge_id", "u", "v", "kind", "confidence", "patch_row", "patch_col") if c not in frame.columns
+    ]
     if missing:
         raise InputError(gpkg, f"its {EDGES_LAYER} layer lacks {', '.join(missing)} (not a csboundary prediction)")
     frame = frame.sort_values("edge_id", kind="stable")
@@ -298,9 +329,14 @@ def read_district(source: str | Path, bounds: tuple[float, float, float, float] 
         position.setdefault(u, line[0])
         position.setdefault(v, line[-1])
     graph = BoundaryGraph(
-        np.array([position[int(x)] for x in ids], float).reshape(-1, 2), np.searchsorted(ids, ends).reshape(-1, 2),
-        edge_kinds=frame["kind"].astype(str).tolist(), edge_polylines=lines, edge_scores=frame["confidence"].to_numpy(float),
-        edge_patches=frame[["patch_row", "patch_col"]].to_numpy(np.int64).reshape(-1, 2), transform=transform, crs=info.get("crs"),
+        np.array([position[int(x)] for x in ids], float).reshape(-1, 2),
+        np.searchsorted(ids, ends).reshape(-1, 2),
+        edge_kinds=frame["kind"].astype(str).tolist(),
+        edge_polylines=lines,
+        edge_scores=frame["confidence"].to_numpy(float),
+        edge_patches=frame[["patch_row", "patch_col"]].to_numpy(np.int64).reshape(-1, 2),
+        transform=transform,
+        crs=info.get("crs"),
     )
     return District(graph, frame["edge_id"].to_numpy(np.int64), ids)
 
@@ -345,8 +381,9 @@ def graph_frames(graph: BoundaryGraph, units: GroundUnits | None = None) -> tupl
     return boundary_frames(stream.finish(), 0, graph.crs, graph.transform, units or graph_units(graph))
 
 
-def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | None, transform,
-                    units: GroundUnits) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
+def boundary_frames(
+    boundaries: list[StreamBoundary], first_id: int, crs: str | None, transform, units: GroundUnits
+) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
     """The ``road_boundaries`` rows of complete boundaries (numbered from ``first_id``) and the
     ``edges`` rows of their edges (by edge number), in world coordinates; lengths in metres.
 
@@ -359,8 +396,19 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
     def world(line: np.ndarray) -> np.ndarray:
         return np.stack(pixel_to_world(transform, line[:, 0], line[:, 1]), axis=1)
 
-    rows: dict[str, list] = {key: [] for key in ("length_m", "n_edges", "confidence_mean", "confidence_min", "review_draft",
-                                                 "corner_edges", "skeleton_edges", "patches")}
+    rows: dict[str, list] = {
+        key: []
+        for key in (
+            "length_m",
+            "n_edges",
+            "confidence_mean",
+            "confidence_min",
+            "review_draft",
+            "corner_edges",
+            "skeleton_edges",
+            "patches",
+        )
+    }
     costs = ReviewCosts()
     pixel_m = metres_per_px(units, transform, costs)
     geometry, edge_rows = [], []
@@ -378,13 +426,27 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
         rows["review_draft"].append(keeps_boundary(rows["confidence_mean"][-1], boundary.polyline, costs, pixel_m))
         rows["confidence_min"].append(float(score[known].min()) if known.any() else np.nan)
         rows["corner_edges"].append(kinds.count("corner"))
-        rows["skeleton_edges"].append(kinds.count("skeleton"))  # added from the segmentation skeleton (graph/skeleton_fill.py)
+        rows["skeleton_edges"].append(
+            kinds.count("skeleton")
+        )  # added from the segmentation skeleton (graph/skeleton_fill.py)
         distinct = dict.fromkeys(e.patch for e in boundary.edges if e.patch is not None and min(e.patch) >= 0)
         rows["patches"].append(";".join(f"{r},{col}" for r, col in distinct))
         for e, edge_world, metres, kind in zip(boundary.edges, lines, length, kinds):
             patch = e.patch if e.patch is not None and min(e.patch) >= 0 else (-1, -1)
-            edge_rows.append((e.id, c, e.u, e.v, np.nan if e.score is None else e.score, kind == "corner", kind, *patch, metres,
-                              LineString(edge_world)))
+            edge_rows.append(
+                (
+                    e.id,
+                    c,
+                    e.u,
+                    e.v,
+                    np.nan if e.score is None else e.score,
+                    kind == "corner",
+                    kind,
+                    *patch,
+                    metres,
+                    LineString(edge_world),
+                )
+            )
     edge_rows.sort(key=lambda row: row[0])
     boundaries_frame = gpd.GeoDataFrame(
         {
@@ -421,14 +483,21 @@ def boundary_frames(boundaries: list[StreamBoundary], first_id: int, crs: str | 
     return boundaries_frame, edges_frame
 
 
-def _write_layer(frame: gpd.GeoDataFrame, path: Path, layer: str | None, driver: str, append: bool = False,
-                 metadata: dict | None = None) -> None:
+def _write_layer(
+    frame: gpd.GeoDataFrame,
+    path: Path,
+    layer: str | None,
+    driver: str,
+    append: bool = False,
+    metadata: dict | None = None,
+) -> None:
     """One layer into ``path`` (a GeoPackage gains a layer per call), or more rows into it with
     ``append``; the geometry type is given so that an empty layer still declares LineString."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="'crs' was not provided")  # a graph without CRS
-        pyogrio.write_dataframe(frame, path, layer=layer, driver=driver, geometry_type="LineString", append=append,
-                                layer_metadata=metadata)
+        pyogrio.write_dataframe(
+            frame, path, layer=layer, driver=driver, geometry_type="LineString", append=append, layer_metadata=metadata
+        )
 
 
 def _centre(graph: BoundaryGraph) -> tuple[float, float] | None:
@@ -436,5 +505,3 @@ def _centre(graph: BoundaryGraph) -> tuple[float, float] | None:
         return None
     xs, ys = pixel_to_world(graph.transform, graph.vertices[:, 0], graph.vertices[:, 1])
     return float(np.mean(xs)), float(np.mean(ys))
-
-

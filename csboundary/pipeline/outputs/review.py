@@ -22,10 +22,16 @@ from csboundary.graph.boundaries import Boundary, graph_boundaries
 from csboundary.graph.chains import edge_line
 from csboundary.graph.layer_edits import boundary_layer_edits, layer_edits
 from csboundary.graph.review_edits import EditError, apply_edits
-from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
-from csboundary.pipeline.outputs.prediction_files import (EDGES_LAYER, graph_units, imagery_extent, metres_per_px, read_district,
-                                                          write_graph_outputs)
 from csboundary.metrics.review_time import ReviewCosts, review_draft
+from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, PROJECTOR_INFO, read_origin, write_lanelet2
+from csboundary.pipeline.outputs.prediction_files import (
+    EDGES_LAYER,
+    graph_units,
+    imagery_extent,
+    metres_per_px,
+    read_district,
+    write_graph_outputs,
+)
 from csboundary.viz.review_page import write_review_page
 
 REVIEW_LOG = "review.json"
@@ -36,10 +42,16 @@ HELD_BACK_LAYER = "held_back"  # the boundaries not worth a look (review --gpkg;
 
 def graph_metres_per_px(graph: BoundaryGraph, costs: ReviewCosts = ReviewCosts()) -> float:
     """Ground size of the graph's pixels (the costs' assumed size when the graph has no CRS)."""
-    return metres_per_px(graph_units(graph), graph.transform, costs) if graph.transform is not None else costs.assumed_metres_per_px
+    return (
+        metres_per_px(graph_units(graph), graph.transform, costs)
+        if graph.transform is not None
+        else costs.assumed_metres_per_px
+    )
 
 
-def review_boundaries(graph: BoundaryGraph, costs: ReviewCosts = ReviewCosts()) -> tuple[list[Boundary], np.ndarray, float]:
+def review_boundaries(
+    graph: BoundaryGraph, costs: ReviewCosts = ReviewCosts()
+) -> tuple[list[Boundary], np.ndarray, float]:
     """What a reviewer acts on: the graph's boundaries, which of them are in the review draft
     (:func:`csboundary.metrics.review_time.review_draft`), and the metres per pixel that priced them."""
     metres_per_px = graph_metres_per_px(graph, costs)
@@ -67,8 +79,13 @@ def city_ground_truth(inputs: list[Path]) -> Path | None:
     return path if layout.is_city_dir(city_dir) and path.exists() else None
 
 
-def write_review(prediction: Path, out: Path | None = None, ground_truth: Path | None = None, progress: bool = True,
-                 bounds: tuple[float, float, float, float] | None = None) -> dict:
+def write_review(
+    prediction: Path,
+    out: Path | None = None,
+    ground_truth: Path | None = None,
+    progress: bool = True,
+    bounds: tuple[float, float, float, float] | None = None,
+) -> dict:
     """The review page of ``prediction`` in ``out`` (default ``prediction/review``), with
     ``ground_truth`` (default: the city's own) as a toggle; returns page, edges, ground truth.
 
@@ -89,18 +106,43 @@ def write_review(prediction: Path, out: Path | None = None, ground_truth: Path |
             try:
                 mosaic = stack.enter_context(mosaic.crop(mosaic.window_from_bounds(*bounds)))
             except ValueError:
-                raise InputError(prediction, f"--bounds {','.join(map(str, bounds))} lies outside the imagery {mosaic.bounds}") from None
+                raise InputError(
+                    prediction, f"--bounds {','.join(map(str, bounds))} lies outside the imagery {mosaic.bounds}"
+                ) from None
             district = read_district(prediction, bounds)
             graph, ids = district.graph, (district.edge_ids, district.vertex_ids)
-        lines = list(read_ground_truth(ground_truth, mosaic.crs, bbox=bounds).geometry) if ground_truth is not None else []
+        lines = (
+            list(read_ground_truth(ground_truth, mosaic.crs, bbox=bounds).geometry) if ground_truth is not None else []
+        )
         boundaries, draft, metres_per_px = review_boundaries(graph)
-        rows = [{"edges": b.edges.tolist(), "score": b.confidence if np.isfinite(b.confidence) else None, "draft": bool(keep),
-                 "length_m": b.length_px * metres_per_px} for b, keep in zip(boundaries, draft)]
-        page = write_review_page(graph, mosaic, out, lines, progress=progress,
-                                 fingerprint=graph_fingerprint(prediction), ids=ids, review_costs=ReviewCosts().to_dict(),
-                                 boundaries=rows, metres_per_px=metres_per_px)
-    return {"page": page, "edges": graph.n_edges, "boundaries": len(boundaries), "draft": int(draft.sum()),
-            "ground_truth": ground_truth if lines else None}
+        rows = [
+            {
+                "edges": b.edges.tolist(),
+                "score": b.confidence if np.isfinite(b.confidence) else None,
+                "draft": bool(keep),
+                "length_m": b.length_px * metres_per_px,
+            }
+            for b, keep in zip(boundaries, draft)
+        ]
+        page = write_review_page(
+            graph,
+            mosaic,
+            out,
+            lines,
+            progress=progress,
+            fingerprint=graph_fingerprint(prediction),
+            ids=ids,
+            review_costs=ReviewCosts().to_dict(),
+            boundaries=rows,
+            metres_per_px=metres_per_px,
+        )
+    return {
+        "page": page,
+        "edges": graph.n_edges,
+        "boundaries": len(boundaries),
+        "draft": int(draft.sum()),
+        "ground_truth": ground_truth if lines else None,
+    }
 
 
 def write_review_layers(prediction: Path, path: Path) -> dict:
@@ -128,19 +170,34 @@ def write_review_layers(prediction: Path, path: Path) -> dict:
         picked = [b for b, d in zip(boundaries, draft) if d == keep]
         picked.sort(key=lambda b: (not np.isfinite(b.confidence), b.confidence if np.isfinite(b.confidence) else 0.0))
         world = [graph.to_world(b.polyline) for b in picked]
-        return gpd.GeoDataFrame({"edge_ids": np.array([";".join(map(str, b.edges.tolist())) for b in picked], dtype=object),
-                                 "n_edges": np.array([len(b.edges) for b in picked], dtype=np.int64),
-                                 "confidence": np.array([b.confidence for b in picked], dtype=float),
-                                 "length_m": np.array([b.length_px * metres_per_px for b in picked], dtype=float)},
-                                geometry=gpd.GeoSeries([LineString(line) for line in world], crs=crs), crs=crs)
+        return gpd.GeoDataFrame(
+            {
+                "edge_ids": np.array([";".join(map(str, b.edges.tolist())) for b in picked], dtype=object),
+                "n_edges": np.array([len(b.edges) for b in picked], dtype=np.int64),
+                "confidence": np.array([b.confidence for b in picked], dtype=float),
+                "length_m": np.array([b.length_px * metres_per_px for b in picked], dtype=float),
+            },
+            geometry=gpd.GeoSeries([LineString(line) for line in world], crs=crs),
+            crs=crs,
+        )
 
     complete = gpd.GeoDataFrame({"note": np.array([], dtype=object)}, geometry=gpd.GeoSeries([], crs=crs), crs=crs)
     with atomic_path(path) as tmp:
         # GeoPackage 1.2: what the GDAL of older GIS releases (QGIS 3.22's 3.6) edits without a warning
-        pyogrio.write_dataframe(frame(True), tmp, layer=DRAFT_LAYER, driver="GPKG", geometry_type="LineString",
-                                dataset_options={"VERSION": "1.2"})
-        pyogrio.write_dataframe(frame(False), tmp, layer=HELD_BACK_LAYER, driver="GPKG", geometry_type="LineString", append=True)
-        pyogrio.write_dataframe(complete, tmp, layer=COMPLETE_LAYER, driver="GPKG", geometry_type="Polygon", append=True)
+        pyogrio.write_dataframe(
+            frame(True),
+            tmp,
+            layer=DRAFT_LAYER,
+            driver="GPKG",
+            geometry_type="LineString",
+            dataset_options={"VERSION": "1.2"},
+        )
+        pyogrio.write_dataframe(
+            frame(False), tmp, layer=HELD_BACK_LAYER, driver="GPKG", geometry_type="LineString", append=True
+        )
+        pyogrio.write_dataframe(
+            complete, tmp, layer=COMPLETE_LAYER, driver="GPKG", geometry_type="Polygon", append=True
+        )
     return {"gpkg": path, "boundaries": int(draft.sum()), "held_back": int((~draft).sum()), "edges": graph.n_edges}
 
 
@@ -197,8 +254,11 @@ def _apply_review(prediction: Path, edits: Path) -> dict:
     before = graph_fingerprint(prediction)
     made_on = props.get("graph_sha256")
     if made_on is not None and made_on != before:
-        raise InputError(edits, "made on another version of graph.json (its fingerprint differs): "
-                                "write the review page again (csboundary review) and redo the edits there")
+        raise InputError(
+            edits,
+            "made on another version of graph.json (its fingerprint differs): "
+            "write the review page again (csboundary review) and redo the edits there",
+        )
     held = held_back_deletions(graph, features, reviewed)
     try:
         updated, record = apply_edits(graph, features + held, extent=imagery_extent(prediction))
@@ -209,17 +269,26 @@ def _apply_review(prediction: Path, edits: Path) -> dict:
     if (prediction / LANELET2_MAP).exists():
         info = prediction / PROJECTOR_INFO
         write_lanelet2(updated, prediction / LANELET2_MAP, read_origin(info) if info.exists() else None)
-    entry = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "edits": str(edits), "edits_sha256": edits_sha, "graph_sha256_before": before,
-             "graph_sha256_after": graph_fingerprint(prediction), "edges_before": graph.n_edges, "edges_after": updated.n_edges,
-             "held_back_deleted": [f["properties"]["edge"] for f in held], **record.to_dict()}
+    entry = {
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "edits": str(edits),
+        "edits_sha256": edits_sha,
+        "graph_sha256_before": before,
+        "graph_sha256_after": graph_fingerprint(prediction),
+        "edges_before": graph.n_edges,
+        "edges_after": updated.n_edges,
+        "held_back_deleted": [f["properties"]["edge"] for f in held],
+        **record.to_dict(),
+    }
     log["reviews"].append(entry)
     with atomic_path(log_path) as tmp:
         tmp.write_text(json.dumps(log, indent=1) + "\n")
     return {**entry, "log": log_path}
 
 
-
-def gpkg_edits(graph: BoundaryGraph, path: Path, reviewed: tuple[list[Boundary], np.ndarray, float] | None = None) -> list[dict]:
+def gpkg_edits(
+    graph: BoundaryGraph, path: Path, reviewed: tuple[list[Boundary], np.ndarray, float] | None = None
+) -> list[dict]:
     """The page's edit features equivalent to ``path``: the review GeoPackage ``review --gpkg``
     wrote (its ``boundaries`` and ``held_back`` layers as a person edited them,
     :func:`~csboundary.graph.layer_edits.boundary_layer_edits`), or a copy of the prediction's
@@ -236,8 +305,11 @@ def gpkg_edits(graph: BoundaryGraph, path: Path, reviewed: tuple[list[Boundary],
     except Exception as exc:  # GDAL's errors for a file that is not a GeoPackage
         raise InputError(path, f"not a readable GeoPackage ({' '.join(str(exc).split())[:200]})") from None
     if not frames:
-        raise InputError(path, f"has no {DRAFT_LAYER} or {EDGES_LAYER} layer: edit the file csboundary review --gpkg writes, "
-                               "or a copy of the prediction's boundaries.gpkg")
+        raise InputError(
+            path,
+            f"has no {DRAFT_LAYER} or {EDGES_LAYER} layer: edit the file csboundary review --gpkg writes, "
+            "or a copy of the prediction's boundaries.gpkg",
+        )
     needed = ("edge_ids",) if boundary_route else ("edge_id", "u", "v")
     for name, frame in frames.items():
         missing = [c for c in needed if c not in frame.columns]
@@ -250,29 +322,44 @@ def gpkg_edits(graph: BoundaryGraph, path: Path, reviewed: tuple[list[Boundary],
     for number, geometry in enumerate([] if complete is None else complete.geometry):
         for polygon in getattr(geometry, "geoms", [geometry]):
             if polygon is None or polygon.geom_type != "Polygon":
-                raise InputError(path, f"its {COMPLETE_LAYER} layer holds a {getattr(polygon, 'geom_type', 'missing')} geometry; "
-                                       "draw polygons there")
+                raise InputError(
+                    path,
+                    f"its {COMPLETE_LAYER} layer holds a {getattr(polygon, 'geom_type', 'missing')} geometry; "
+                    "draw polygons there",
+                )
             if polygon.is_empty:
-                raise InputError(path, f"feature {number} of its {COMPLETE_LAYER} layer is an empty polygon: draw the area, or delete "
-                                       "the feature")
+                raise InputError(
+                    path,
+                    f"feature {number} of its {COMPLETE_LAYER} layer is an empty polygon: draw the area, or delete "
+                    "the feature",
+                )
             areas.append([[float(x), float(y)] for x, y, *_ in polygon.exterior.coords])
     features_in = sum(len(frame) for frame in frames.values())
     if features_in == 0 and graph.n_edges:
-        raise InputError(path, f"its {', '.join(frames)} layer{'s hold' if len(frames) > 1 else ' holds'} no feature: applied, that "
-                               f"would delete all {graph.n_edges} edges; to start the map afresh, delete graph.json's edges on "
-                               "purpose (review page: Delete below over the whole city)")
+        raise InputError(
+            path,
+            f"its {', '.join(frames)} layer{'s hold' if len(frames) > 1 else ' holds'} no feature: applied, that "
+            f"would delete all {graph.n_edges} edges; to start the map afresh, delete graph.json's edges on "
+            "purpose (review page: Delete below over the whole city)",
+        )
     try:
         if boundary_route:
-            rows = [(_edge_ids(value, path, name, number), line, name == DRAFT_LAYER)
-                    for name, frame in frames.items()
-                    for number, (value, line) in enumerate(zip(frame["edge_ids"], _lines(frame, path, name)))]
+            rows = [
+                (_edge_ids(value, path, name, number), line, name == DRAFT_LAYER)
+                for name, frame in frames.items()
+                for number, (value, line) in enumerate(zip(frame["edge_ids"], _lines(frame, path, name)))
+            ]
             boundaries, draft, _ = reviewed or review_boundaries(graph)
             held = frozenset(tuple(sorted(b.edges.tolist())) for b, d in zip(boundaries, draft) if not d)
             return boundary_layer_edits(graph, rows, areas, held)
         edges = frames[EDGES_LAYER]
         rows = []
-        for number, (edge_id, u, v, line) in enumerate(zip(edges["edge_id"], edges["u"], edges["v"], _lines(edges, path, EDGES_LAYER))):
-            known = [_whole(value, path, number, name) for value, name in ((edge_id, "edge_id"), (u, "u"), (v, "v"))]  # NULL: drawn
+        for number, (edge_id, u, v, line) in enumerate(
+            zip(edges["edge_id"], edges["u"], edges["v"], _lines(edges, path, EDGES_LAYER))
+        ):
+            known = [
+                _whole(value, path, number, name) for value, name in ((edge_id, "edge_id"), (u, "u"), (v, "v"))
+            ]  # NULL: drawn
             rows.append((*(known if known[0] is not None else (None, None, None)), line))
         return layer_edits(graph, rows, areas)
     except EditError as exc:
@@ -300,7 +387,9 @@ def _whole(value, path: Path, number: int, column: str) -> int | None:
             return int(number_value)
     except (TypeError, ValueError, OverflowError):
         pass
-    raise InputError(path, f"feature {number} of its {EDGES_LAYER} layer: {column} {str(value)[:40]!r} is not a whole number")
+    raise InputError(
+        path, f"feature {number} of its {EDGES_LAYER} layer: {column} {str(value)[:40]!r} is not a whole number"
+    )
 
 
 def _edge_ids(value, path: Path, layer: str, number: int) -> list[int] | None:
@@ -310,22 +399,31 @@ def _edge_ids(value, path: Path, layer: str, number: int) -> list[int] | None:
     try:
         return [int(part) for part in str(value).split(";")]
     except ValueError:
-        raise InputError(path, f"feature {number} of its {layer} layer: edge_ids {str(value)[:40]!r} is not a list of edge "
-                               "numbers (3;4;5)") from None
+        raise InputError(
+            path,
+            f"feature {number} of its {layer} layer: edge_ids {str(value)[:40]!r} is not a list of edge "
+            "numbers (3;4;5)",
+        ) from None
 
 
-def held_back_deletions(graph: BoundaryGraph, features: list[dict],
-                        reviewed: tuple[list[Boundary], np.ndarray, float] | None = None) -> list[dict]:
+def held_back_deletions(
+    graph: BoundaryGraph, features: list[dict], reviewed: tuple[list[Boundary], np.ndarray, float] | None = None
+) -> list[dict]:
     """Delete edits for the boundaries held back from the review draft that lie inside an area the
     edits mark complete (their middle inside it) and that no edit touches: the reviewer vouches for
     what the page or the GIS showed there, and fine-tuning must not learn them as curbs."""
     from shapely.geometry import Point, Polygon
 
-    areas = [Polygon(f["geometry"]["coordinates"][0]) for f in features
-             if f.get("properties", {}).get("action") == "complete" and f.get("geometry", {}).get("type") == "Polygon"]
+    areas = [
+        Polygon(f["geometry"]["coordinates"][0])
+        for f in features
+        if f.get("properties", {}).get("action") == "complete" and f.get("geometry", {}).get("type") == "Polygon"
+    ]
     if not areas or graph.transform is None:
         return []
-    touched = {f["properties"].get("edge") for f in features if f.get("properties", {}).get("action") in ("delete", "accept")}
+    touched = {
+        f["properties"].get("edge") for f in features if f.get("properties", {}).get("action") in ("delete", "accept")
+    }
     moved = {f["properties"].get("vertex") for f in features if f.get("properties", {}).get("action") == "move"}
     boundaries, draft, _ = reviewed or review_boundaries(graph)
     out = []
@@ -338,8 +436,13 @@ def held_back_deletions(graph: BoundaryGraph, features: list[dict],
         if any(area.contains(Point(x, y)) for area in areas):
             for k in edges:
                 line = graph.to_world(edge_line(graph, k))
-                out.append({"type": "Feature", "properties": {"action": "delete", "edge": int(k)},
-                            "geometry": {"type": "LineString", "coordinates": line.tolist()}})
+                out.append(
+                    {
+                        "type": "Feature",
+                        "properties": {"action": "delete", "edge": int(k)},
+                        "geometry": {"type": "LineString", "coordinates": line.tolist()},
+                    }
+                )
     return out
 
 
@@ -352,5 +455,5 @@ def read_log(path: Path) -> dict:
         if not isinstance(log, dict) or not isinstance(log.get("reviews"), list):
             raise ValueError
     except ValueError as exc:
-        raise InputError(path, "damaged review log (not {\"reviews\": [...]}): move it aside to continue") from exc
+        raise InputError(path, 'damaged review log (not {"reviews": [...]}): move it aside to continue') from exc
     return log

@@ -46,29 +46,52 @@ def render_patch_labels(mosaic: Mosaic, labels_dir: str | Path, patch: Patch) ->
     with mosaic:
         read = mosaic.read(patch.expanded)
     core = patch.core_local
-    rgb = draw_patch_labels(to_display(read.data, read.valid), arrays, graph, (core.col_off, core.row_off, core.col_end, core.row_end))
+    rgb = draw_patch_labels(
+        to_display(read.data, read.valid), arrays, graph, (core.col_off, core.row_off, core.col_end, core.row_end)
+    )
     return rgb, graph
 
 
-def render_view(mosaic: Mosaic, lines: list, window: PixelWindow | None = None, bounds: tuple[float, float, float, float] | None = None,
-                max_size: int = 2000, grid: bool = False, source: str | Path = "imagery",
-                lines_source: str | Path | None = None) -> tuple[np.ndarray, PixelWindow]:
+def render_view(
+    mosaic: Mosaic,
+    lines: list,
+    window: PixelWindow | None = None,
+    bounds: tuple[float, float, float, float] | None = None,
+    max_size: int = 2000,
+    grid: bool = False,
+    source: str | Path = "imagery",
+    lines_source: str | Path | None = None,
+) -> tuple[np.ndarray, PixelWindow]:
     """(h, w, 3) picture of a pixel ``window`` or world ``bounds`` (default: everything) with
     ``lines`` over it, downsampled to ``max_size``, and the window drawn (clipped to the
     imagery). InputError naming ``source`` (the imagery) when the window misses it; a warning
     naming ``lines_source`` when no line falls in it (wrong CRS?)."""
     with mosaic:
-        win = window if window is not None else mosaic.window_from_bounds(*bounds) if bounds is not None else mosaic.window
+        win = (
+            window
+            if window is not None
+            else mosaic.window_from_bounds(*bounds)
+            if bounds is not None
+            else mosaic.window
+        )
         inside = win.intersection(mosaic.window)
         if inside is None or inside.is_empty:
             where = f" in {mosaic.crs.to_string()} coordinates" if bounds is not None and mosaic.crs is not None else ""
-            raise InputError(source, f"the window{where} lies outside the imagery ({mosaic.width}x{mosaic.height} px, "
-                                     f"bounds {tuple(round(b, 3) for b in mosaic.bounds)})")
+            raise InputError(
+                source,
+                f"the window{where} lies outside the imagery ({mosaic.width}x{mosaic.height} px, "
+                f"bounds {tuple(round(b, 3) for b in mosaic.bounds)})",
+            )
         if lines and not any_line_in(lines, mosaic, inside):
-            warnings.warn(f"{lines_source or source}: none of the {len(lines)} boundaries lies in the window (wrong CRS, or a file "
-                          f"without one?)",
-                          InputWarning, stacklevel=2)
-        rgb = render_window(mosaic, inside, lines, max_size=max_size, grid=PatchGrid.for_mosaic(mosaic) if grid else None)
+            warnings.warn(
+                f"{lines_source or source}: none of the {len(lines)} boundaries lies in the window (wrong CRS, or a file "
+                f"without one?)",
+                InputWarning,
+                stacklevel=2,
+            )
+        rgb = render_window(
+            mosaic, inside, lines, max_size=max_size, grid=PatchGrid.for_mosaic(mosaic) if grid else None
+        )
     return rgb, inside
 
 

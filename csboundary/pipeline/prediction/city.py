@@ -37,8 +37,17 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.graph_stream import StreamBoundary, StreamPiece
 from csboundary.graph.stitching import StitchConfig
 from csboundary.pipeline.prediction.city_blocks import BLOCK, CityCollector, CityGraphRecipe, stream_city_graph
-from csboundary.pipeline.prediction.city_job import (CPU, DEFAULT_CHANNELS, STAGES, CityJob, CityResult, PatchModel, StageTimer,
-                                                     empty_graph, reads_evidence)
+from csboundary.pipeline.prediction.city_job import (
+    CPU,
+    DEFAULT_CHANNELS,
+    STAGES,
+    CityJob,
+    CityResult,
+    PatchModel,
+    StageTimer,
+    empty_graph,
+    reads_evidence,
+)
 from csboundary.pipeline.prediction.edge_confidence import core_sampler
 from csboundary.pipeline.prediction.map_stitching import Index, WindowSchedule
 from csboundary.pipeline.prediction.run_store import RunStore
@@ -55,7 +64,13 @@ class CityRun:
     """The bookkeeping of one run, whoever does the work: which windows are ready, which maps to
     drop, the patch graphs, the seconds per stage, the progress bar."""
 
-    def __init__(self, job: CityJob, batch_size: int, progress: bool, on_window: Callable[[Patch, np.ndarray], None] | None = None):
+    def __init__(
+        self,
+        job: CityJob,
+        batch_size: int,
+        progress: bool,
+        on_window: Callable[[Patch, np.ndarray], None] | None = None,
+    ):
         self.job, self.on_window = job, on_window
         grid, store = job.grid, job.store
         job.blank = job.find_blank()
@@ -67,7 +82,9 @@ class CityRun:
         self.schedule = WindowSchedule(grid, graphs_done=graphs)
         # windows with only blank patches around them have no boundary: done before the run, with
         # nothing stored, so a mostly empty mosaic costs little more than its data
-        self.quiet = frozenset(i for i, around in self.schedule.neighbourhoods.items() if all(q in job.blank for q in around))
+        self.quiet = frozenset(
+            i for i, around in self.schedule.neighbourhoods.items() if all(q in job.blank for q in around)
+        )
         store.mark_empty_cores(self.quiet)
         self.schedule.graphs_done |= self.quiet
         # maps a finished window no longer needs were dropped; they count as done
@@ -79,10 +96,20 @@ class CityRun:
         self.patch_graphs.update({i: empty_graph(grid.patch(*i)) for i in self.quiet})
         self.batches = [b for b in fpn_batches(grid, batch_size) if not set(b) <= self.schedule.maps_done]
         self.seconds: dict[str, float] = defaultdict(float)
-        self.work = {"patches_predicted": 0, "windows_connected": 0, "patches_reused": len(reused - job.blank),
-                     "windows_reused": len(graphs - self.quiet)}
+        self.work = {
+            "patches_predicted": 0,
+            "windows_connected": 0,
+            "patches_reused": len(reused - job.blank),
+            "windows_reused": len(graphs - self.quiet),
+        }
         self.map_bytes_peak = store.held_map_bytes()
-        self.bar = tqdm(total=len(grid), initial=len(graphs | self.quiet), desc="predict patches", unit="patch", disable=not progress)
+        self.bar = tqdm(
+            total=len(grid),
+            initial=len(graphs | self.quiet),
+            desc="predict patches",
+            unit="patch",
+            disable=not progress,
+        )
 
     def add_seconds(self, seconds: dict[str, float]) -> None:
         for k, v in seconds.items():
@@ -136,8 +163,15 @@ class CityRun:
         graph, seconds = self.job.connect_window(index, maps)
         self.graph_finished(index, graph, seconds)
 
-    def finish(self, stitch: StitchConfig, progress: bool, writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
-               keep_graphs: bool = True, block: int = BLOCK, one_pass: bool = False) -> CityResult:
+    def finish(
+        self,
+        stitch: StitchConfig,
+        progress: bool,
+        writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
+        keep_graphs: bool = True,
+        block: int = BLOCK,
+        one_pass: bool = False,
+    ) -> CityResult:
         """Make the city graph block by block (:mod:`csboundary.pipeline.prediction.city_blocks`) and hand
         each block's vertices and edges, and the boundaries it completes, to ``writer``. With
         ``keep_graphs`` the result also holds the whole city graph and every patch graph (the
@@ -151,8 +185,16 @@ class CityRun:
         grid, mosaic, store, model = self.job.grid, self.job.mosaic, self.job.store, self.job.model
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         settings = model.settings
-        recipe = CityGraphRecipe(stitch, crs, settings.min_fragment_px, settings.attach_px, model.confidence, settings.min_confidence,
-                                 reads_evidence(model), block=block)
+        recipe = CityGraphRecipe(
+            stitch,
+            crs,
+            settings.min_fragment_px,
+            settings.attach_px,
+            model.confidence,
+            settings.min_confidence,
+            reads_evidence(model),
+            block=block,
+        )
         load_core = lambda index: store.load_core(index) if grid.is_planned(index) else None  # noqa: E731 (unplanned: no imagery, all zero)
         sample = core_sampler(grid, load_core, store.channels or DEFAULT_CHANNELS) if recipe.evidence else None
         counted: dict[Index, int] = {}
@@ -171,10 +213,25 @@ class CityRun:
         if keep_graphs and store.root is not None:
             self.patch_graphs = {p.index: load(p.index) for p in grid}
         graph, evidence = (whole or CityCollector(grid.transform, crs)).result()
-        seconds = {**{s: 0.0 for s in STAGES}, **{k: v for k, v in self.seconds.items() if k in STAGES or k.startswith(CPU)}}
-        return CityResult(graph, self.patch_graphs if keep_graphs else {}, grid, seconds,
-                          self.map_bytes_peak, len(self.job.store.empty_patches() | self.job.blank), dict(self.work), evidence,
-                          self.job.blank, made.seconds.get("outputs", 0.0), sum(counted.values()), made.close_pairs, made.busiest_core)
+        seconds = {
+            **{s: 0.0 for s in STAGES},
+            **{k: v for k, v in self.seconds.items() if k in STAGES or k.startswith(CPU)},
+        }
+        return CityResult(
+            graph,
+            self.patch_graphs if keep_graphs else {},
+            grid,
+            seconds,
+            self.map_bytes_peak,
+            len(self.job.store.empty_patches() | self.job.blank),
+            dict(self.work),
+            evidence,
+            self.job.blank,
+            made.seconds.get("outputs", 0.0),
+            sum(counted.values()),
+            made.close_pairs,
+            made.busiest_core,
+        )
 
 
 def run_here(run: CityRun, drain_workers: int | None = None) -> None:
@@ -194,14 +251,18 @@ def run_here(run: CityRun, drain_workers: int | None = None) -> None:
     for index in run.schedule.ready():  # windows an interrupted run left ready
         run.connect_here(index)
     batches, job = run.batches, run.job
-    with ThreadPoolExecutor(1, thread_name_prefix="csboundary-read") as reader, \
-            ThreadPoolExecutor(1, thread_name_prefix="csboundary-fpn") as network:
+    with (
+        ThreadPoolExecutor(1, thread_name_prefix="csboundary-read") as reader,
+        ThreadPoolExecutor(1, thread_name_prefix="csboundary-fpn") as network,
+    ):
         reading = [reader.submit(job.read_batch, b) for b in batches[:2]]
 
         def read_and_predict(k: int):
             start = time.perf_counter()
             reads = reading[k].result()
-            reading[k] = None  # the batch is held by the caller until its maps are stored, not by this list for the whole run
+            reading[k] = (
+                None  # the batch is held by the caller until its maps are stored, not by this list for the whole run
+            )
             waited = time.perf_counter() - start
             if k + 2 < len(batches):
                 reading.append(reader.submit(job.read_batch, batches[k + 2]))
@@ -220,12 +281,25 @@ def run_here(run: CityRun, drain_workers: int | None = None) -> None:
             run.connect_all_here(ready, workers=1 if upcoming is not None else drain_workers)
 
 
-def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(),
-                 batch_size: int = 1, progress: bool = True, on_window: Callable[[Patch, np.ndarray], None] | None = None,
-                 store: RunStore | None = None, write_cores: bool = False, executor: Callable[[CityRun], None] = run_here,
-                 threads: int | None = None, overview_scale: float | None = None,
-                 writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None, keep_graphs: bool = True,
-                 block: int = BLOCK, one_pass: bool = False) -> CityResult:
+def predict_city(
+    mosaic: Mosaic,
+    model: PatchModel,
+    *,
+    grid_config: GridConfig = GridConfig(),
+    stitch: StitchConfig = StitchConfig(),
+    batch_size: int = 1,
+    progress: bool = True,
+    on_window: Callable[[Patch, np.ndarray], None] | None = None,
+    store: RunStore | None = None,
+    write_cores: bool = False,
+    executor: Callable[[CityRun], None] = run_here,
+    threads: int | None = None,
+    overview_scale: float | None = None,
+    writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
+    keep_graphs: bool = True,
+    block: int = BLOCK,
+    one_pass: bool = False,
+) -> CityResult:
     """Predict the whole mosaic. ``on_window(patch, stitched_maps)`` sees every final window
     (in-process runs only); ``store`` (default: in memory) holds the work done, and a store left
     by an interrupted run is resumed; ``executor`` does the work (default: this process; see
@@ -234,8 +308,15 @@ def predict_city(mosaic: Mosaic, model: PatchModel, *, grid_config: GridConfig =
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     grid = PatchGrid.for_mosaic(mosaic, grid_config)
-    job = CityJob(mosaic, model, grid, store if store is not None else RunStore(), write_cores or reads_evidence(model), threads,
-                  overview_scale)
+    job = CityJob(
+        mosaic,
+        model,
+        grid,
+        store if store is not None else RunStore(),
+        write_cores or reads_evidence(model),
+        threads,
+        overview_scale,
+    )
     run = CityRun(job, batch_size, progress, on_window)
     executor(run)
     return run.finish(stitch, progress, writer, keep_graphs, block, one_pass)

@@ -35,13 +35,13 @@ from tqdm import tqdm
 from csboundary.data.grid import PatchGrid
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.bubbles import BUBBLE_PX, drop_bubbles
-from csboundary.graph.straightening import StraightenConfig, straighten
 from csboundary.graph.edge_evidence import Sampler, edge_evidence
 from csboundary.graph.end_attachment import ATTACH, attach_ends, dangling_ends
 from csboundary.graph.fragments import drop_short_fragments
 from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPiece
 from csboundary.graph.noding import node_shared_points
 from csboundary.graph.stitching import StitchConfig, edge_midpoints, owner_cores, stitch_patch_graphs
+from csboundary.graph.straightening import StraightenConfig, straighten
 from csboundary.models.confidence import EdgeConfidence
 from csboundary.pipeline.prediction.edge_confidence import scored_graph
 
@@ -61,8 +61,12 @@ class CityGraphRecipe:
     confidence: EdgeConfidence | None = None  # the edges' scores become this probability
     min_confidence: float = 0.0  # edges less sure than this are dropped
     evidence: bool = False  # compute the edges' evidence (to score them, or to fit a confidence)
-    straighten: StraightenConfig | None = StraightenConfig()  # detours off a straight curb flattened (graph/straightening.py)
-    bubble_px: float = BUBBLE_PX  # of two short routes between the same two vertices, the longer goes (graph/bubbles.py)
+    straighten: StraightenConfig | None = (
+        StraightenConfig()
+    )  # detours off a straight curb flattened (graph/straightening.py)
+    bubble_px: float = (
+        BUBBLE_PX  # of two short routes between the same two vertices, the longer goes (graph/bubbles.py)
+    )
     block: int = BLOCK
     halo: int = HALO
 
@@ -93,7 +97,9 @@ def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, recipe
     (:func:`~csboundary.graph.straightening.straighten`). Noding and attaching come after the short pieces are
     dropped, so that noise is not kept alive by touching a road (Ottawa crops: F1@5 0.450 noding
     first, 0.452 after). Without scores from the confidence: :func:`city_blocks` adds them."""
-    graph = drop_short_fragments(stitch_patch_graphs(patch_graphs, grid, recipe.stitch, recipe.crs), recipe.min_fragment_px)
+    graph = drop_short_fragments(
+        stitch_patch_graphs(patch_graphs, grid, recipe.stitch, recipe.crs), recipe.min_fragment_px
+    )
     if recipe.stitch.node_shared:
         graph = node_shared_points(graph)
     if recipe.attach_px > 0:
@@ -105,14 +111,22 @@ def city_graph(patch_graphs: dict[Index, BoundaryGraph], grid: PatchGrid, recipe
 def block_ranges(grid: PatchGrid, block: int) -> list[tuple[range, range]]:
     """(patch rows, patch cols) of every block holding a planned patch, in row-major order."""
     if grid.planned is None:
-        return [(range(r, min(r + block, grid.n_rows)), range(c, min(c + block, grid.n_cols)))
-                for r in range(0, grid.n_rows, block) for c in range(0, grid.n_cols, block)]
+        return [
+            (range(r, min(r + block, grid.n_rows)), range(c, min(c + block, grid.n_cols)))
+            for r in range(0, grid.n_rows, block)
+            for c in range(0, grid.n_cols, block)
+        ]
     corners = sorted({(r - r % block, c - c % block) for r, c in grid.planned})
     return [(range(r, min(r + block, grid.n_rows)), range(c, min(c + block, grid.n_cols))) for r, c in corners]
 
 
-def city_blocks(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, recipe: CityGraphRecipe,
-                sample: Sampler | None = None, one_pass: bool = False) -> Iterator[CityBlock]:
+def city_blocks(
+    load_graph: Callable[[Index], BoundaryGraph],
+    grid: PatchGrid,
+    recipe: CityGraphRecipe,
+    sample: Sampler | None = None,
+    one_pass: bool = False,
+) -> Iterator[CityBlock]:
     """The city graph block by block (module docstring). ``load_graph(index)`` gives a patch's
     graph (mosaic pixels); ``sample`` reads the stored maps for the evidence. With ``one_pass``
     every patch graph is loaded and the city graph made once (memory grows with the city)."""
@@ -136,8 +150,12 @@ def city_blocks(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, r
         index = (rows.start // recipe.block, cols.start // recipe.block)
         built, built_cpu = time.perf_counter(), time.thread_time()
         block = _finished_block(index, local, cores, mids, keep, grid, recipe, sample)
-        block.seconds = {"graph_stitching": built - start, "confidence": time.perf_counter() - built,
-                         "cpu:graph_stitching": built_cpu - cpu, "cpu:confidence": time.thread_time() - built_cpu}
+        block.seconds = {
+            "graph_stitching": built - start,
+            "confidence": time.perf_counter() - built,
+            "cpu:graph_stitching": built_cpu - cpu,
+            "cpu:confidence": time.thread_time() - built_cpu,
+        }
         yield block
 
 
@@ -185,9 +203,16 @@ class MadeCityGraph:
     held_peak: int  # vertices and edges the stream held at most
 
 
-def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchGrid, recipe: CityGraphRecipe,
-                      sample: Sampler | None = None, writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
-                      collector: "CityCollector | None" = None, one_pass: bool = False, progress: bool = False) -> MadeCityGraph:
+def stream_city_graph(
+    load_graph: Callable[[Index], BoundaryGraph],
+    grid: PatchGrid,
+    recipe: CityGraphRecipe,
+    sample: Sampler | None = None,
+    writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
+    collector: "CityCollector | None" = None,
+    one_pass: bool = False,
+    progress: bool = False,
+) -> MadeCityGraph:
     """Make the city graph block by block (:func:`city_blocks`) and hand each block's vertices
     and edges, then the boundaries it completed, to ``writer`` (and ``collector``, which keeps
     the whole graph). A vertex is final, and the boundaries through it can be completed, once
@@ -213,7 +238,10 @@ def stream_city_graph(load_graph: Callable[[Index], BoundaryGraph], grid: PatchG
         seconds["outputs"] += time.perf_counter() - start
 
     n_blocks = len(block_ranges(grid, recipe.block))
-    with tqdm(total=n_blocks, desc="stitch graphs", unit="block", disable=not progress or n_blocks < 2) as bar, _young_collections_only():
+    with (
+        tqdm(total=n_blocks, desc="stitch graphs", unit="block", disable=not progress or n_blocks < 2) as bar,
+        _young_collections_only(),
+    ):
         for block in city_blocks(load_graph, grid, recipe, sample, one_pass):
             for stage, value in block.seconds.items():
                 seconds[stage] += value
@@ -257,17 +285,27 @@ class CityCollector:
         graph = BoundaryGraph(
             np.concatenate(self.vertices).reshape(-1, 2) if self.vertices else np.zeros((0, 2)),
             np.array([[e.u, e.v] for e in edges], np.int64).reshape(-1, 2),
-            vertex_kinds=list(self.vertex_kinds), edge_kinds=[e.kind or "normal" for e in edges],
+            vertex_kinds=list(self.vertex_kinds),
+            edge_kinds=[e.kind or "normal" for e in edges],
             edge_polylines=[e.polyline for e in edges],
             edge_scores=np.array([np.nan if e.score is None else e.score for e in edges], float),
             edge_patches=np.array([e.patch or (-1, -1) for e in edges], np.int64).reshape(-1, 2),
-            transform=self.transform, crs=self.crs,
+            transform=self.transform,
+            crs=self.crs,
         )
         return graph, np.concatenate(self.evidence) if self.evidence else None
 
 
-def _finished_block(index: Index, local: BoundaryGraph, cores: np.ndarray, mids: np.ndarray, keep: np.ndarray, grid: PatchGrid,
-                    recipe: CityGraphRecipe, sample: Sampler | None) -> CityBlock:
+def _finished_block(
+    index: Index,
+    local: BoundaryGraph,
+    cores: np.ndarray,
+    mids: np.ndarray,
+    keep: np.ndarray,
+    grid: PatchGrid,
+    recipe: CityGraphRecipe,
+    sample: Sampler | None,
+) -> CityBlock:
     """The block's edges of ``local`` in order, scored by the confidence."""
     degree = np.bincount(local.edges.ravel(), minlength=local.n_vertices)  # in the city graph, not just the block
     picked = np.flatnonzero(keep)
@@ -289,7 +327,16 @@ def _edge_order(graph: BoundaryGraph, picked: np.ndarray, cores: np.ndarray, mid
     """The order of the ``picked`` edges: by core (row-major), then midpoint (row, col), then
     the positions of u and of v, all exact numbers of the edge itself."""
     ends = graph.vertices[graph.edges[picked]].reshape(-1, 4)
-    keys = (ends[:, 3], ends[:, 2], ends[:, 1], ends[:, 0], mids[picked, 0], mids[picked, 1], cores[picked, 1], cores[picked, 0])
+    keys = (
+        ends[:, 3],
+        ends[:, 2],
+        ends[:, 1],
+        ends[:, 0],
+        mids[picked, 0],
+        mids[picked, 1],
+        cores[picked, 1],
+        cores[picked, 0],
+    )
     return np.lexsort(keys).astype(np.int64)  # the last key sorts first
 
 
@@ -303,11 +350,13 @@ def _subgraph_in_order(graph: BoundaryGraph, edges: np.ndarray) -> tuple[Boundar
     renumber[used] = np.arange(len(used))
     pick = edges.tolist()
     return BoundaryGraph(
-        graph.vertices[used], renumber[graph.edges[edges]].reshape(-1, 2),
+        graph.vertices[used],
+        renumber[graph.edges[edges]].reshape(-1, 2),
         vertex_kinds=None if graph.vertex_kinds is None else [graph.vertex_kinds[i] for i in used.tolist()],
         edge_kinds=None if graph.edge_kinds is None else [graph.edge_kinds[k] for k in pick],
         edge_polylines=None if graph.edge_polylines is None else [graph.edge_polylines[k] for k in pick],
         edge_scores=None if graph.edge_scores is None else np.asarray(graph.edge_scores)[edges],
         edge_patches=None if graph.edge_patches is None else graph.edge_patches[edges],
-        transform=graph.transform, crs=graph.crs,
+        transform=graph.transform,
+        crs=graph.crs,
     ), used

@@ -56,9 +56,9 @@ _trim_heap = _heap_trimmer()
 
 class PatchModel(Protocol):
     """What the city pipeline runs: three steps per patch, the graph settings the city graph
-    reads (``min_fragment_px``, ``attach_px``, ``min_confidence``), an edge confidence (None:
-    scores as found), whether to keep the maps the edges' evidence is read from, and the pixel size
-it takes imagery at."""
+        reads (``min_fragment_px``, ``attach_px``, ``min_confidence``), an edge confidence (None:
+        scores as found), whether to keep the maps the edges' evidence is read from, and the pixel size
+    it takes imagery at."""
 
     settings: GraphSettings
     confidence: EdgeConfidence | None
@@ -86,11 +86,15 @@ class CityResult:
     map_bytes_peak: int = 0  # stored patch maps at most (memory or disk)
     patches_without_imagery: int = 0  # windows with no valid pixel: the FPN was not run on them
     work: dict[str, int] = field(default_factory=dict)  # patches predicted / windows connected by this run, and reused
-    evidence: np.ndarray | None = None  # (E, F) edge evidence of ``graph`` (graph/edge_evidence.py), for a model collecting it
+    evidence: np.ndarray | None = (
+        None  # (E, F) edge evidence of ``graph`` (graph/edge_evidence.py), for a model collecting it
+    )
     blank: frozenset = frozenset()  # patches known to have no imagery, never read
     outputs_seconds: float = 0.0  # spent in the writer the city graph was handed to, block by block
     patch_graph_edges: int = 0  # edges of all patch graphs, before stitching
-    close_vertex_pairs: int = 0  # city graph vertices less than 1 px apart (stitching merges them; noding may make some)
+    close_vertex_pairs: int = (
+        0  # city graph vertices less than 1 px apart (stitching merges them; noding may make some)
+    )
     busiest_core: tuple[int, int] = (0, 0)  # the patch core holding the most city graph length
 
     @property
@@ -178,7 +182,12 @@ class CityJob:
                 timed("read", self.store.save_image, index, read.data)
         if self.overview_scale:
             for index, read in zip(indices, reads):
-                timed("read", self.store.save_thumb, index, core_thumbnail(read, self.grid.patch(*index), self.overview_scale))
+                timed(
+                    "read",
+                    self.store.save_thumb,
+                    index,
+                    core_thumbnail(read, self.grid.patch(*index), self.overview_scale),
+                )
         return dict(timed.seconds)
 
     def stitched_maps(self, index: Index) -> np.ndarray:
@@ -192,7 +201,9 @@ class CityJob:
         self.keep_window(index, graph, maps)
         return graph, seconds
 
-    def window_graph(self, index: Index, maps: np.ndarray | None = None) -> tuple[BoundaryGraph, np.ndarray, dict[str, float]]:
+    def window_graph(
+        self, index: Index, maps: np.ndarray | None = None
+    ) -> tuple[BoundaryGraph, np.ndarray, dict[str, float]]:
         """The window's graph (mosaic pixels), its stitched maps and the seconds per stage. Only
         reads the store, so several windows may be computed at once in threads."""
         timed = StageTimer()
@@ -229,5 +240,3 @@ def reads_evidence(model: PatchModel) -> bool:
     """Whether the run keeps every core's maps to read the edges' evidence from (a model with an
     edge confidence, or one collecting evidence to fit it)."""
     return model.confidence is not None or model.collect_evidence
-
-

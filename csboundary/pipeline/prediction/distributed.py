@@ -30,8 +30,8 @@ from typing import Callable, Iterator
 
 from csboundary.data.atomic import is_disk_full
 from csboundary.errors import InputError
-from csboundary.pipeline.prediction.city_job import CityJob
 from csboundary.pipeline.prediction.city import CityRun
+from csboundary.pipeline.prediction.city_job import CityJob
 
 RETRIES = 2  # a task that raises is tried this many more times before the run fails
 AHEAD_PER_THREAD = 2  # FPN batches queued per worker thread
@@ -93,8 +93,15 @@ def dask_executor(client) -> Callable[[CityRun], None]:
         what: dict[str, tuple[str, object]] = {}
 
         def submit_window(index) -> None:
-            future = client.submit(connect_window_task, job, index, key=f"csboundary-window-{token}-{index[0]}-{index[1]}",
-                                   priority=10, retries=RETRIES, pure=False)
+            future = client.submit(
+                connect_window_task,
+                job,
+                index,
+                key=f"csboundary-window-{token}-{index[0]}-{index[1]}",
+                priority=10,
+                retries=RETRIES,
+                pure=False,
+            )
             what[future.key] = ("window", index)
             waiting.add(future)
 
@@ -103,8 +110,15 @@ def dask_executor(client) -> Callable[[CityRun], None]:
             if batch is None:
                 return False
             first = batch[0]
-            future = client.submit(predict_maps_task, job, batch, key=f"csboundary-fpn-{token}-{first[0]}-{first[1]}",
-                                   priority=0, retries=RETRIES, pure=False)
+            future = client.submit(
+                predict_maps_task,
+                job,
+                batch,
+                key=f"csboundary-fpn-{token}-{first[0]}-{first[1]}",
+                priority=0,
+                retries=RETRIES,
+                pure=False,
+            )
             what[future.key] = ("fpn", batch)
             waiting.add(future)
             return True
@@ -143,8 +157,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         try:
             client = Client(scheduler, timeout="15s")
         except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(scheduler,
-                             f"cannot reach the Dask scheduler ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
+            raise InputError(
+                scheduler,
+                f"cannot reach the Dask scheduler ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})",
+            ) from exc
         with client:
             if not client.nthreads():
                 try:
@@ -154,6 +170,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             yield client, None
         return
     threads = max(1, (os.cpu_count() or 1) // workers)
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=40) as cluster, Client(cluster) as client:
+    with (
+        LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+        ) as cluster,
+        Client(cluster) as client,
+    ):
         yield client, threads

@@ -26,7 +26,9 @@ from csboundary.pipeline.prediction.float16 import add_float32
 Index = tuple[int, int]
 
 
-def stitch_window(grid: PatchGrid, patch: Patch, load: Callable[[Index], np.ndarray | None], channels: int) -> np.ndarray:
+def stitch_window(
+    grid: PatchGrid, patch: Patch, load: Callable[[Index], np.ndarray | None], channels: int
+) -> np.ndarray:
     """The (C, S, S) float32 stitched maps of ``patch``'s expanded window; ``load(index)`` gives a
     covering patch's stored (C, S, S) maps, or None for a window without imagery (zeros)."""
     win = patch.expanded
@@ -42,7 +44,9 @@ def stitch_window(grid: PatchGrid, patch: Patch, load: Callable[[Index], np.ndar
         maps = load(q.index)
         if maps is not None:
             if maps.shape != (channels, win.height, win.width):
-                raise ValueError(f"maps of patch {q.index} must be ({channels}, {win.height}, {win.width}), got {maps.shape}")
+                raise ValueError(
+                    f"maps of patch {q.index} must be ({channels}, {win.height}, {win.width}), got {maps.shape}"
+                )
             srows, scols = part.relative_to(q.expanded).slices()
             add_float32(total[:, rows, cols], maps[:, srows, scols])
         count[rows, cols] += 1

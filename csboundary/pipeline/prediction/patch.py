@@ -26,8 +26,8 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.crossings import added_crossings
 from csboundary.graph.edge_support import unsupported_pairs
 from csboundary.graph.end_joining import join_ends
-from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.graph.outline_fusion import fused_with_outline
+from csboundary.graph.settings import GraphOverrides, GraphSettings
 from csboundary.graph.skeleton_fill import fill_from_skeleton
 from csboundary.graph.surface_check import surface_checked
 from csboundary.graph.surface_gate import gated_maps
@@ -37,8 +37,8 @@ from csboundary.models.batchnorm_folding import fold_batch_norms
 from csboundary.models.checkpoint import load_afanet, load_checkpoint, load_fpn, shipped_weights
 from csboundary.models.confidence import EdgeConfidence
 from csboundary.models.decoding import graph_from_adjacency
-from csboundary.models.fpn import FPN, SURFACE
 from csboundary.models.device import bfloat16_hardware
+from csboundary.models.fpn import FPN, SURFACE
 from csboundary.models.maps import PRECISIONS, bands_and_maps, predict_probabilities, unit_bands
 from csboundary.models.onnx_engine import OnnxNetworks
 from csboundary.models.onnx_session import WINDOW, onnxruntime_available
@@ -71,20 +71,29 @@ class PatchPredictor:
     onnx: OnnxNetworks | None = None  # the networks on ONNX Runtime (CPU), see use_engine
     precision: str = "float32"  # the FPN's arithmetic, see use_precision
     precision_choice: str | None = None  # how ``auto`` chose it, in words (None: asked for by name)
-    folded_fpn: torch.nn.Module | None = field(default=None, repr=False)  # the FPN with batch norms folded, for bfloat16
-    confidence: EdgeConfidence | None = None  # the city graph's edge confidence (models/confidence.py; None: scores as found)
+    folded_fpn: torch.nn.Module | None = field(
+        default=None, repr=False
+    )  # the FPN with batch norms folded, for bfloat16
+    confidence: EdgeConfidence | None = (
+        None  # the city graph's edge confidence (models/confidence.py; None: scores as found)
+    )
     collect_evidence: bool = False  # keep the maps the edges' evidence is read from (to fit a confidence)
 
     def override(self, options: GraphOverrides) -> None:
         """The command line's graph options in place of the bundle's settings; a check that
         reads the road surface needs an FPN with a surface head, a confidence threshold a bundle
         with a confidence."""
-        for name, value in (("--surface-check", options.surface_check), ("--surface-gate", options.surface_gate),
-                            ("--roadway-outline", options.roadway_outline)):
+        for name, value in (
+            ("--surface-check", options.surface_check),
+            ("--surface-gate", options.surface_gate),
+            ("--roadway-outline", options.roadway_outline),
+        ):
             if value is not None and value > 0 and not self.fpn.config.surface:
                 raise InputError(name, "the FPN of these weights has no road-surface head")
         if options.min_confidence and self.confidence is None:
-            raise InputError("--min-confidence", "these weights have no edge confidence (csboundary fit-confidence adds one)")
+            raise InputError(
+                "--min-confidence", "these weights have no edge confidence (csboundary fit-confidence adds one)"
+            )
         self.settings = self.settings.overridden(options)
 
     @property
@@ -101,15 +110,20 @@ class PatchPredictor:
             raise InputError("--engine", f"unknown engine {engine!r} (auto, torch or onnx)")
         on_cpu = self.device.type == "cpu"
         if engine == "onnx" and not on_cpu:
-            raise InputError("--engine", f"the onnx engine runs on the CPU, not {self.device}; use --device cpu or --engine torch")
+            raise InputError(
+                "--engine", f"the onnx engine runs on the CPU, not {self.device}; use --device cpu or --engine torch"
+            )
         if engine == "onnx" and not onnxruntime_available():
             raise InputError("--engine", "onnxruntime is not installed (pip install 'csboundary[onnx]')")
         if engine == "auto" and on_cpu and onnxruntime_available() and not export_cache_usable():
             engine = "torch"
         if engine == "torch" or (engine == "auto" and not (on_cpu and onnxruntime_available())):
             if self.precision == "int8":
-                raise InputError("--precision", "int8 runs the FPN on ONNX Runtime: use --engine onnx or auto "
-                                                "(on a CPU, with onnxruntime installed: pip install 'csboundary[onnx]')")
+                raise InputError(
+                    "--precision",
+                    "int8 runs the FPN on ONNX Runtime: use --engine onnx or auto "
+                    "(on a CPU, with onnxruntime installed: pip install 'csboundary[onnx]')",
+                )
             if self.precision == "auto":
                 self.precision, self.precision_choice = "float32", "float32: the torch engine runs the FPN in float32"
             self.onnx = None
@@ -136,17 +150,25 @@ class PatchPredictor:
             self.precision, self.folded_fpn = "auto", None
             return
         if precision == "int8" and self.device.type != "cpu":
-            raise InputError("--precision", f"int8 runs the FPN on ONNX Runtime on the CPU, not {self.device}; use --device cpu")
+            raise InputError(
+                "--precision", f"int8 runs the FPN on ONNX Runtime on the CPU, not {self.device}; use --device cpu"
+            )
         if precision == "bfloat16" and not bfloat16_hardware(self.device):
             if self.device.type == "cuda":
-                raise InputError("--precision", f"{torch.cuda.get_device_name(self.device)} has no bfloat16 support; use float32")
-            warnings.warn("this CPU has no bfloat16 units (AMX or AVX512-BF16): --precision bfloat16 will be slower than float32",
-                          InputWarning)
+                raise InputError(
+                    "--precision", f"{torch.cuda.get_device_name(self.device)} has no bfloat16 support; use float32"
+                )
+            warnings.warn(
+                "this CPU has no bfloat16 units (AMX or AVX512-BF16): --precision bfloat16 will be slower than float32",
+                InputWarning,
+            )
         self.precision = precision
         self.folded_fpn = fold_batch_norms(self.fpn) if precision == "bfloat16" else None
 
     @classmethod
-    def load(cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None) -> "PatchPredictor":
+    def load(
+        cls, weights: str | Path | None, device: torch.device, fpn_weights: str | Path | None = None
+    ) -> "PatchPredictor":
         """From a bundle (both models; the shipped one by default), or an AfANet checkpoint plus
         ``fpn_weights``."""
         path = Path(weights) if weights else shipped_weights()
@@ -156,17 +178,23 @@ class PatchPredictor:
         else:
             source = fpn_weights or (payload.get("train_config") or {}).get("fpn_weights")
             if not source:
-                raise InputError(path, "is an AfANet checkpoint without the FPN it was trained with; give --fpn-weights")
+                raise InputError(
+                    path, "is an AfANet checkpoint without the FPN it was trained with; give --fpn-weights"
+                )
             fpn = load_fpn(source, device)
         afanet = load_afanet(payload, device, path)
         settings = GraphSettings.from_bundle(payload.get("inference", {}), path)
         if settings.reads_surface and not fpn.config.surface:
-            raise InputError(path, "damaged weights file: a surface check or gate is set but the FPN has no surface head")
+            raise InputError(
+                path, "damaged weights file: a surface check or gate is set but the FPN has no surface head"
+            )
         confidence = None
         if payload.get("confidence") is not None:
             confidence = EdgeConfidence.from_dict(payload["confidence"], path)
             if confidence.needs_surface and not fpn.config.surface:
-                raise InputError(path, "damaged weights file: the confidence reads the road surface but the FPN has no surface head")
+                raise InputError(
+                    path, "damaged weights file: the confidence reads the road surface but the FPN has no surface head"
+                )
         pixel_size = payload.get("pixel_size_m", MODEL_GSD)
         if not isinstance(pixel_size, (int, float)) or not (0.01 <= pixel_size <= 5.0):
             raise InputError(path, f"damaged weights file: pixel_size_m = {pixel_size!r} is not a pixel size in metres")
@@ -180,13 +208,22 @@ class PatchPredictor:
         keypoint and boundary, plus the road surface when the surface check is on."""
         batch = np.stack(images)
         if self.onnx is not None and self.precision != "bfloat16" and batch.shape[-2:] == (WINDOW, WINDOW):
-            probs = torch.sigmoid(torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch), int8=self.precision == "int8"))).numpy()
+            probs = torch.sigmoid(
+                torch.from_numpy(self.onnx.fpn_logits(unit_bands(batch), int8=self.precision == "int8"))
+            ).numpy()
         else:
             if self.precision == "int8":
-                warnings.warn(f"the int8 FPN is made for {WINDOW} px windows: this {batch.shape[-1]} x {batch.shape[-2]} px image "
-                              "runs in float32", InputWarning)
-            probs = predict_probabilities(self.fpn if self.folded_fpn is None else self.folded_fpn, batch, self.device, self.precision)
-        if not self.reads_surface:  # the surface channel is carried (stitched, stored, written) only when the check or gate reads it
+                warnings.warn(
+                    f"the int8 FPN is made for {WINDOW} px windows: this {batch.shape[-1]} x {batch.shape[-2]} px image "
+                    "runs in float32",
+                    InputWarning,
+                )
+            probs = predict_probabilities(
+                self.fpn if self.folded_fpn is None else self.folded_fpn, batch, self.device, self.precision
+            )
+        if (
+            not self.reads_surface
+        ):  # the surface channel is carried (stitched, stored, written) only when the check or gate reads it
             probs = probs[:, :SURFACE]
         return list(probs)
 
@@ -207,9 +244,14 @@ class PatchPredictor:
         extra = added_crossings(found, maps[1], settings.crossings)
         if not len(extra):
             return found
-        return BoundaryGraph(np.concatenate([found.vertices, extra]), found.edges,
-                             vertex_kinds=list(found.vertex_kinds or []) + ["isolated"] * len(extra),
-                             edge_kinds=found.edge_kinds, edge_polylines=found.edge_polylines, edge_scores=found.edge_scores)
+        return BoundaryGraph(
+            np.concatenate([found.vertices, extra]),
+            found.edges,
+            vertex_kinds=list(found.vertex_kinds or []) + ["isolated"] * len(extra),
+            edge_kinds=found.edge_kinds,
+            edge_polylines=found.edge_polylines,
+            edge_scores=found.edge_scores,
+        )
 
     @torch.no_grad()
     def connect(self, patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
@@ -219,7 +261,9 @@ class PatchPredictor:
         maps = gated_maps(maps, SURFACE, settings.gate)
         m = found.n_vertices
         if m < 2:
-            return self.finished(patch, maps, graph_from_adjacency(found, np.zeros((m, m)), settings.edge_threshold, settings.max_degree))
+            return self.finished(
+                patch, maps, graph_from_adjacency(found, np.zeros((m, m)), settings.edge_threshold, settings.max_degree)
+            )
         tensor = torch.from_numpy(bands_and_maps(image, maps)).to(self.device)
         vertices = torch.from_numpy(found.vertices.astype(np.float32)).to(self.device)
         if self.onnx is not None:  # the views (resized tensor, vertex windows) come from PyTorch either way
@@ -229,7 +273,9 @@ class PatchPredictor:
             probs = self.afanet.adjacency(tensor, vertices).cpu().numpy()
         for i, j in unsupported_pairs(found.vertices, probs, maps[1], settings.edge_threshold, settings.support):
             probs[i, j] = probs[j, i] = 0.0
-        return self.finished(patch, maps, graph_from_adjacency(found, probs, settings.edge_threshold, settings.max_degree))
+        return self.finished(
+            patch, maps, graph_from_adjacency(found, probs, settings.edge_threshold, settings.max_degree)
+        )
 
     def finished(self, patch: Patch | None, maps: np.ndarray, graph: BoundaryGraph) -> BoundaryGraph:
         """``graph`` filled in from the skeleton (``fill``), then without the edges no roadway
@@ -273,13 +319,22 @@ def faster_fpn(seconds: dict[str, float]) -> tuple[str, str]:
     if not f32 or not q8:
         return "float32", "float32 (the FPN was not timed in int8 on this machine)"
     if q8 < f32:
-        return "int8", (f"int8: its FPN ran in {q8 * 1000:.0f} ms against {f32 * 1000:.0f} ms in float32 on this CPU "
-                        "(--precision float32 forces float32)")
+        return "int8", (
+            f"int8: its FPN ran in {q8 * 1000:.0f} ms against {f32 * 1000:.0f} ms in float32 on this CPU "
+            "(--precision float32 forces float32)"
+        )
     return "float32", f"float32: its FPN ran in {f32 * 1000:.0f} ms against {q8 * 1000:.0f} ms in int8 on this CPU"
 
 
-def load_predictor(weights: str | Path | None = None, device: str = "auto", graph: GraphOverrides = GraphOverrides(), *,
-                   fpn_weights: str | Path | None = None, engine: str = "auto", precision: str = "float32") -> PatchPredictor:
+def load_predictor(
+    weights: str | Path | None = None,
+    device: str = "auto",
+    graph: GraphOverrides = GraphOverrides(),
+    *,
+    fpn_weights: str | Path | None = None,
+    engine: str = "auto",
+    precision: str = "float32",
+) -> PatchPredictor:
     """The predictor of a weights bundle (the shipped one by default) with the command line's
     ``graph`` options over its settings, on the chosen engine (``auto``: ONNX Runtime on a CPU
     when installed) and device (``auto``: CUDA if present)."""

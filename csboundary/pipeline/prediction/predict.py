@@ -25,7 +25,6 @@ from csboundary.pipeline.prediction.run import run_prediction
 from csboundary.viz.labels import draw_patch_labels
 from csboundary.viz.overlay import to_display, write_png
 
-
 SPARSE_SHARE = 0.5  # imagery under fewer than this share of the patches is worth a word before the run
 SECONDS_PER_PATCH = 1.0  # a patch with imagery on a 2-core CPU with ONNX Runtime (docs/scaling.md), for the estimate
 
@@ -37,15 +36,30 @@ def warn_if_sparse(grid: PatchGrid, mosaic, inputs: Sequence[str | Path]) -> Non
     the run store exists."""
     covered = sum(mosaic.may_have_data(patch.expanded) for patch in grid)
     if len(grid) >= 4 and covered < SPARSE_SHARE * len(grid):
-        warnings.warn(f"{inputs[0]}: imagery covers {covered} of {len(grid)} patches ({covered / len(grid):.1%}) of its extent; "
-                      f"the empty ones are skipped without reading (about {covered * SECONDS_PER_PATCH / 60:.0f} min on a 2-core CPU)",
-                      InputWarning)
+        warnings.warn(
+            f"{inputs[0]}: imagery covers {covered} of {len(grid)} patches ({covered / len(grid):.1%}) of its extent; "
+            f"the empty ones are skipped without reading (about {covered * SECONDS_PER_PATCH / 60:.0f} min on a 2-core CPU)",
+            InputWarning,
+        )
 
 
-def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: PatchPredictor, *, weights: str | Path | None = None,
-                      gsd: float | None = None, batch_size: int = 1, write_maps: bool = False, lanelet2: bool = False,
-                      restart: bool = False, scheduler: str | None = None, workers: int | None = None, threads: int | None = None,
-                      progress: bool = True, on_plan: Callable[[PatchGrid, ModelInput], None] | None = None) -> dict:
+def predict_to_folder(
+    inputs: Sequence[str | Path],
+    out: str | Path,
+    predictor: PatchPredictor,
+    *,
+    weights: str | Path | None = None,
+    gsd: float | None = None,
+    batch_size: int = 1,
+    write_maps: bool = False,
+    lanelet2: bool = False,
+    restart: bool = False,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    threads: int | None = None,
+    progress: bool = True,
+    on_plan: Callable[[PatchGrid, ModelInput], None] | None = None,
+) -> dict:
     """Predict the city that ``inputs`` name (tiles, a folder of tiles, a city directory) into
     ``out`` and return the run's summary. ``weights`` names the file ``predictor`` came from (None:
     the shipped one), for the run's manifest; ``gsd`` is the pixel size of imagery without a
@@ -76,22 +90,44 @@ def predict_to_folder(inputs: Sequence[str | Path], out: str | Path, predictor: 
 
             client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
             options = {"executor": dask_executor(client), "threads": threads or worker_threads}
-            settings["cluster"] = scheduler or f"local, {workers} workers"  # not part of the run's manifest: a run may resume elsewhere
-        _, summary = run_prediction(view.mosaic, predictor, out, write_maps=write_maps, batch_size=batch_size, progress=progress,
-                                    settings=settings, units=view.units, restart=restart, lanelet2=lanelet2, keep_graphs=False, **options)
+            settings["cluster"] = (
+                scheduler or f"local, {workers} workers"
+            )  # not part of the run's manifest: a run may resume elsewhere
+        _, summary = run_prediction(
+            view.mosaic,
+            predictor,
+            out,
+            write_maps=write_maps,
+            batch_size=batch_size,
+            progress=progress,
+            settings=settings,
+            units=view.units,
+            restart=restart,
+            lanelet2=lanelet2,
+            keep_graphs=False,
+            **options,
+        )
     return summary
 
 
 def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Path | None, batch_size: int) -> dict:
     """The model and how it is run, for the run's manifest (JSON-ready)."""
     graph = predictor.settings
-    settings = {"weights": str(weights or "shipped"), "weights_sha256": file_sha256(weights or shipped_weights()),
-                "edge_threshold": graph.edge_threshold, "support": [graph.support.min_support, graph.support.max_length_px],
-                "max_gap": [graph.support.max_gap_px, graph.support.gap_level],
-                "min_fragment_px": graph.min_fragment_px, "fill_min_length_px": graph.fill.min_length_px,
-                "batch_size": batch_size, "device": str(predictor.device), "engine": predictor.engine,
-                "input_pixel_m": [round(v, 5) for v in view.source_pixel_m], "resampled": view.resampled,
-                "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high}}
+    settings = {
+        "weights": str(weights or "shipped"),
+        "weights_sha256": file_sha256(weights or shipped_weights()),
+        "edge_threshold": graph.edge_threshold,
+        "support": [graph.support.min_support, graph.support.max_length_px],
+        "max_gap": [graph.support.max_gap_px, graph.support.gap_level],
+        "min_fragment_px": graph.min_fragment_px,
+        "fill_min_length_px": graph.fill.min_length_px,
+        "batch_size": batch_size,
+        "device": str(predictor.device),
+        "engine": predictor.engine,
+        "input_pixel_m": [round(v, 5) for v in view.source_pixel_m],
+        "resampled": view.resampled,
+        "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high},
+    }
     if graph.join.active:  # only then: a run interrupted before end joining existed still resumes
         settings["join_max_px"] = graph.join.max_px
         if graph.join.attach_px > 0:
@@ -100,7 +136,9 @@ def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Pat
         settings["attach_max_px"] = graph.attach_px
     if predictor.precision != "float32":  # likewise
         settings["precision"] = predictor.precision
-    settings["precision_choice"] = predictor.precision_choice or predictor.precision  # --precision auto: what it chose, and why
+    settings["precision_choice"] = (
+        predictor.precision_choice or predictor.precision
+    )  # --precision auto: what it chose, and why
     if graph.surface.active:  # only then: a run interrupted before the check existed still resumes
         settings["surface_check"] = [graph.surface.strong, graph.surface.weak, graph.surface.offset_px]
         if graph.surface.both_sides > 0:  # likewise
@@ -108,13 +146,20 @@ def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Pat
     if graph.gate.active:  # likewise
         settings["surface_gate"] = [graph.gate.radius_px, graph.gate.full_change, graph.gate.min_piece_px]
     if graph.outline.active:  # likewise
-        settings["roadway_outline"] = [graph.outline.sure, graph.outline.support, graph.outline.min_length_px, graph.outline.max_unsure]
+        settings["roadway_outline"] = [
+            graph.outline.sure,
+            graph.outline.support,
+            graph.outline.min_length_px,
+            graph.outline.max_unsure,
+        ]
     if predictor.confidence is None:  # likewise; said so that --min-confidence later never filters raw network scores
         settings["edge_confidence"] = False
     return settings
 
 
-def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: PatchPredictor, gsd: float | None = None) -> BoundaryGraph:
+def predict_patch_to_folder(
+    image: str | Path, out: str | Path, predictor: PatchPredictor, gsd: float | None = None
+) -> BoundaryGraph:
     """One image (at most 1100x1100 px at the model's pixel size) -> ``out``/graph.json,
     boundaries.geojson and overlay.png (maps and graph over the image); returns the graph.
 
@@ -127,15 +172,21 @@ def predict_patch_to_folder(image: str | Path, out: str | Path, predictor: Patch
     mosaic, _ = open_imagery([image])
     with model_view(mosaic, gsd, predictor.pixel_size_m, assume_model_gsd=True).mosaic as mosaic:
         if mosaic.width > 1100 or mosaic.height > 1100:
-            raise InputError(image,
-                             f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a "
-                             f"patch)")
+            raise InputError(
+                image,
+                f"is {mosaic.width}x{mosaic.height} px at the model's pixel size; predict-patch takes at most 1100x1100 (a "
+                f"patch)",
+            )
         maps = CoreMaps(mosaic.width, mosaic.height)
         graph = predict_city(mosaic, predictor, progress=False, on_window=maps.add).graph
         read = mosaic.read(mosaic.window)
     frame = gpd.GeoDataFrame(
-        {"kind": graph.edge_kinds or [], "confidence": list(graph.edge_scores) if graph.edge_scores is not None else []},
-        geometry=graph.to_linestrings(world=True), crs=graph.crs,
+        {
+            "kind": graph.edge_kinds or [],
+            "confidence": list(graph.edge_scores) if graph.edge_scores is not None else [],
+        },
+        geometry=graph.to_linestrings(world=True),
+        crs=graph.crs,
     )
     with staging_folder(check_output_dir(out, create=True), last="graph.json") as stage:
         graph.write_json(stage / "graph.json")

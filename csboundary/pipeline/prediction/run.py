@@ -34,35 +34,53 @@ from typing import Callable
 import numpy as np
 import rasterio
 
-from csboundary.data.footprint import union_area
 from csboundary.data.atomic import DiskFull, disk_full_file, naming_full_disk, staging_folder
+from csboundary.data.footprint import union_area
 from csboundary.data.grid import GridConfig, PatchGrid
-from csboundary.data.windows import pixel_to_world
-from csboundary.data.raster import Mosaic
 from csboundary.data.model_view import mosaic_units
+from csboundary.data.raster import Mosaic
 from csboundary.data.units import GroundUnits
+from csboundary.data.windows import pixel_to_world
 from csboundary.graph.stitching import StitchConfig
-from csboundary.pipeline.prediction.city_job import CPU, GDAL_ENV, STAGES, CityResult, PatchModel
-from csboundary.pipeline.prediction.city import CityRun, predict_city, run_here
 from csboundary.pipeline.outputs.map_output import write_maps_cog
+from csboundary.pipeline.outputs.prediction_files import GraphWriter, read_prediction_graph
+from csboundary.pipeline.prediction.city import CityRun, predict_city, run_here
+from csboundary.pipeline.prediction.city_job import CPU, GDAL_ENV, STAGES, CityResult, PatchModel
 from csboundary.pipeline.prediction.run_folder import run_folder
 from csboundary.pipeline.prediction.run_store import RunStore
 from csboundary.viz.overlay import overview_scale
-from csboundary.pipeline.outputs.prediction_files import GraphWriter, read_prediction_graph
 
 ORANGE = (255, 140, 0)
 OVERVIEW_PX = 2000  # longest side of overview.png
 SUMMARY = "summary.json"
-RUN_ONLY_SETTINGS = {"cluster", "precision_choice"}  # how the work is spread or why a setting was chosen, not what it computes:
+RUN_ONLY_SETTINGS = {
+    "cluster",
+    "precision_choice",
+}  # how the work is spread or why a setting was chosen, not what it computes:
 # a run may resume on another cluster
 PIXEL_UNITS = GroundUnits((1.0, 1.0), "pixel")  # no CRS and no stated pixel size: lengths in pixels
 
 
-def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, write_maps: bool = False, batch_size: int = 1,
-                   grid_config: GridConfig = GridConfig(), stitch: StitchConfig = StitchConfig(), progress: bool = True,
-                   settings: dict | None = None, ground_truth=(), units: GroundUnits | None = None, restart: bool = False,
-                   executor: Callable[[CityRun], None] = run_here, threads: int | None = None,
-                   lanelet2: bool = False, keep_graphs: bool = True, **city) -> tuple[CityResult, dict]:
+def run_prediction(
+    mosaic: Mosaic,
+    model: PatchModel,
+    out_dir: str | Path,
+    *,
+    write_maps: bool = False,
+    batch_size: int = 1,
+    grid_config: GridConfig = GridConfig(),
+    stitch: StitchConfig = StitchConfig(),
+    progress: bool = True,
+    settings: dict | None = None,
+    ground_truth=(),
+    units: GroundUnits | None = None,
+    restart: bool = False,
+    executor: Callable[[CityRun], None] = run_here,
+    threads: int | None = None,
+    lanelet2: bool = False,
+    keep_graphs: bool = True,
+    **city,
+) -> tuple[CityResult, dict]:
     """Predict ``mosaic`` and write every output into ``out_dir``; returns the result and the summary.
 
     ``ground_truth`` (world LineStrings), when given, is drawn in cyan under the prediction.
@@ -78,18 +96,38 @@ def run_prediction(mosaic: Mosaic, model: PatchModel, out_dir: str | Path, *, wr
         units = mosaic_units(mosaic) or PIXEL_UNITS
     manifest = run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps)
     try:
-        with run_folder(out_dir, manifest, restart) as (out, store), staging_folder(out) as stage, contextlib.ExitStack() as stack:
+        with (
+            run_folder(out_dir, manifest, restart) as (out, store),
+            staging_folder(out) as stage,
+            contextlib.ExitStack() as stack,
+        ):
             (out / SUMMARY).unlink(missing_ok=True)  # a summary from an earlier run must not vouch for this one
             start = time.perf_counter()
             stack.enter_context(rasterio.Env(**GDAL_ENV))  # overviews read every tile too
-            files = {"gpkg": stage / "boundaries.gpkg", "geojson": stage / "boundaries.geojson", "graph_json": stage / "graph.json"}
+            files = {
+                "gpkg": stage / "boundaries.gpkg",
+                "geojson": stage / "boundaries.geojson",
+                "graph_json": stage / "graph.json",
+            }
             crs = mosaic.crs.to_string() if mosaic.crs is not None else None
             writer = GraphWriter(files, crs, PatchGrid.for_mosaic(mosaic, grid_config).transform, units)
             stack.callback(writer.abort)
-            result = predict_city(mosaic, model, grid_config=grid_config, stitch=stitch, batch_size=batch_size, progress=progress,
-                                  store=store, write_cores=write_maps, executor=executor, threads=threads,
-                                  overview_scale=overview_scale(mosaic.window, OVERVIEW_PX), writer=writer.add, keep_graphs=keep_graphs,
-                                  **city)
+            result = predict_city(
+                mosaic,
+                model,
+                grid_config=grid_config,
+                stitch=stitch,
+                batch_size=batch_size,
+                progress=progress,
+                store=store,
+                write_cores=write_maps,
+                executor=executor,
+                threads=threads,
+                overview_scale=overview_scale(mosaic.window, OVERVIEW_PX),
+                writer=writer.add,
+                keep_graphs=keep_graphs,
+                **city,
+            )
             written_at = time.perf_counter()
             counts = writer.close()
             rss_after_prediction = peak_rss_mb()
@@ -137,23 +175,40 @@ def run_manifest(mosaic: Mosaic, settings: dict, grid_config: GridConfig, batch_
         stat = Path(tile.path).stat()
         inputs.append([str(Path(tile.path).resolve()), stat.st_size, stat.st_mtime_ns])
     settings = {k: v for k, v in settings.items() if k not in RUN_ONLY_SETTINGS}
-    return {"inputs": inputs, "settings": settings, "grid": [grid_config.core, grid_config.margin], "batch_size": batch_size,
-            "write_maps": write_maps, "code_version": code_version()}
+    return {
+        "inputs": inputs,
+        "settings": settings,
+        "grid": [grid_config.core, grid_config.margin],
+        "batch_size": batch_size,
+        "write_maps": write_maps,
+        "code_version": code_version(),
+    }
 
 
-def summarize(mosaic: Mosaic, result: CityResult, seconds: dict, files: dict, settings: dict, units: GroundUnits | None = None,
-              counts: dict | None = None) -> dict:
+def summarize(
+    mosaic: Mosaic,
+    result: CityResult,
+    seconds: dict,
+    files: dict,
+    settings: dict,
+    units: GroundUnits | None = None,
+    counts: dict | None = None,
+) -> dict:
     """Counts, timings and throughput of one run (JSON-ready); areas and lengths in true metres.
     ``counts`` are the writer's (:class:`~csboundary.pipeline.outputs.prediction_files.GraphWriter`); without
     them they are taken from ``result.graph``."""
     units = units or mosaic_units(mosaic) or PIXEL_UNITS
     if counts is None:
         counts = graph_counts(result.graph, units)
-    area_km2 = units.area_km2(mosaic.bounds) * union_area(mosaic.footprint) / mosaic.window.area  # the imagery's, not its bounding box's
+    area_km2 = (
+        units.area_km2(mosaic.bounds) * union_area(mosaic.footprint) / mosaic.window.area
+    )  # the imagery's, not its bounding box's
     n = result.n_patches
     kinds = counts["kinds"]
     return {
-        "inputs": [str(Path(t.path).resolve()) for t in mosaic.tiles],  # absolute: review and apply-review run from anywhere
+        "inputs": [
+            str(Path(t.path).resolve()) for t in mosaic.tiles
+        ],  # absolute: review and apply-review run from anywhere
         "crs": mosaic.crs.to_string() if mosaic.crs is not None else None,
         "length_unit": f"metre (from {units.unit_name}{', geodesic' if units.geographic else ''})",
         "mosaic_px": [mosaic.width, mosaic.height],
@@ -192,12 +247,18 @@ def graph_counts(graph, units: GroundUnits) -> dict:
     for kind in graph.edge_kinds or ["normal"] * graph.n_edges:
         kinds[kind] = kinds.get(kind, 0) + 1
     boundaries, edges = graph_frames(graph, units)
-    return {"vertices": graph.n_vertices, "edges": graph.n_edges, "kinds": kinds, "boundaries": len(boundaries),
-            "boundary_m": float(edges["length_m"].sum())}
+    return {
+        "vertices": graph.n_vertices,
+        "edges": graph.n_edges,
+        "kinds": kinds,
+        "boundaries": len(boundaries),
+        "boundary_m": float(edges["length_m"].sum()),
+    }
 
 
-def write_pictures(mosaic: Mosaic, result: CityResult, out: Path, gpkg: Path, ground_truth=(), store: RunStore | None = None) -> dict[str,
-                                                                                                                                      Path]:
+def write_pictures(
+    mosaic: Mosaic, result: CityResult, out: Path, gpkg: Path, ground_truth=(), store: RunStore | None = None
+) -> dict[str, Path]:
     """``overview.png`` (whole mosaic, from the run's core thumbnails when ``store`` has them
     all) and ``detail.png`` (the patch core holding the most of the city graph), the prediction
     read back from ``gpkg`` a chunk at a time, so drawing a city's lines holds one chunk. The
@@ -205,8 +266,13 @@ def write_pictures(mosaic: Mosaic, result: CityResult, out: Path, gpkg: Path, gr
     the GIL)."""
     from csboundary.viz.overlay import draw_world_lines, overview_from_thumbs, render_window, write_png
 
-    base = None if store is None else overview_from_thumbs(result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb,
-                                                           result.blank)
+    base = (
+        None
+        if store is None
+        else overview_from_thumbs(
+            result.grid, overview_scale(mosaic.window, OVERVIEW_PX), store.load_thumb, result.blank
+        )
+    )
     with ThreadPoolExecutor(1, thread_name_prefix="csboundary-png") as encoder:
         overview = render_window(mosaic, mosaic.window, ground_truth, max_size=OVERVIEW_PX, grid=result.grid, base=base)
         for lines in edge_lines_in_chunks(gpkg):
@@ -235,12 +301,16 @@ def edge_lines_in_chunks(gpkg: Path, bounds=None, chunk: int = 50_000):
         return
     total = pyogrio.read_info(gpkg, layer=EDGES_LAYER)["features"]
     for skip in range(0, total, chunk):
-        yield list(pyogrio.read_dataframe(gpkg, layer=EDGES_LAYER, columns=[], skip_features=skip, max_features=chunk).geometry)
+        yield list(
+            pyogrio.read_dataframe(gpkg, layer=EDGES_LAYER, columns=[], skip_features=skip, max_features=chunk).geometry
+        )
 
 
 def window_bounds(mosaic: Mosaic, window) -> tuple[float, float, float, float]:
     """World (minx, miny, maxx, maxy) of a pixel window of the mosaic."""
-    xs, ys = pixel_to_world(mosaic.transform, np.array([window.col_off, window.col_end]), np.array([window.row_off, window.row_end]))
+    xs, ys = pixel_to_world(
+        mosaic.transform, np.array([window.col_off, window.col_end]), np.array([window.row_off, window.row_end])
+    )
     return float(min(xs)), float(min(ys)), float(max(xs)), float(max(ys))
 
 
@@ -251,15 +321,19 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
 
 def written_files(folder: Path) -> str:
     """The finished files of an output folder, by name (what a run wrote, for the user)."""
-    return ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in Path(folder).iterdir() if not p.name.startswith(".")))
+    return ", ".join(
+        sorted(p.name + ("/" if p.is_dir() else "") for p in Path(folder).iterdir() if not p.name.startswith("."))
+    )
 
 
 def stage_table(summary: dict) -> str:
     """Seconds per patch for each stage, one line."""
     per = summary["seconds_per_patch"]
     parts = ", ".join(f"{k.replace('_', ' ')} {per[k]:.3f}" for k in STAGES)
-    return (f"{counted(summary['patches'], 'patch')}, {summary['area_km2']:.3f} km2 in {summary['seconds']['total']:.1f} s "
-            f"({summary['km2_per_hour']} km2/h); s/patch: {parts}")
+    return (
+        f"{counted(summary['patches'], 'patch')}, {summary['area_km2']:.3f} km2 in {summary['seconds']['total']:.1f} s "
+        f"({summary['km2_per_hour']} km2/h); s/patch: {parts}"
+    )
 
 
 def peak_rss_mb() -> float:
@@ -269,8 +343,13 @@ def peak_rss_mb() -> float:
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
 
 
-def evaluate_run(result: CityResult, ground_truth, seed: int = 0, scales: tuple[str, ...] = ("patch", "city"),
-                 metres_per_px: float | None = None) -> dict[str, dict]:
+def evaluate_run(
+    result: CityResult,
+    ground_truth,
+    seed: int = 0,
+    scales: tuple[str, ...] = ("patch", "city"),
+    metres_per_px: float | None = None,
+) -> dict[str, dict]:
     """Scores against ``ground_truth`` (world LineStrings) at the paper's two scales, those in
     ``scales``: ``patch`` (each patch's own graph on its core, averaged; Table I) and ``city``
     (the stitched graph as a whole; Table II). ``metres_per_px`` (the frame's pixel size) puts
@@ -282,7 +361,13 @@ def evaluate_run(result: CityResult, ground_truth, seed: int = 0, scales: tuple[
     gt = BoundaryGraph.from_world_lines(list(ground_truth), result.grid.transform)
     score = {
         "patch": lambda: evaluate(patch_scale_graph(result), gt, scale="patch", grid=result.grid, seed=seed),
-        "city": lambda: evaluate(result.graph, gt, scale="city", seed=seed, extent=(0, 0, result.grid.width, result.grid.height),
-                                metres_per_px=metres_per_px),
+        "city": lambda: evaluate(
+            result.graph,
+            gt,
+            scale="city",
+            seed=seed,
+            extent=(0, 0, result.grid.width, result.grid.height),
+            metres_per_px=metres_per_px,
+        ),
     }
     return {scale: score[scale]() for scale in scales}

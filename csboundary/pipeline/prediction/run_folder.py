@@ -56,5 +56,9 @@ def _full_disk(out: Path, store: RunStore | None) -> OSError:
     if not root.exists():
         return OSError(errno.ENOSPC, "no space left on device; nothing of the run was kept", str(out))
     size = sum(f.stat().st_size for f in root.rglob("*") if f.is_file()) / 2**20
-    return OSError(errno.ENOSPC, f"no space left on device; the finished work ({size:.1f} MB) is kept in {root}: free some space "
-                                 "and run the same command to continue, or delete that folder", str(out))
+    return OSError(
+        errno.ENOSPC,
+        f"no space left on device; the finished work ({size:.1f} MB) is kept in {root}: free some space "
+        "and run the same command to continue, or delete that folder",
+        str(out),
+    )

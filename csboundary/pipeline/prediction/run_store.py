@@ -107,7 +107,9 @@ def _atomic_save(path: Path, write, checksum: bool = False) -> None:
 
 def holds_work(root: Path) -> bool:
     """Whether a store has any patch's maps or window's graph stored."""
-    return any(not n.startswith(".") for sub in ("maps", "graphs") if (root / sub).is_dir() for n in os.listdir(root / sub))
+    return any(
+        not n.startswith(".") for sub in ("maps", "graphs") if (root / sub).is_dir() for n in os.listdir(root / sub)
+    )
 
 
 class RunStore:
@@ -152,16 +154,26 @@ class RunStore:
                 if not isinstance(old, dict):
                     raise ValueError
             except (OSError, ValueError, UnicodeDecodeError):
-                raise RunMismatch(root.parent, f"holds an unfinished run whose {MANIFEST} is damaged; "
-                                               "rerun with --restart to discard it, or choose another --out") from None
+                raise RunMismatch(
+                    root.parent,
+                    f"holds an unfinished run whose {MANIFEST} is damaged; "
+                    "rerun with --restart to discard it, or choose another --out",
+                ) from None
             differs = [k for k in [*manifest, *(k for k in old if k not in manifest)] if old.get(k) != manifest.get(k)]
-            if differs and not holds_work(root):  # a run that failed before any work (e.g. on a damaged input) blocks nothing
-                warnings.warn(f"{root.parent}: discarding an unfinished run with other {', '.join(differs)} that had done no work",
-                              InputWarning)
+            if differs and not holds_work(
+                root
+            ):  # a run that failed before any work (e.g. on a damaged input) blocks nothing
+                warnings.warn(
+                    f"{root.parent}: discarding an unfinished run with other {', '.join(differs)} that had done no work",
+                    InputWarning,
+                )
                 shutil.rmtree(root)
             elif differs:
-                raise RunMismatch(root.parent, f"holds an unfinished run with other {', '.join(differs)}; "
-                                               "rerun with --restart to discard it, or choose another --out")
+                raise RunMismatch(
+                    root.parent,
+                    f"holds an unfinished run with other {', '.join(differs)}; "
+                    "rerun with --restart to discard it, or choose another --out",
+                )
         elif root.exists():
             shutil.rmtree(root)  # no manifest: a store whose creation was interrupted
         resumed = path.exists()
@@ -228,12 +240,20 @@ class RunStore:
         """Patches without imagery (the FPN was not run on them)."""
         if self.root is None:
             return {i for i, m in self._maps.items() if m is None}
-        return {_index(n[: -len(".empty")]) for n in os.listdir(self.root / "maps") if n.endswith(".empty") and not n.startswith(".")}
+        return {
+            _index(n[: -len(".empty")])
+            for n in os.listdir(self.root / "maps")
+            if n.endswith(".empty") and not n.startswith(".")
+        }
 
     def graphs_done(self) -> set[Index]:
         if self.root is None:
             return set(self._graphs)
-        return {_index(n[: -len(".npz")]) for n in os.listdir(self.root / "graphs") if n.endswith(".npz") and not n.startswith(".")}
+        return {
+            _index(n[: -len(".npz")])
+            for n in os.listdir(self.root / "graphs")
+            if n.endswith(".npz") and not n.startswith(".")
+        }
 
     # -- maps ----------------------------------------------------------------------------------
     def save_maps(self, index: Index, maps: np.ndarray | None) -> None:
@@ -262,8 +282,10 @@ class RunStore:
         self._settle(MAX_PENDING_WRITES - 1)
         if self._writer is None:
             self._writer = ThreadPoolExecutor(1, thread_name_prefix="csboundary-store-writer")
-        self._pending[folder, index] = (array, self._writer.submit(_atomic_save, path, lambda f: np.save(f, array, allow_pickle=False),
-                                                                   True))
+        self._pending[folder, index] = (
+            array,
+            self._writer.submit(_atomic_save, path, lambda f: np.save(f, array, allow_pickle=False), True),
+        )
 
     def _get(self, folder: str, index: Index) -> np.ndarray | None:
         """A stored array (pending or memory-mapped), None if there is none."""
@@ -363,7 +385,11 @@ class RunStore:
         if self.root is None:
             self._graphs[index] = graph
         else:
-            _atomic_save(self.root / "graphs" / f"{_stem(index)}.npz", lambda f: np.savez(f, **graph_arrays(graph)), checksum=True)
+            _atomic_save(
+                self.root / "graphs" / f"{_stem(index)}.npz",
+                lambda f: np.savez(f, **graph_arrays(graph)),
+                checksum=True,
+            )
 
     def load_graph(self, index: Index) -> BoundaryGraph:
         if self.root is None:
@@ -374,8 +400,14 @@ class RunStore:
     def save_core(self, index: Index, values: np.ndarray | None) -> None:
         """The stitched maps of a patch core, uint8 (for ``maps.tif`` and the edge confidence);
         None for a core whose maps are all zero (no imagery near it: a marker, not 3 MB of zeros)."""
-        if values is not None and self.root is not None:  # in place before the window's graph is: never a graph without its core
-            _atomic_save(self.root / "cores" / f"{_stem(index)}.npy", lambda f: np.save(f, values, allow_pickle=False), checksum=True)
+        if (
+            values is not None and self.root is not None
+        ):  # in place before the window's graph is: never a graph without its core
+            _atomic_save(
+                self.root / "cores" / f"{_stem(index)}.npy",
+                lambda f: np.save(f, values, allow_pickle=False),
+                checksum=True,
+            )
         elif values is not None:
             self._put("cores", index, values)
         elif self.root is None:
@@ -387,7 +419,9 @@ class RunStore:
         """Whether a core (or its all-zero marker) is stored."""
         if self.root is None:
             return ("cores", index) in self._memory or index in self._empty_cores
-        return index in self._empty_cores or any((self.root / "cores" / f"{_stem(index)}{ext}").exists() for ext in (".npy", ".empty"))
+        return index in self._empty_cores or any(
+            (self.root / "cores" / f"{_stem(index)}{ext}").exists() for ext in (".npy", ".empty")
+        )
 
     def drop_graph(self, index: Index) -> None:
         """Forget a window's graph (it will be connected again)."""
@@ -406,6 +440,8 @@ class RunStore:
         core = self._get("cores", index)
         if core is not None:
             return np.asarray(core)
-        if index in self._empty_cores or (self.root is not None and (self.root / "cores" / f"{_stem(index)}.empty").exists()):
+        if index in self._empty_cores or (
+            self.root is not None and (self.root / "cores" / f"{_stem(index)}.empty").exists()
+        ):
             return None
         raise KeyError(f"stitched maps of patch {index} are not in the run store")

@@ -30,8 +30,15 @@ from csboundary.models.device import resolve_device
 from csboundary.models.training.adapt import AdaptConfig
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
-from csboundary.pipeline.training.finetune import FinetuneBudget, _train, check_budget, checked_base, locked_work, training_configs
 from csboundary.pipeline.outputs.review import prediction_inputs
+from csboundary.pipeline.training.finetune import (
+    FinetuneBudget,
+    _train,
+    check_budget,
+    checked_base,
+    locked_work,
+    training_configs,
+)
 
 RASTER_SUFFIXES = (".tif", ".tiff")
 
@@ -40,6 +47,7 @@ RASTER_SUFFIXES = (".tif", ".tiff")
 class AdaptBudget(Config):
     """How much adapting: sized so that 14 crops of 700 px take under 15 minutes on a 2-core
     CPU (docs/adapt.md has the measured times)."""
+
     config_name = "adapt budget"
 
     fpn_steps: int = 800
@@ -102,9 +110,20 @@ def open_imagery_views(groups: list[list[Path]], gsd: float | None, model_gsd: f
     return views, mosaics
 
 
-def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None, budget: AdaptBudget = AdaptBudget(),
-          method: AdaptConfig = AdaptConfig(), seed: int = 0, cache: Path | None = None, gsd: float | None = None, device: str = "auto",
-          progress: bool = True) -> dict:
+def adapt(
+    imagery: list[Path],
+    out: Path,
+    *,
+    weights: Path | None = None,
+    work: Path | None = None,
+    budget: AdaptBudget = AdaptBudget(),
+    method: AdaptConfig = AdaptConfig(),
+    seed: int = 0,
+    cache: Path | None = None,
+    gsd: float | None = None,
+    device: str = "auto",
+    progress: bool = True,
+) -> dict:
     """The checks every caller gets (the command line and the Python API alike), then
     :func:`_adapt` holding the work folder's lock: a second run into the same work folder is
     refused in one line instead of spoiling this one's runs."""
@@ -113,13 +132,35 @@ def adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: 
     out = Path(out)
     work = Path(work) if work else default_work(out)
     with locked_work(work):
-        return _adapt(imagery, out, weights=weights, work=work, budget=budget, method=method, seed=seed, cache=cache, gsd=gsd,
-                      device=device, progress=progress)
+        return _adapt(
+            imagery,
+            out,
+            weights=weights,
+            work=work,
+            budget=budget,
+            method=method,
+            seed=seed,
+            cache=cache,
+            gsd=gsd,
+            device=device,
+            progress=progress,
+        )
 
 
-def _adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None, budget: AdaptBudget = AdaptBudget(),
-          method: AdaptConfig = AdaptConfig(), seed: int = 0, cache: Path | None = None, gsd: float | None = None, device: str = "auto",
-          progress: bool = True) -> dict:
+def _adapt(
+    imagery: list[Path],
+    out: Path,
+    *,
+    weights: Path | None = None,
+    work: Path | None = None,
+    budget: AdaptBudget = AdaptBudget(),
+    method: AdaptConfig = AdaptConfig(),
+    seed: int = 0,
+    cache: Path | None = None,
+    gsd: float | None = None,
+    device: str = "auto",
+    progress: bool = True,
+) -> dict:
     """Adapt the bundle ``weights`` (default: the shipped one) to the unlabelled ``imagery`` and
     write the adapted bundle ``out``. ``work`` keeps the runs (default ``OUT-adapt/``), ``cache``
     the synthetic cities (default: in ``work``); ``gsd`` is the pixel size of imagery without a
@@ -130,33 +171,58 @@ def _adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work:
     work = Path(work) if work else default_work(out)
     base = checked_base(base_path)
     if not base["fpn_config"].get("surface") and (method.mix or method.surface_anchor):
-        raise InputError(base_path, "its FPN has no road-surface head, which mixing and the surface anchor need "
-                                    "(give --no-mix --no-surface-anchor, or a bundle with one)")
+        raise InputError(
+            base_path,
+            "its FPN has no road-surface head, which mixing and the surface anchor need "
+            "(give --no-mix --no-surface-anchor, or a bundle with one)",
+        )
     groups = imagery_groups(imagery)
     model_gsd = float(base.get("pixel_size_m", MODEL_GSD))
     views, mosaics = open_imagery_views(groups, gsd, model_gsd)
     try:
         target = UnlabelledImagery(views, [str(g[0]) for g in groups])
-        least = 4 * budget.crop ** 2
+        least = 4 * budget.crop**2
         if target.pixels < least:
-            raise InputError(groups[0][0], f"too little imagery to learn from: {target.pixels} px at the model's pixel size, "
-                                           f"adapt needs at least {least} (four {budget.crop} px windows)")
+            raise InputError(
+                groups[0][0],
+                f"too little imagery to learn from: {target.pixels} px at the model's pixel size, "
+                f"adapt needs at least {least} (four {budget.crop} px windows)",
+            )
         try:  # one window before any work: imagery that is all no-data where windows fall is refused here, not mid-training
             target.sample(np.random.default_rng(seed), budget.crop)
         except ValueError:
-            raise InputError(groups[0][0], f"{DRAWS} random {budget.crop} px windows of the imagery held no valid pixel: it is all "
-                                           "no-data where they fall") from None
+            raise InputError(
+                groups[0][0],
+                f"{DRAWS} random {budget.crop} px windows of the imagery held no valid pixel: it is all "
+                "no-data where they fall",
+            ) from None
         records = [{"path": str(p.resolve()), "sha256": file_sha256(p)} for group in groups for p in group]
-        tune = FinetuneBudget(fpn_steps=budget.fpn_steps, afanet_steps=budget.afanet_steps, user_share=0.5,
-                              synthetic_cities=budget.synthetic_cities, fpn_lr=budget.fpn_lr, afanet_lr=budget.afanet_lr,
-                              crop=budget.crop, batch=method.source_batch)
-        fpn_config, afanet_config = training_configs(base, base_path, [], tune, seed, Path(cache) if cache else work / "synthetic")
+        tune = FinetuneBudget(
+            fpn_steps=budget.fpn_steps,
+            afanet_steps=budget.afanet_steps,
+            user_share=0.5,
+            synthetic_cities=budget.synthetic_cities,
+            fpn_lr=budget.fpn_lr,
+            afanet_lr=budget.afanet_lr,
+            crop=budget.crop,
+            batch=method.source_batch,
+        )
+        fpn_config, afanet_config = training_configs(
+            base, base_path, [], tune, seed, Path(cache) if cache else work / "synthetic"
+        )
         fpn_config.options = {"method": method.to_dict(), "imagery": records}
         resolved = resolve_device(device)
         seconds = {}
         start = time.perf_counter()
-        fpn = _train("adapt", fpn_config, work / "fpn", resolved, progress, final_name="fpn.pt",
-                     trainer=lambda config, run, dev, resume, progress: train_adapt(config, target, run, dev, resume, progress))
+        fpn = _train(
+            "adapt",
+            fpn_config,
+            work / "fpn",
+            resolved,
+            progress,
+            final_name="fpn.pt",
+            trainer=lambda config, run, dev, resume, progress: train_adapt(config, target, run, dev, resume, progress),
+        )
         seconds["fpn"] = time.perf_counter() - start
     finally:
         for mosaic in mosaics:
@@ -166,19 +232,43 @@ def _adapt(imagery: list[Path], out: Path, *, weights: Path | None = None, work:
     afanet = _train("afanet", afanet_config, work / "afanet", resolved, progress) if budget.afanet_steps else None
     seconds["afanet"] = time.perf_counter() - start
     adapted_fpn = load_checkpoint(fpn, ("fpn",))
-    adapted_afanet = load_checkpoint(afanet, ("afanet",)) if afanet else {"afanet": base["afanet"], "afanet_config": base["afanet_config"]}
-    record = {"base_weights": str(base_path.resolve()), "base_sha256": file_sha256(base_path), "imagery": records,
-              "budget": budget.to_dict(), "method": method.to_dict(), "seed": seed, "code_version": code_version(),
-              "edge_confidence": "the base bundle's, fitted on its own predictions (docs/adapt.md: its AUC with the adapted networks)"}
+    adapted_afanet = (
+        load_checkpoint(afanet, ("afanet",))
+        if afanet
+        else {"afanet": base["afanet"], "afanet_config": base["afanet_config"]}
+    )
+    record = {
+        "base_weights": str(base_path.resolve()),
+        "base_sha256": file_sha256(base_path),
+        "imagery": records,
+        "budget": budget.to_dict(),
+        "method": method.to_dict(),
+        "seed": seed,
+        "code_version": code_version(),
+        "edge_confidence": "the base bundle's, fitted on its own predictions (docs/adapt.md: its AUC with the adapted networks)",
+    }
     keys = ("code_version", "code_version_at_start", "train_config", "step", "validation")
     payload = {k: v for k, v in base.items() if k not in ("format", "kind", "code_version")}
     provenance = {"fpn": {k: adapted_fpn.get(k) for k in keys}, "base": base.get("provenance") or {}, "adapt": record}
-    provenance["afanet"] = {k: adapted_afanet.get(k) for k in keys} if afanet else (base.get("provenance") or {}).get("afanet")
-    payload.update(fpn=adapted_fpn["fpn"], fpn_config=adapted_fpn["fpn_config"], afanet=adapted_afanet["afanet"],
-                   afanet_config=adapted_afanet["afanet_config"], provenance=provenance)
+    provenance["afanet"] = (
+        {k: adapted_afanet.get(k) for k in keys} if afanet else (base.get("provenance") or {}).get("afanet")
+    )
+    payload.update(
+        fpn=adapted_fpn["fpn"],
+        fpn_config=adapted_fpn["fpn_config"],
+        afanet=adapted_afanet["afanet"],
+        afanet_config=adapted_afanet["afanet_config"],
+        provenance=provenance,
+    )
     save_checkpoint(out, "bundle", **payload)
-    return {"out": out, "images": len(records), "pixels": target.pixels, "work": work, "seconds": seconds,
-            "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps}}
+    return {
+        "out": out,
+        "images": len(records),
+        "pixels": target.pixels,
+        "work": work,
+        "seconds": seconds,
+        "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps},
+    }
 
 
 __all__ = ["AdaptBudget", "adapt", "imagery_groups"]

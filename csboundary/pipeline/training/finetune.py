@@ -37,6 +37,7 @@ from csboundary.pipeline.training.labelled_inputs import labelled_cities
 class FinetuneBudget(Config):
     """How much fine-tuning: sized so that a handful of patches takes under 20 minutes on a
     2-core CPU (docs/finetune.md has the measured times)."""
+
     config_name = "finetune budget"
 
     fpn_steps: int = 1000
@@ -47,7 +48,9 @@ class FinetuneBudget(Config):
     afanet_lr: float = 3e-4
     crop: int = 256
     batch: int = 4
-    refit_confidence: bool = True  # refit the edge confidence with the tuned networks when the labelled cities give enough edges
+    refit_confidence: bool = (
+        True  # refit the edge confidence with the tuned networks when the labelled cities give enough edges
+    )
 
     def __post_init__(self) -> None:
         check_budget(self)
@@ -63,7 +66,9 @@ def check_budget(budget) -> None:
         value = getattr(budget, name)
         low = 1 if name == "fpn_steps" else 0
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= MAX_STEPS:
-            raise InputError("--" + name.replace("_", "-"), f"must be a whole number from {low} to {MAX_STEPS:,}, got {value!r}")
+            raise InputError(
+                "--" + name.replace("_", "-"), f"must be a whole number from {low} to {MAX_STEPS:,}, got {value!r}"
+            )
     for name in ("fpn_lr", "afanet_lr"):
         value = getattr(budget, name)
         if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
@@ -75,37 +80,65 @@ def check_budget(budget) -> None:
         raise InputError("--user-share", f"must be from 0 to 1, got {share!r}")
 
 
-FINETUNE_VALID = CitySpec(split="valid", seed=0, tiles=(1, 1), tile_size=1500)  # a small synthetic city: forgetting shows there
+FINETUNE_VALID = CitySpec(
+    split="valid", seed=0, tiles=(1, 1), tile_size=1500
+)  # a small synthetic city: forgetting shows there
 
 
 def default_work(out: Path) -> Path:
     return out.with_name(out.stem + "-finetune")
 
 
-def training_configs(base: dict, base_path: Path, cities: list[Path], budget: FinetuneBudget, seed: int,
-                     cache: Path) -> tuple[TrainConfig, TrainConfig]:
+def training_configs(
+    base: dict, base_path: Path, cities: list[Path], budget: FinetuneBudget, seed: int, cache: Path
+) -> tuple[TrainConfig, TrainConfig]:
     """The FPN and AfANet training configs of a fine-tune of the bundle ``base`` (its payload,
     read from ``base_path``, where both networks start) on ``cities``: the bundle's own recipe
     (style mix, losses, surface head) with the budget's steps, rates and user share."""
     recipe = ((base.get("provenance") or {}).get("fpn") or {}).get("train_config") or {}
     worlds = {**(recipe.get("worlds") or {}), "cities": budget.synthetic_cities}
     worlds.setdefault("tile_size", 2500)
-    shared = dict(seed=seed, cache=str(cache), train_city=None, worlds=worlds, valid_city=FINETUNE_VALID,
-                  extra_train_cities=[str(c) for c in cities], extra_share=budget.user_share, validation_samples=4)
-    fpn = TrainConfig(model="fpn", steps=budget.fpn_steps, lr=budget.fpn_lr, validate_every=max(1, min(100, budget.fpn_steps)),
-                      init_fpn=str(base_path.resolve()), surface=bool(base["fpn_config"].get("surface")), crop=budget.crop,
-                      batch=budget.batch,
-                      augment=recipe.get("augment", {}), hard_negative_weight=float(recipe.get("hard_negative_weight", 0.0)),
-                      hard_negative_margin_px=int(recipe.get("hard_negative_margin_px", 6)),
-                      pos_weight_keypoint=float(recipe.get("pos_weight_keypoint", 20.0)),
-                      pos_weight_segmentation=float(recipe.get("pos_weight_segmentation", 10.0)), **shared)
+    shared = dict(
+        seed=seed,
+        cache=str(cache),
+        train_city=None,
+        worlds=worlds,
+        valid_city=FINETUNE_VALID,
+        extra_train_cities=[str(c) for c in cities],
+        extra_share=budget.user_share,
+        validation_samples=4,
+    )
+    fpn = TrainConfig(
+        model="fpn",
+        steps=budget.fpn_steps,
+        lr=budget.fpn_lr,
+        validate_every=max(1, min(100, budget.fpn_steps)),
+        init_fpn=str(base_path.resolve()),
+        surface=bool(base["fpn_config"].get("surface")),
+        crop=budget.crop,
+        batch=budget.batch,
+        augment=recipe.get("augment", {}),
+        hard_negative_weight=float(recipe.get("hard_negative_weight", 0.0)),
+        hard_negative_margin_px=int(recipe.get("hard_negative_margin_px", 6)),
+        pos_weight_keypoint=float(recipe.get("pos_weight_keypoint", 20.0)),
+        pos_weight_segmentation=float(recipe.get("pos_weight_segmentation", 10.0)),
+        **shared,
+    )
     afanet_recipe = ((base.get("provenance") or {}).get("afanet") or {}).get("train_config") or {}
-    afanet = TrainConfig(model="afanet", steps=budget.afanet_steps, gt_steps=0, lr=budget.afanet_lr, init_afanet=str(base_path.resolve()),
-                         validate_every=max(1, min(200, budget.afanet_steps)),
-                         vertex_threshold=float(base["inference"].get("vertex_threshold", 0.5)),  # the vertices it meets at inference
-                         window=int(afanet_recipe.get("window", 1100)), max_vertices=int(afanet_recipe.get("max_vertices", 160)),
-                         max_pos_weight=float(afanet_recipe.get("max_pos_weight", 30.0)), augment=afanet_recipe.get("augment", {}),
-                         **shared)
+    afanet = TrainConfig(
+        model="afanet",
+        steps=budget.afanet_steps,
+        gt_steps=0,
+        lr=budget.afanet_lr,
+        init_afanet=str(base_path.resolve()),
+        validate_every=max(1, min(200, budget.afanet_steps)),
+        vertex_threshold=float(base["inference"].get("vertex_threshold", 0.5)),  # the vertices it meets at inference
+        window=int(afanet_recipe.get("window", 1100)),
+        max_vertices=int(afanet_recipe.get("max_vertices", 160)),
+        max_pos_weight=float(afanet_recipe.get("max_pos_weight", 30.0)),
+        augment=afanet_recipe.get("augment", {}),
+        **shared,
+    )
     return fpn, afanet
 
 
@@ -120,7 +153,9 @@ def checked_base(path: Path) -> dict:
     return load_checkpoint(path, ("bundle",))
 
 
-def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool, trainer=None, final_name: str | None = None) -> Path:
+def _train(
+    kind: str, config: TrainConfig, run: Path, device, progress: bool, trainer=None, final_name: str | None = None
+) -> Path:
     """One training run in ``run`` (``trainer(config, run, device, resume, progress)``, by
     default the trainer of ``kind``), resumed from its last checkpoint when one is there; a run
     whose final weights (``final_name``, default ``<kind>.pt``) exist under the same config is
@@ -131,7 +166,9 @@ def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool, tr
     final, last, recorded = run / (final_name or f"{kind}.pt"), run / f"{kind}-last.pt", run / "config.json"
     wanted = json.dumps(config.to_dict(), indent=2) + "\n"
     if recorded.exists() and recorded.read_text() != wanted:
-        raise InputError(run, "holds a fine-tune with other inputs or settings: give another --work folder or remove it")
+        raise InputError(
+            run, "holds a fine-tune with other inputs or settings: give another --work folder or remove it"
+        )
     if final.exists():
         return final
     run.mkdir(parents=True, exist_ok=True)
@@ -143,13 +180,25 @@ def _train(kind: str, config: TrainConfig, run: Path, device, progress: bool, tr
 
 def labelled_record(city: Path) -> dict:
     """A labelled input as provenance: its name, its ground truth's and its tiles' sha256."""
-    return {"city": str(Path(city).resolve()), "ground_truth_sha256": file_sha256(layout.ground_truth_path(city)),
-            "tiles_sha256": {p.name: file_sha256(p) for p in sorted(layout.tiles_dir(city).glob("*.tif"))}}
+    return {
+        "city": str(Path(city).resolve()),
+        "ground_truth_sha256": file_sha256(layout.ground_truth_path(city)),
+        "tiles_sha256": {p.name: file_sha256(p) for p in sorted(layout.tiles_dir(city).glob("*.tif"))},
+    }
 
 
-def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None,
-             budget: FinetuneBudget = FinetuneBudget(), seed: int = 0, cache: Path | None = None, device: str = "auto",
-             progress: bool = True) -> dict:
+def finetune(
+    labelled: list[Path],
+    out: Path,
+    *,
+    weights: Path | None = None,
+    work: Path | None = None,
+    budget: FinetuneBudget = FinetuneBudget(),
+    seed: int = 0,
+    cache: Path | None = None,
+    device: str = "auto",
+    progress: bool = True,
+) -> dict:
     """The checks every caller gets (the command line and the Python API alike), then
     :func:`_finetune` holding the work folder's lock: a second run into the same work folder is
     refused in one line instead of spoiling this one's runs."""
@@ -158,8 +207,17 @@ def finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, wo
     out = Path(out)
     work = Path(work) if work else default_work(out)
     with locked_work(work):
-        return _finetune(labelled, out, weights=weights, work=work, budget=budget, seed=seed, cache=cache, device=device,
-                         progress=progress)
+        return _finetune(
+            labelled,
+            out,
+            weights=weights,
+            work=work,
+            budget=budget,
+            seed=seed,
+            cache=cache,
+            device=device,
+            progress=progress,
+        )
 
 
 def locked_work(work: Path):
@@ -168,9 +226,18 @@ def locked_work(work: Path):
     return locked_folder(work, "--work")
 
 
-def _finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, work: Path | None = None,
-             budget: FinetuneBudget = FinetuneBudget(), seed: int = 0, cache: Path | None = None, device: str = "auto",
-             progress: bool = True) -> dict:
+def _finetune(
+    labelled: list[Path],
+    out: Path,
+    *,
+    weights: Path | None = None,
+    work: Path | None = None,
+    budget: FinetuneBudget = FinetuneBudget(),
+    seed: int = 0,
+    cache: Path | None = None,
+    device: str = "auto",
+    progress: bool = True,
+) -> dict:
     """Fine-tune the bundle ``weights`` (default: the shipped one) on the ``labelled`` cities,
     sets or reviewed predictions, and write the tuned bundle ``out``. ``work`` keeps the runs
     (default: ``OUT-finetune/`` beside ``out``); ``cache`` the synthetic cities (default: in
@@ -185,7 +252,9 @@ def _finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, w
         if made:  # the refused input of a second reviewed prediction comes after the first one's city was made
             shutil.rmtree(work, ignore_errors=True)
         raise
-    fpn_config, afanet_config = training_configs(base, base_path, cities, budget, seed, Path(cache) if cache else work / "synthetic")
+    fpn_config, afanet_config = training_configs(
+        base, base_path, cities, budget, seed, Path(cache) if cache else work / "synthetic"
+    )
     resolved = resolve_device(device)
     seconds = {}
     start = time.perf_counter()
@@ -196,28 +265,48 @@ def _finetune(labelled: list[Path], out: Path, *, weights: Path | None = None, w
     afanet = _train("afanet", afanet_config, work / "afanet", resolved, progress)
     seconds["afanet"] = time.perf_counter() - start
     tuned_fpn, tuned_afanet = load_checkpoint(fpn, ("fpn",)), load_checkpoint(afanet, ("afanet",))
-    record = {"base_weights": str(base_path.resolve()), "base_sha256": file_sha256(base_path),
-              "labelled": [labelled_record(c) for c in cities],
-              "budget": budget.to_dict(), "seed": seed, "code_version": code_version(),
-              "edge_confidence": {"refitted": False, "reason": "the base bundle's (refit switched off)"}}
+    record = {
+        "base_weights": str(base_path.resolve()),
+        "base_sha256": file_sha256(base_path),
+        "labelled": [labelled_record(c) for c in cities],
+        "budget": budget.to_dict(),
+        "seed": seed,
+        "code_version": code_version(),
+        "edge_confidence": {"refitted": False, "reason": "the base bundle's (refit switched off)"},
+    }
     keys = ("code_version", "code_version_at_start", "train_config", "step", "validation")
     payload = {k: v for k, v in base.items() if k not in ("format", "kind", "code_version")}
-    payload.update(fpn=tuned_fpn["fpn"], fpn_config=tuned_fpn["fpn_config"], afanet=tuned_afanet["afanet"],
-                   afanet_config=tuned_afanet["afanet_config"],
-                   provenance={"fpn": {k: tuned_fpn.get(k) for k in keys}, "afanet": {k: tuned_afanet.get(k) for k in keys},
-                               "base": base.get("provenance") or {}, "finetune": record})
+    payload.update(
+        fpn=tuned_fpn["fpn"],
+        fpn_config=tuned_fpn["fpn_config"],
+        afanet=tuned_afanet["afanet"],
+        afanet_config=tuned_afanet["afanet_config"],
+        provenance={
+            "fpn": {k: tuned_fpn.get(k) for k in keys},
+            "afanet": {k: tuned_afanet.get(k) for k in keys},
+            "base": base.get("provenance") or {},
+            "finetune": record,
+        },
+    )
     save_checkpoint(out, "bundle", **payload)
     confidence = record["edge_confidence"]
     if budget.refit_confidence:
         start = time.perf_counter()
         confidence = refit_tuned_confidence(out, cities, fpn_config, resolved, seed, progress)
         seconds["confidence"] = time.perf_counter() - start
-    return {"out": out, "cities": cities, "work": work, "seconds": seconds, "steps": {"fpn": budget.fpn_steps,
-                                                                                      "afanet": budget.afanet_steps},
-            "confidence": confidence}
+    return {
+        "out": out,
+        "cities": cities,
+        "work": work,
+        "seconds": seconds,
+        "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps},
+        "confidence": confidence,
+    }
 
 
-def refit_tuned_confidence(out: Path, cities: list[Path], fpn_config: TrainConfig, device, seed: int, progress: bool) -> dict:
+def refit_tuned_confidence(
+    out: Path, cities: list[Path], fpn_config: TrainConfig, device, seed: int, progress: bool
+) -> dict:
     """Refit the tuned bundle ``out``'s edge confidence on the labelled ``cities`` and the
     synthetic cities the FPN mixed in, when they hold enough edges
     (:func:`csboundary.pipeline.training.confidence_fit.refit_for_tuned`); the outcome goes into the
@@ -225,7 +314,9 @@ def refit_tuned_confidence(out: Path, cities: list[Path], fpn_config: TrainConfi
     from csboundary.models.training.data import WorldsConfig
     from csboundary.pipeline.training.confidence_fit import refit_for_tuned
 
-    synthetic = [spec.ensure(fpn_config.cache, progress=False) for spec in WorldsConfig.from_dict(fpn_config.worlds).specs()]
+    synthetic = [
+        spec.ensure(fpn_config.cache, progress=False) for spec in WorldsConfig.from_dict(fpn_config.worlds).specs()
+    ]
     outcome = refit_for_tuned(out, cities, synthetic, device, seed=seed, progress=progress)
     payload = load_checkpoint(out, ("bundle",))
     payload["provenance"]["finetune"]["edge_confidence"] = outcome

@@ -42,14 +42,22 @@ def reviewed_areas(prediction: Path) -> gpd.GeoDataFrame:
     covers the imagery (a review log from before apply-review checked that)."""
     areas = complete_areas(prediction)
     if not areas:
-        raise InputError(prediction, "no area of it is marked complete: on the review page mark what you reviewed "
-                                     "(Area, or View complete), export the edits and run apply-review")
-    crs = pyogrio.read_info(prediction / REVIEWED_GROUND_TRUTH, layer=LAYER)["crs"]  # the graph's, in which the areas were drawn
+        raise InputError(
+            prediction,
+            "no area of it is marked complete: on the review page mark what you reviewed "
+            "(Area, or View complete), export the edits and run apply-review",
+        )
+    crs = pyogrio.read_info(prediction / REVIEWED_GROUND_TRUTH, layer=LAYER)[
+        "crs"
+    ]  # the graph's, in which the areas were drawn
     complete = gpd.GeoDataFrame(geometry=[Polygon(ring) for ring in areas], crs=crs)
     with Mosaic.open(prediction_inputs(prediction)) as mosaic:
         if not covers_imagery(list(complete.to_crs(mosaic.crs).geometry if mosaic.crs else complete.geometry), mosaic):
-            raise InputError(prediction / REVIEW_LOG, "no area marked complete in it covers any of the imagery (they lie in "
-                                                      "the margin around it): mark the areas again and run apply-review")
+            raise InputError(
+                prediction / REVIEW_LOG,
+                "no area marked complete in it covers any of the imagery (they lie in "
+                "the margin around it): mark the areas again and run apply-review",
+            )
     return complete
 
 
@@ -89,8 +97,11 @@ def labelled_cities(paths: list[Path], work: Path) -> list[Path]:
         elif (path / SET_FILE).exists() or (path.is_dir() and any(layout.is_city_dir(p) for p in path.iterdir())):
             found += set_cities(path)
         elif (path / "summary.json").exists():
-            raise InputError(path, "a prediction that was never reviewed: review it (csboundary review), mark the complete "
-                                   "area and apply-review, or give a labelled city")
+            raise InputError(
+                path,
+                "a prediction that was never reviewed: review it (csboundary review), mark the complete "
+                "area and apply-review, or give a labelled city",
+            )
         else:
             raise InputError(path, "not a labelled city, a set of them, or a reviewed prediction folder")
     names = [p.resolve() for p in found]

@@ -6,14 +6,30 @@ import json
 import os
 import tempfile
 
-from qgis.core import (QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProcessing, QgsProcessingAlgorithm,
-                       QgsProcessingContext, QgsProcessingException, QgsProject, QgsProcessingOutputFile,
-                       QgsProcessingOutputFolder, QgsProcessingOutputNumber,
-                       QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterFolderDestination, QgsProcessingParameterMultipleLayers,
-                       QgsProcessingParameterNumber, QgsProcessingParameterVectorLayer, QgsProcessingUtils,
-                       QgsVectorFileWriter, QgsVectorLayer)
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsCoordinateTransform,
+    QgsProcessing,
+    QgsProcessingAlgorithm,
+    QgsProcessingContext,
+    QgsProcessingException,
+    QgsProcessingOutputFile,
+    QgsProcessingOutputFolder,
+    QgsProcessingOutputNumber,
+    QgsProcessingOutputVectorLayer,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterFileDestination,
+    QgsProcessingParameterFolderDestination,
+    QgsProcessingParameterMultipleLayers,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterVectorLayer,
+    QgsProcessingUtils,
+    QgsProject,
+    QgsVectorFileWriter,
+    QgsVectorLayer,
+)
 
 from . import runner
 from .command import configured_command
@@ -30,6 +46,7 @@ REVIEW_GPKG = "review.gpkg"  # the boundaries that a reviewer edits, beside the 
 
 class CsboundaryAlgorithm(QgsProcessingAlgorithm):
     """What every algorithm shares: the command's run with QGIS's progress bar and cancel."""
+
     NAME = ""
     TITLE = ""
     HELP = ""
@@ -44,8 +61,10 @@ class CsboundaryAlgorithm(QgsProcessingAlgorithm):
         return self.TITLE
 
     def shortHelpString(self):  # noqa: N802
-        return self.HELP + ("<p>Runs the csboundary command of the environment named under Settings > Options > "
-                            "Processing > Providers > csboundary (or $CSBOUNDARY_COMMAND, or the one on PATH).</p>")
+        return self.HELP + (
+            "<p>Runs the csboundary command of the environment named under Settings > Options > "
+            "Processing > Providers > csboundary (or $CSBOUNDARY_COMMAND, or the one on PATH).</p>"
+        )
 
     def csboundary(self, args, feedback):
         """Run ``csboundary args``: its bars in QGIS's progress bar, its lines in the log, cancel
@@ -54,18 +73,27 @@ class CsboundaryAlgorithm(QgsProcessingAlgorithm):
             command = runner.find_command(configured_command())
             feedback.pushInfo(f"{runner.check_command(command)} ({command})")
             feedback.pushCommandInfo(" ".join([command, *args]))
-            progress = runner.Progress(stage=feedback.setProgressText, percent=feedback.setProgress,
-                                       line=feedback.pushConsoleInfo, canceled=feedback.isCanceled)
+            progress = runner.Progress(
+                stage=feedback.setProgressText,
+                percent=feedback.setProgress,
+                line=feedback.pushConsoleInfo,
+                canceled=feedback.isCanceled,
+            )
             return runner.run(command, list(args), progress)
         except runner.Canceled:
-            raise QgsProcessingException("canceled: csboundary was stopped (a prediction keeps its finished patches: "
-                                         "run it again into the same folder to continue)") from None
+            raise QgsProcessingException(
+                "canceled: csboundary was stopped (a prediction keeps its finished patches: "
+                "run it again into the same folder to continue)"
+            ) from None
         except runner.CommandError as exc:
             raise QgsProcessingException(f"csboundary: {exc}") from None
 
     def engine_parameters(self):
-        self.addParameter(QgsProcessingParameterFile("WEIGHTS", "Weights bundle (empty: the shipped weights)",
-                                                     extension="pt", optional=True))
+        self.addParameter(
+            QgsProcessingParameterFile(
+                "WEIGHTS", "Weights bundle (empty: the shipped weights)", extension="pt", optional=True
+            )
+        )
         self.addParameter(QgsProcessingParameterEnum("DEVICE", "Device", options=list(DEVICES), defaultValue=0))
 
     def engine_args(self, parameters, context):
@@ -80,8 +108,16 @@ class CsboundaryAlgorithm(QgsProcessingAlgorithm):
         return path
 
     def min_confidence_parameter(self):
-        self.addParameter(QgsProcessingParameterNumber("MIN_CONFIDENCE", "Leave out edges less sure than",
-                                                       QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+        self.addParameter(
+            QgsProcessingParameterNumber(
+                "MIN_CONFIDENCE",
+                "Leave out edges less sure than",
+                QgsProcessingParameterNumber.Double,
+                0.0,
+                minValue=0.0,
+                maxValue=1.0,
+            )
+        )
 
     def min_confidence_args(self, parameters, context):
         min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
@@ -89,34 +125,54 @@ class CsboundaryAlgorithm(QgsProcessingAlgorithm):
 
     def training_parameters(self, fpn_steps, afanet_steps, afanet_label, afanet_min, output_label):
         """Fine-tune's and Adapt's budget, engine, optional work folder and weights to write."""
-        self.addParameter(QgsProcessingParameterNumber("FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, fpn_steps,
-                                                       minValue=1))
-        self.addParameter(QgsProcessingParameterNumber("AFANET_STEPS", afanet_label, QgsProcessingParameterNumber.Integer, afanet_steps,
-                                                       minValue=afanet_min))
+        self.addParameter(
+            QgsProcessingParameterNumber(
+                "FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, fpn_steps, minValue=1
+            )
+        )
+        self.addParameter(
+            QgsProcessingParameterNumber(
+                "AFANET_STEPS", afanet_label, QgsProcessingParameterNumber.Integer, afanet_steps, minValue=afanet_min
+            )
+        )
         self.engine_parameters()
-        self.addParameter(QgsProcessingParameterFolderDestination("WORK", "Work folder (training runs; empty: beside the weights)",
-                                                                  optional=True, createByDefault=False))
+        self.addParameter(
+            QgsProcessingParameterFolderDestination(
+                "WORK", "Work folder (training runs; empty: beside the weights)", optional=True, createByDefault=False
+            )
+        )
         self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", output_label, "Weights bundle (*.pt)"))
 
     def training_args(self, parameters, context):
         work = self.parameterAsString(parameters, "WORK", context) if parameters.get("WORK") else ""
-        return [*(["--work", work] if work else []), "--fpn-steps", str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
-                "--afanet-steps", str(self.parameterAsInt(parameters, "AFANET_STEPS", context)), *self.engine_args(parameters, context)]
+        return [
+            *(["--work", work] if work else []),
+            "--fpn-steps",
+            str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
+            "--afanet-steps",
+            str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
+            *self.engine_args(parameters, context),
+        ]
 
     def kept(self, path, what, feedback):
         """Warn when ``path`` is in QGIS's temporary folder: deleted when QGIS closes, and a new
         one each run, so a canceled run could not be continued there."""
         temporary = os.path.normcase(os.path.realpath(QgsProcessingUtils.tempFolder()))
         if os.path.normcase(os.path.realpath(path)).startswith(temporary + os.sep):
-            feedback.reportError(f"{what} is in QGIS's temporary folder ({path}): it is deleted when QGIS closes, and a canceled "
-                                 "run can only be continued in the same folder; give a folder of your own to keep it", False)
+            feedback.reportError(
+                f"{what} is in QGIS's temporary folder ({path}): it is deleted when QGIS closes, and a canceled "
+                "run can only be continued in the same folder; give a folder of your own to keep it",
+                False,
+            )
         return path
 
     def prediction(self, parameters, context):
         """A predict output folder (its graph.json must be there)."""
         path = self.folder(parameters, "PREDICTION", context)
         if not os.path.isfile(os.path.join(path, "graph.json")):
-            raise QgsProcessingException(f"{path}: not a csboundary prediction (no graph.json): choose a Detect output folder")
+            raise QgsProcessingException(
+                f"{path}: not a csboundary prediction (no graph.json): choose a Detect output folder"
+            )
         return path
 
 
@@ -125,7 +181,9 @@ def load(context, source, name, output, kind):
     if context.project() is None:
         return
     details = QgsProcessingContext.LayerDetails(name, context.project(), output, QgsProcessingUtils.LayerHint.Vector)
-    details.forceName = True  # our name, not the GeoPackage layer's ("Prefer output filename for layer names" is on by default)
+    details.forceName = (
+        True  # our name, not the GeoPackage layer's ("Prefer output filename for layer names" is on by default)
+    )
     details.setPostProcessor(Styler.make(kind))
     context.addLayerToLoadOnCompletion(source, details)
 
@@ -155,8 +213,9 @@ def imagery_files(algorithm, parameters, name, context):
     for layer in layers:
         path = layer.source().split("|")[0]
         if layer.providerType() != "gdal" or not os.path.isfile(path):
-            raise QgsProcessingException(f"{layer.name()}: not a local raster file; save it as a GeoTIFF first "
-                                         "(Raster > Conversion > Translate)")
+            raise QgsProcessingException(
+                f"{layer.name()}: not a local raster file; save it as a GeoTIFF first (Raster > Conversion > Translate)"
+            )
         files.append(path)
     return files
 
@@ -164,44 +223,70 @@ def imagery_files(algorithm, parameters, name, context):
 class Detect(CsboundaryAlgorithm):
     NAME = "detect"
     TITLE = "Detect road boundaries"
-    HELP = ("<p>Predicts the road-boundary graph of aerial imagery (one or more GeoTIFF tiles of one mosaic) with "
-            "<code>csboundary predict</code>, and loads the boundaries and the review layers, coloured by the "
-            "calibrated confidence of each boundary: the least sure in red.</p>"
-            "<p>To review: edit the <i>boundaries to review</i> layer of review.gpkg, a boundary per feature (delete "
-            "false ones, split one and delete a part, move vertices, draw missing boundaries) and draw the areas you "
-            "checked in its <i>complete</i> layer, then run Apply review. Boundaries not worth a look (their expected "
-            "review cost exceeds what they save) are in the hidden <i>held back</i> layer; inside an area you mark "
-            "complete, those you leave there are deleted (copy one into the boundaries layer to keep it).</p>"
-            "<p>An interrupted or canceled run continues where it stopped when run again into the same output folder.</p>")
+    HELP = (
+        "<p>Predicts the road-boundary graph of aerial imagery (one or more GeoTIFF tiles of one mosaic) with "
+        "<code>csboundary predict</code>, and loads the boundaries and the review layers, coloured by the "
+        "calibrated confidence of each boundary: the least sure in red.</p>"
+        "<p>To review: edit the <i>boundaries to review</i> layer of review.gpkg, a boundary per feature (delete "
+        "false ones, split one and delete a part, move vertices, draw missing boundaries) and draw the areas you "
+        "checked in its <i>complete</i> layer, then run Apply review. Boundaries not worth a look (their expected "
+        "review cost exceeds what they save) are in the hidden <i>held back</i> layer; inside an area you mark "
+        "complete, those you leave there are deleted (copy one into the boundaries layer to keep it).</p>"
+        "<p>An interrupted or canceled run continues where it stopped when run again into the same output folder.</p>"
+    )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF tiles of one mosaic)",
-                                                               QgsProcessing.TypeRaster))
+        self.addParameter(
+            QgsProcessingParameterMultipleLayers(
+                "INPUT", "Aerial imagery (GeoTIFF tiles of one mosaic)", QgsProcessing.TypeRaster
+            )
+        )
         self.addParameter(QgsProcessingParameterEnum("ENGINE", "Engine", options=list(ENGINES), defaultValue=0))
         self.min_confidence_parameter()
         self.engine_parameters()
         self.addParameter(QgsProcessingParameterFolderDestination("OUTPUT", "Prediction folder"))
         self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
-        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_BOUNDARIES", "Boundaries to review", QgsProcessing.TypeVectorLine))
-        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_HELD_BACK", "Held back from the review", QgsProcessing.TypeVectorLine))
-        self.addOutput(QgsProcessingOutputVectorLayer("REVIEW_COMPLETE", "Areas checked", QgsProcessing.TypeVectorPolygon))
+        self.addOutput(
+            QgsProcessingOutputVectorLayer("REVIEW_BOUNDARIES", "Boundaries to review", QgsProcessing.TypeVectorLine)
+        )
+        self.addOutput(
+            QgsProcessingOutputVectorLayer(
+                "REVIEW_HELD_BACK", "Held back from the review", QgsProcessing.TypeVectorLine
+            )
+        )
+        self.addOutput(
+            QgsProcessingOutputVectorLayer("REVIEW_COMPLETE", "Areas checked", QgsProcessing.TypeVectorPolygon)
+        )
         self.addOutput(QgsProcessingOutputFile("GRAPH", "graph.json"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         inputs = imagery_files(self, parameters, "INPUT", context)
         out = self.kept(self.parameterAsString(parameters, "OUTPUT", context), "The prediction", feedback)
-        args = ["predict", *inputs, "--out", out, "--engine", ENGINES[self.parameterAsEnum(parameters, "ENGINE", context)]]
+        args = [
+            "predict",
+            *inputs,
+            "--out",
+            out,
+            "--engine",
+            ENGINES[self.parameterAsEnum(parameters, "ENGINE", context)],
+        ]
         args += self.min_confidence_args(parameters, context)
         self.csboundary(args + self.engine_args(parameters, context), feedback)
         review = os.path.join(out, REVIEW_GPKG)
-        if os.path.exists(review):  # edits may be in it: never overwritten (Apply review refuses it if the graph changed since)
+        if os.path.exists(
+            review
+        ):  # edits may be in it: never overwritten (Apply review refuses it if the graph changed since)
             feedback.pushWarning(f"{review} exists and is kept (it may hold your edits); delete it for a fresh one")
         else:
             self.csboundary(["review", out, "--gpkg", review, "--quiet"], feedback)
-        results = {"OUTPUT": out, "GRAPH": os.path.join(out, "graph.json"),
-                   "BOUNDARIES": f"{os.path.join(out, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}",
-                   "REVIEW_BOUNDARIES": f"{review}|layername={DRAFT_LAYER}", "REVIEW_HELD_BACK": f"{review}|layername={HELD_BACK_LAYER}",
-                   "REVIEW_COMPLETE": f"{review}|layername={COMPLETE_LAYER}"}
+        results = {
+            "OUTPUT": out,
+            "GRAPH": os.path.join(out, "graph.json"),
+            "BOUNDARIES": f"{os.path.join(out, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}",
+            "REVIEW_BOUNDARIES": f"{review}|layername={DRAFT_LAYER}",
+            "REVIEW_HELD_BACK": f"{review}|layername={HELD_BACK_LAYER}",
+            "REVIEW_COMPLETE": f"{review}|layername={COMPLETE_LAYER}",
+        }
         load(context, results["BOUNDARIES"], "road boundaries", "BOUNDARIES", "boundaries")
         load_review(context, review, "REVIEW_BOUNDARIES", "REVIEW_HELD_BACK", "REVIEW_COMPLETE")
         return results
@@ -210,15 +295,29 @@ class Detect(CsboundaryAlgorithm):
 class Evaluate(CsboundaryAlgorithm):
     NAME = "evaluate"
     TITLE = "Evaluate against ground truth"
-    HELP = ("<p>Relaxed precision, recall and F1 at 2, 5 and 10 px, APLS and TLTS of a prediction against a "
-            "ground-truth line layer (<code>csboundary evaluate</code>; definitions in docs/metrics.md).</p>")
-    SCORES = (("F1_5", "f1@5"), ("PRECISION_5", "precision@5"), ("RECALL_5", "recall@5"), ("F1_2", "f1@2"),
-              ("F1_10", "f1@10"), ("APLS", "apls"), ("TLTS", "tlts"))
+    HELP = (
+        "<p>Relaxed precision, recall and F1 at 2, 5 and 10 px, APLS and TLTS of a prediction against a "
+        "ground-truth line layer (<code>csboundary evaluate</code>; definitions in docs/metrics.md).</p>"
+    )
+    SCORES = (
+        ("F1_5", "f1@5"),
+        ("PRECISION_5", "precision@5"),
+        ("RECALL_5", "recall@5"),
+        ("F1_2", "f1@2"),
+        ("F1_10", "f1@10"),
+        ("APLS", "apls"),
+        ("TLTS", "tlts"),
+    )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
-        self.addParameter(QgsProcessingParameterVectorLayer("GROUND_TRUTH", "Ground-truth road boundaries",
-                                                            [QgsProcessing.TypeVectorLine]))
+        self.addParameter(
+            QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder)
+        )
+        self.addParameter(
+            QgsProcessingParameterVectorLayer(
+                "GROUND_TRUTH", "Ground-truth road boundaries", [QgsProcessing.TypeVectorLine]
+            )
+        )
         self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Scores (JSON)", "JSON files (*.json)"))
         for key, label in self.SCORES:
             self.addOutput(QgsProcessingOutputNumber(key, label))
@@ -232,14 +331,20 @@ class Evaluate(CsboundaryAlgorithm):
             options = QgsVectorFileWriter.SaveVectorOptions()
             options.driverName = "GPKG"
             crs = prediction_crs(prediction)
-            if crs.isValid() and layer.crs().isValid() and layer.crs() != crs:  # in the prediction's CRS, as evaluate needs it
+            if (
+                crs.isValid() and layer.crs().isValid() and layer.crs() != crs
+            ):  # in the prediction's CRS, as evaluate needs it
                 options.ct = QgsCoordinateTransform(layer.crs(), crs, context.transformContext())
-                feedback.pushInfo(f"{layer.name()}: reprojected from {layer.crs().authid()} to the prediction's {crs.authid()}")
+                feedback.pushInfo(
+                    f"{layer.name()}: reprojected from {layer.crs().authid()} to the prediction's {crs.authid()}"
+                )
             error = QgsVectorFileWriter.writeAsVectorFormatV3(layer, ground_truth, context.transformContext(), options)
             if error[0] != QgsVectorFileWriter.NoError:
                 raise QgsProcessingException(f"{layer.name()}: could not be written for csboundary ({error[1]})")
             try:
-                self.csboundary(["evaluate", os.path.join(prediction, "graph.json"), ground_truth, "--json", out], feedback)
+                self.csboundary(
+                    ["evaluate", os.path.join(prediction, "graph.json"), ground_truth, "--json", out], feedback
+                )
             except QgsProcessingException as exc:  # the layer's name, not the temporary copy's path
                 raise QgsProcessingException(str(exc).replace(ground_truth, layer.name())) from None
         with open(out) as file:
@@ -255,11 +360,15 @@ class Evaluate(CsboundaryAlgorithm):
 class ExportLanelet2(CsboundaryAlgorithm):
     NAME = "exportlanelet2"
     TITLE = "Export Lanelet2"
-    HELP = ("<p>The predicted boundaries as a Lanelet2 map (<code>csboundary export-lanelet2</code>): one road_border "
-            "linestring per boundary, confidence as an attribute, Autoware's map_projector_info.yaml beside it.</p>")
+    HELP = (
+        "<p>The predicted boundaries as a Lanelet2 map (<code>csboundary export-lanelet2</code>): one road_border "
+        "linestring per boundary, confidence as an attribute, Autoware's map_projector_info.yaml beside it.</p>"
+    )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(
+            QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder)
+        )
         self.min_confidence_parameter()
         self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", "Lanelet2 map", "OSM files (*.osm)"))
 
@@ -275,18 +384,25 @@ class ExportLanelet2(CsboundaryAlgorithm):
 class ApplyReview(CsboundaryAlgorithm):
     NAME = "applyreview"
     TITLE = "Apply review"
-    HELP = ("<p>Merges the review done in QGIS into the prediction (<code>csboundary apply-review</code>): the "
-            "deleted, split, moved, reshaped and drawn boundaries of the review GeoPackage's <i>boundaries</i> layer and "
-            "the polygons of its <i>complete</i> layer become the same edits as the review page's, checked the same way "
-            "and recorded in review.json (the complete areas are labels for Fine-tune). Save your edits first. "
-            "A fresh review GeoPackage of the corrected graph is written for the next round, and replaces the edited "
-            "one's layers in the project.</p>")
+    HELP = (
+        "<p>Merges the review done in QGIS into the prediction (<code>csboundary apply-review</code>): the "
+        "deleted, split, moved, reshaped and drawn boundaries of the review GeoPackage's <i>boundaries</i> layer and "
+        "the polygons of its <i>complete</i> layer become the same edits as the review page's, checked the same way "
+        "and recorded in review.json (the complete areas are labels for Fine-tune). Save your edits first. "
+        "A fresh review GeoPackage of the corrected graph is written for the next round, and replaces the edited "
+        "one's layers in the project.</p>"
+    )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(
+            QgsProcessingParameterFile("PREDICTION", "Prediction folder", QgsProcessingParameterFile.Folder)
+        )
         self.addParameter(QgsProcessingParameterFile("EDITED", "Edited review GeoPackage", extension="gpkg"))
-        self.addParameter(QgsProcessingParameterFileDestination("NEXT_REVIEW", "Review GeoPackage of the corrected graph",
-                                                                "GeoPackage (*.gpkg)"))
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "NEXT_REVIEW", "Review GeoPackage of the corrected graph", "GeoPackage (*.gpkg)"
+            )
+        )
         self.addOutput(QgsProcessingOutputVectorLayer("BOUNDARIES", "Road boundaries", QgsProcessing.TypeVectorLine))
         self.addOutput(QgsProcessingOutputFolder("PREDICTION", "Prediction folder"))
 
@@ -294,23 +410,35 @@ class ApplyReview(CsboundaryAlgorithm):
         """On the main thread, where the project's layers may be read: which of them hold unsaved
         edits of the edited file (processAlgorithm refuses then, with the message in the log)."""
         edited = os.path.realpath(self.parameterAsFile(parameters, "EDITED", context))
-        self.unsaved = [layer.name() for layer in QgsProject.instance().mapLayers().values()
-                        if isinstance(layer, QgsVectorLayer) and os.path.realpath(layer.source().split("|")[0]) == edited
-                        and layer.isEditable() and layer.isModified()]
+        self.unsaved = [
+            layer.name()
+            for layer in QgsProject.instance().mapLayers().values()
+            if isinstance(layer, QgsVectorLayer)
+            and os.path.realpath(layer.source().split("|")[0]) == edited
+            and layer.isEditable()
+            and layer.isModified()
+        ]
         return True
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         if getattr(self, "unsaved", None):
-            raise QgsProcessingException(f"{', '.join(self.unsaved)} has unsaved edits: save them (Save Layer Edits) before Apply review")
+            raise QgsProcessingException(
+                f"{', '.join(self.unsaved)} has unsaved edits: save them (Save Layer Edits) before Apply review"
+            )
         prediction = self.prediction(parameters, context)
         edited = self.parameterAsFile(parameters, "EDITED", context)
         next_review = self.parameterAsFileOutput(parameters, "NEXT_REVIEW", context)
         if os.path.realpath(next_review) == os.path.realpath(edited):
-            raise QgsProcessingException(f"{next_review}: the next review GeoPackage must be a new file, not the edited one")
+            raise QgsProcessingException(
+                f"{next_review}: the next review GeoPackage must be a new file, not the edited one"
+            )
         self.csboundary(["apply-review", prediction, edited], feedback)
         self.csboundary(["review", prediction, "--gpkg", next_review, "--quiet"], feedback)
-        results = {"PREDICTION": prediction, "NEXT_REVIEW": next_review,
-                   "BOUNDARIES": f"{os.path.join(prediction, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}"}
+        results = {
+            "PREDICTION": prediction,
+            "NEXT_REVIEW": next_review,
+            "BOUNDARIES": f"{os.path.join(prediction, 'boundaries.gpkg')}|layername={BOUNDARIES_LAYER}",
+        }
         load(context, results["BOUNDARIES"], "road boundaries (reviewed)", "BOUNDARIES", "boundaries")
         load_review(context, next_review, "NEXT_REVIEW", "NEXT_REVIEW", "NEXT_REVIEW")
         self.edited = os.path.realpath(edited)
@@ -321,8 +449,11 @@ class ApplyReview(CsboundaryAlgorithm):
         edited = getattr(self, "edited", None)
         project = context.project()
         if edited and project is not None:
-            stale = [layer.id() for layer in project.mapLayers().values()
-                     if isinstance(layer, QgsVectorLayer) and os.path.realpath(layer.source().split("|")[0]) == edited]
+            stale = [
+                layer.id()
+                for layer in project.mapLayers().values()
+                if isinstance(layer, QgsVectorLayer) and os.path.realpath(layer.source().split("|")[0]) == edited
+            ]
             project.removeMapLayers(stale)
         return {}
 
@@ -330,38 +461,57 @@ class ApplyReview(CsboundaryAlgorithm):
 class Finetune(CsboundaryAlgorithm):
     NAME = "finetune"
     TITLE = "Fine-tune on reviewed areas"
-    HELP = ("<p>Fine-tunes the weights on the areas marked complete in reviewed predictions (<code>csboundary "
-            "finetune</code>), with synthetic cities mixed in. Takes hours on a CPU; run again with the same work "
-            "folder to continue a stopped run.</p>")
+    HELP = (
+        "<p>Fine-tunes the weights on the areas marked complete in reviewed predictions (<code>csboundary "
+        "finetune</code>), with synthetic cities mixed in. Takes hours on a CPU; run again with the same work "
+        "folder to continue a stopped run.</p>"
+    )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile("PREDICTION", "Reviewed prediction folder", QgsProcessingParameterFile.Folder))
+        self.addParameter(
+            QgsProcessingParameterFile("PREDICTION", "Reviewed prediction folder", QgsProcessingParameterFile.Folder)
+        )
         self.training_parameters(1000, 500, "AfANet steps", 1, "Fine-tuned weights")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.kept(self.parameterAsFileOutput(parameters, "OUTPUT", context), "The fine-tuned weights", feedback)
-        self.csboundary(["finetune", self.prediction(parameters, context), "--out", out, *self.training_args(parameters, context)],
-                        feedback)
+        self.csboundary(
+            ["finetune", self.prediction(parameters, context), "--out", out, *self.training_args(parameters, context)],
+            feedback,
+        )
         return {"OUTPUT": out}
 
 
 class Adapt(CsboundaryAlgorithm):
     NAME = "adapt"
     TITLE = "Adapt to your imagery (no labels)"
-    HELP = ("<p>Adapts the weights to your city from its own unlabelled imagery (<code>csboundary adapt</code>): "
-            "self-training of the FPN by an averaged teacher with synthetic cities mixed in, then AfANet. Measured "
-            "gains and losses: docs/adapt.md. Run again with the same work folder to continue a stopped run.</p>")
+    HELP = (
+        "<p>Adapts the weights to your city from its own unlabelled imagery (<code>csboundary adapt</code>): "
+        "self-training of the FPN by an averaged teacher with synthetic cities mixed in, then AfANet. Measured "
+        "gains and losses: docs/adapt.md. Run again with the same work folder to continue a stopped run.</p>"
+    )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF)", QgsProcessing.TypeRaster))
+        self.addParameter(
+            QgsProcessingParameterMultipleLayers("INPUT", "Aerial imagery (GeoTIFF)", QgsProcessing.TypeRaster)
+        )
         self.addParameter(QgsProcessingParameterBoolean("MIX", "Paste synthetic roadway into your windows", True))
         self.training_parameters(800, 300, "AfANet steps (0: keep the bundle's)", 0, "Adapted weights")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.kept(self.parameterAsFileOutput(parameters, "OUTPUT", context), "The adapted weights", feedback)
         mix = self.parameterAsBoolean(parameters, "MIX", context)
-        self.csboundary(["adapt", *imagery_files(self, parameters, "INPUT", context), "--out", out, "--mix" if mix else "--no-mix",
-                         *self.training_args(parameters, context)], feedback)
+        self.csboundary(
+            [
+                "adapt",
+                *imagery_files(self, parameters, "INPUT", context),
+                "--out",
+                out,
+                "--mix" if mix else "--no-mix",
+                *self.training_args(parameters, context),
+            ],
+            feedback,
+        )
         return {"OUTPUT": out}
 
 

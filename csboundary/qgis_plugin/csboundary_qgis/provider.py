@@ -18,10 +18,15 @@ class CsboundaryProvider(QgsProcessingProvider):
             pass
         else:
             ProcessingConfig.settingIcons[self.name()] = self.icon()
-            ProcessingConfig.addSetting(Setting(
-                self.name(), COMMAND_SETTING,
-                f"csboundary command (the csboundary executable of its environment; empty: ${COMMAND_ENV}, then PATH)",
-                "", valuetype=Setting.FILE))
+            ProcessingConfig.addSetting(
+                Setting(
+                    self.name(),
+                    COMMAND_SETTING,
+                    f"csboundary command (the csboundary executable of its environment; empty: ${COMMAND_ENV}, then PATH)",
+                    "",
+                    valuetype=Setting.FILE,
+                )
+            )
             ProcessingConfig.readSettings()
         self.refreshAlgorithms()
         return True

@@ -30,7 +30,16 @@ _BAR = re.compile(r"^\s*(?P<stage>[^|]{1,80}?):\s*(?P<percent>\d{1,3})%\|[^|]*\|
 
 # What QGIS sets for its own Python and libraries (OSGeo4W on Windows, the macOS bundle), which
 # must not reach the csboundary environment's Python, GDAL and PROJ.
-QGIS_ONLY = ("PYTHONHOME", "PYTHONPATH", "PYTHONSTARTUP", "PROJ_LIB", "PROJ_DATA", "GDAL_DATA", "GDAL_DRIVER_PATH", "QGIS_PREFIX_PATH")
+QGIS_ONLY = (
+    "PYTHONHOME",
+    "PYTHONPATH",
+    "PYTHONSTARTUP",
+    "PROJ_LIB",
+    "PROJ_DATA",
+    "GDAL_DATA",
+    "GDAL_DRIVER_PATH",
+    "QGIS_PREFIX_PATH",
+)
 
 
 def command_environment() -> dict:
@@ -59,11 +68,15 @@ def find_command(configured: str | None) -> str:
     command = (configured or "").strip() or os.environ.get(COMMAND_ENV, "").strip() or shutil.which("csboundary")
     command = os.path.expanduser(command) if command else command
     if not command:
-        raise CommandError("no csboundary command found: install csboundary in a Python environment "
-                           f"(pip install csboundary) and give its csboundary executable under {SETTING_PLACE}")
+        raise CommandError(
+            "no csboundary command found: install csboundary in a Python environment "
+            f"(pip install csboundary) and give its csboundary executable under {SETTING_PLACE}"
+        )
     if not os.path.isfile(command) or not os.access(command, os.X_OK):
-        raise CommandError(f"{command}: not an executable file; give the csboundary executable of the environment "
-                           f"where csboundary is installed under {SETTING_PLACE}")
+        raise CommandError(
+            f"{command}: not an executable file; give the csboundary executable of the environment "
+            f"where csboundary is installed under {SETTING_PLACE}"
+        )
     return command
 
 
@@ -71,14 +84,22 @@ def check_command(command: str, timeout: float = 120.0) -> str:
     """The version the command reports (``csboundary 0.1.0``); a command that does not run as
     csboundary is a :class:`CommandError` naming what it printed."""
     try:
-        done = subprocess.run([command, "--version"], capture_output=True, text=True, timeout=timeout, env=command_environment(),
-                              **({"creationflags": getattr(subprocess, "CREATE_NO_WINDOW", 0)} if os.name == "nt" else {}))
+        done = subprocess.run(
+            [command, "--version"],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            env=command_environment(),
+            **({"creationflags": getattr(subprocess, "CREATE_NO_WINDOW", 0)} if os.name == "nt" else {}),
+        )
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise CommandError(f"{command}: does not run ({exc})") from None
     said = (done.stdout + done.stderr).strip()
     if done.returncode != 0 or not said.startswith("csboundary "):
-        raise CommandError(f"{command}: the csboundary environment is broken ({last_line(said) or f'exit {done.returncode}'}); "
-                           "reinstall csboundary there")
+        raise CommandError(
+            f"{command}: the csboundary environment is broken ({last_line(said) or f'exit {done.returncode}'}); "
+            "reinstall csboundary there"
+        )
     return said.splitlines()[0]
 
 
@@ -92,7 +113,7 @@ def failure(lines: list[str], returncode: int) -> str:
     environment, not the input) its last line."""
     errors = [line for line in lines if line.startswith("error:")]
     if errors:
-        return errors[-1][len("error:"):].strip()
+        return errors[-1][len("error:") :].strip()
     if any(line.startswith("Traceback") for line in lines):
         return f"the csboundary environment is broken ({last_line(chr(10).join(lines))}); reinstall csboundary there"
     return last_line("\n".join(lines)) or f"csboundary stopped with exit status {returncode}"
@@ -101,6 +122,7 @@ def failure(lines: list[str], returncode: int) -> str:
 @dataclass
 class Progress:
     """Where the output of a run goes: a stage's name and percentage, and every other line."""
+
     stage: Callable[[str], None] = lambda text: None
     percent: Callable[[float], None] = lambda value: None
     line: Callable[[str], None] = lambda text: None
@@ -135,8 +157,9 @@ def run(command: str, args: list[str], progress: Progress, poll: float = 0.1, gr
     command to continue) and, after ``grace`` seconds, SIGKILL. Raises :class:`Canceled` or, on a
     non-zero exit, :class:`CommandError`. The command never outlives this call."""
     try:
-        process = subprocess.Popen([command, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=command_environment(),
-                                   **_detached())
+        process = subprocess.Popen(
+            [command, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=command_environment(), **_detached()
+        )
     except OSError as exc:
         raise CommandError(f"{command}: does not run ({exc})") from None
     pieces: queue.Queue = queue.Queue()
@@ -166,6 +189,7 @@ def run(command: str, args: list[str], progress: Progress, poll: float = 0.1, gr
 def stop(process: subprocess.Popen, grace: float) -> None:
     """Ask the command and what it started to stop (SIGTERM; Ctrl-Break on Windows), then kill
     whatever is left after ``grace`` seconds."""
+
     def ask() -> None:
         try:
             if os.name == "nt":

@@ -1,8 +1,15 @@
 """How the loaded layers look: boundaries graduated by confidence (held-back ones hidden), the least sure in a
 warm colour (the order in which a reviewer looks at them), checked areas as green outlines."""
 
-from qgis.core import (QgsFillSymbol, QgsGraduatedSymbolRenderer, QgsLineSymbol, QgsProcessingLayerPostProcessorInterface, QgsProject,
-                       QgsRendererRange, QgsSingleSymbolRenderer)
+from qgis.core import (
+    QgsFillSymbol,
+    QgsGraduatedSymbolRenderer,
+    QgsLineSymbol,
+    QgsProcessingLayerPostProcessorInterface,
+    QgsProject,
+    QgsRendererRange,
+    QgsSingleSymbolRenderer,
+)
 
 # (lower, upper, colour, label): the classes of the calibrated probability that an edge is a true
 # boundary; a line a reviewer drew has no confidence (NULL, classed as -1) and is drawn grey
@@ -24,14 +31,16 @@ def confidence_renderer(field: str, width: float = 0.8) -> QgsGraduatedSymbolRen
 
 
 def complete_renderer() -> QgsSingleSymbolRenderer:
-    symbol = QgsFillSymbol.createSimple({"color": "0,0,0,0", "outline_color": "#1a9850", "outline_width": "0.6",
-                                         "outline_style": "dash"})
+    symbol = QgsFillSymbol.createSimple(
+        {"color": "0,0,0,0", "outline_color": "#1a9850", "outline_width": "0.6", "outline_style": "dash"}
+    )
     return QgsSingleSymbolRenderer(symbol)
 
 
 class Styler(QgsProcessingLayerPostProcessorInterface):
     """Styles a layer once Processing has loaded it into the project. Processing keeps only a
     pointer to a post-processor, so every one made is kept here for the session."""
+
     kept = []
 
     def __init__(self, kind: str):

@@ -20,10 +20,16 @@ TINY = {"widths": [8, 8, 8, 8], "blocks": [1, 1, 1, 1], "pyramid": 8, "stem": 8}
 
 
 def _log(path, start, end, steps, config):
-    path.write_text("\n".join(json.dumps(r) for r in [
-        {"time": start, "event": "start", "step": 0, "config": config},
-        {"time": end, "event": "done", "step": steps},
-    ]) + "\n")
+    path.write_text(
+        "\n".join(
+            json.dumps(r)
+            for r in [
+                {"time": start, "event": "start", "step": 0, "config": config},
+                {"time": end, "event": "done", "step": steps},
+            ]
+        )
+        + "\n"
+    )
 
 
 def test_training_time_per_epoch_from_a_log(tmp_path):
@@ -49,12 +55,20 @@ def weights(tmp_path_factory):
     with torch.no_grad():
         fpn.head[-1].bias.fill_(-3.0)
     afanet_config = AfANetConfig(global_size=64, roi=16, encoder_widths=(8, 8), dim=32, layers=1)
-    save_checkpoint(root / "csboundary-synthetic.pt", "bundle", fpn=fpn.state_dict(), fpn_config=fpn_config.to_dict(),
-                    afanet=AfANet(afanet_config).state_dict(), afanet_config=afanet_config.to_dict(),
-                    inference={"edge_threshold": 0.5, "max_degree": 2})
+    save_checkpoint(
+        root / "csboundary-synthetic.pt",
+        "bundle",
+        fpn=fpn.state_dict(),
+        fpn_config=fpn_config.to_dict(),
+        afanet=AfANet(afanet_config).state_dict(),
+        afanet_config=afanet_config.to_dict(),
+        inference={"edge_threshold": 0.5, "max_degree": 2},
+    )
     pair = _Pair(Options(refiner=TINY), FPNConfig.from_dict({**TINY, "out_channels": 17}))
     (root / "baselines").mkdir()
-    save_checkpoint(root / "baselines" / f"{KIND}.pt", KIND, **{KIND: pair.state_dict(), f"{KIND}_config": pair.config.to_dict()})
+    save_checkpoint(
+        root / "baselines" / f"{KIND}.pt", KIND, **{KIND: pair.state_dict(), f"{KIND}_config": pair.config.to_dict()}
+    )
     config = {"model": KIND, "train_city": {"tiles": [1, 1], "tile_size": 1000}, "batch": 2, "crop": 100}
     _log(root / "baselines" / f"{KIND}-train.log", "2026-01-01T10:00:00", "2026-01-01T10:01:40", 100, config)
     return root
@@ -64,8 +78,14 @@ def test_benchmark_writes_every_table_and_the_figure(weights, tmp_path):
     city = tmp_path / "city"
     synthesize_city(city, 1, "test", (1, 2), SynthConfig(tile_size=600, gsd=0.3), progress=False)
     out = tmp_path / "bench"
-    results = run_benchmark(city, out, weights, torch.device("cpu"), ["csboundary", "orientation-refine", "icurb", "no-global"],
-                            progress=False)
+    results = run_benchmark(
+        city,
+        out,
+        weights,
+        torch.device("cpu"),
+        ["csboundary", "orientation-refine", "icurb", "no-global"],
+        progress=False,
+    )
     assert "scores" in results["csboundary"] and "scores" in results["orientation-refine"]
     assert "missing" in results["icurb"] and "missing" in results["no-global"]  # no weights: reported, not guessed
     table1 = list(csv.reader(open(out / "tableI.csv")))
@@ -92,7 +112,9 @@ def test_benchmark_writes_every_table_and_the_figure(weights, tmp_path):
 
     predicted = BoundaryGraph.read_json(out / "predictions" / "csboundary" / "graph.json")
     with Mosaic.open(layout.tiles_dir(city)) as mosaic:
-        gt = BoundaryGraph.from_world_lines(list(read_ground_truth(layout.ground_truth_path(city), mosaic.crs).geometry), mosaic.transform)
+        gt = BoundaryGraph.from_world_lines(
+            list(read_ground_truth(layout.ground_truth_path(city), mosaic.crs).geometry), mosaic.transform
+        )
         again = evaluate(predicted, gt, scale="city", seed=0, extent=(0, 0, mosaic.width, mosaic.height))["metrics"]
     table2 = {row[0]: row[1:] for row in list(csv.reader(open(out / "tableII.csv")))[1:]}
     reported = dict(zip(TABLE_METRICS, map(float, table2["csBoundary"])))

@@ -18,7 +18,9 @@ from helpers import run_cli  # noqa: E402
 def demo(demo_run, tmp_path_factory):
     """The demo city predicted by the shipped model, with --lanelet2."""
     pred = tmp_path_factory.mktemp("l2") / "pred"
-    done = run_cli("predict", str(demo_run / "city"), "--out", str(pred), "--lanelet2", "--device", "cpu", "--quiet", timeout=600)
+    done = run_cli(
+        "predict", str(demo_run / "city"), "--out", str(pred), "--lanelet2", "--device", "cpu", "--quiet", timeout=600
+    )
     assert done.returncode == 0, done.stderr
     return pred
 
@@ -27,7 +29,9 @@ def test_the_demo_city_round_trips_through_lanelet2(demo):
     info = demo / "map_projector_info.yaml"
     projector = projector_for(read_origin(info))
     loaded = lanelet2.io.load(str(demo / "map.osm"), projector)
-    borders = {int(ls.attributes["boundary_id"]): ls for ls in loaded.lineStringLayer if ls.attributes["type"] == "road_border"}
+    borders = {
+        int(ls.attributes["boundary_id"]): ls for ls in loaded.lineStringLayer if ls.attributes["type"] == "road_border"
+    }
     frame = gpd.read_file(demo / "boundaries.gpkg", layer="road_boundaries")
     assert len(frame) > 10 and set(borders) == set(frame["boundary_id"])
     to_lonlat = to_wgs84(str(frame.crs))
@@ -55,10 +59,16 @@ def test_a_closed_boundary_is_a_closed_linestring(tmp_path):
     graph.transform, graph.crs = Affine(0.5, 0, 583000.0, 0, -0.5, 4507000.0), "EPSG:32618"
     write_lanelet2(graph, tmp_path / "m.osm")
     projector = projector_for(read_origin(tmp_path / "map_projector_info.yaml"))
-    borders = [ls for ls in lanelet2.io.load(str(tmp_path / "m.osm"), projector).lineStringLayer if ls.attributes["type"] == "road_border"]
+    borders = [
+        ls
+        for ls in lanelet2.io.load(str(tmp_path / "m.osm"), projector).lineStringLayer
+        if ls.attributes["type"] == "road_border"
+    ]
     assert len(borders) == 1
     line = borders[0]
-    assert len(line) == 5 and line[0].id == line[len(line) - 1].id  # closed by its first point, not by a second point on top of it
+    assert (
+        len(line) == 5 and line[0].id == line[len(line) - 1].id
+    )  # closed by its first point, not by a second point on top of it
 
 
 def test_export_lanelet2_writes_the_same_map_from_a_prediction_folder(demo, tmp_path):
@@ -101,11 +111,16 @@ def test_export_lanelet2_of_a_district(demo, tmp_path):
     frame = gpd.read_file(demo / "boundaries.gpkg", layer="road_boundaries")
     x0, y0, x1, y1 = frame.total_bounds
     west = (x0, y0, (x0 + x1) / 2, y1)
-    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "west.osm"), "--bounds", ",".join(map(str, west)))
+    done = run_cli(
+        "export-lanelet2", str(demo), "--out", str(tmp_path / "west.osm"), "--bounds", ",".join(map(str, west))
+    )
     assert done.returncode == 0, done.stderr
     projector = projector_for(read_origin(tmp_path / "map_projector_info.yaml"))
-    borders = [ls for ls in lanelet2.io.load(str(tmp_path / "west.osm"),
-                                             projector).lineStringLayer if ls.attributes["type"] == "road_border"]
+    borders = [
+        ls
+        for ls in lanelet2.io.load(str(tmp_path / "west.osm"), projector).lineStringLayer
+        if ls.attributes["type"] == "road_border"
+    ]
     # the map holds exactly the edges meeting the district, merged into boundaries of their own
     from shapely.geometry import box
 
@@ -123,7 +138,9 @@ def test_bounds_outside_the_prediction_are_one_line_and_no_map(demo, tmp_path, w
     x0, y0, x1, y1 = frame.total_bounds
     # a district east of the city, or the city's own corner given in degrees on its metric CRS
     bounds = (x1 + 5000, y0, x1 + 6000, y1) if where == "beside" else (-74.01, 40.70, -74.00, 40.71)
-    done = run_cli("export-lanelet2", str(demo), "--out", str(tmp_path / "m.osm"), "--bounds", ",".join(map(str, bounds)))
+    done = run_cli(
+        "export-lanelet2", str(demo), "--out", str(tmp_path / "m.osm"), "--bounds", ",".join(map(str, bounds))
+    )
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1 and "lies outside the prediction" in lines[0], done.stderr
     assert not (tmp_path / "m.osm").exists() and not (tmp_path / "map_projector_info.yaml").exists()
@@ -137,7 +154,10 @@ def test_min_confidence_leaves_out_the_doubtful_edges(demo, tmp_path):
     kept = edges[edges["confidence"] >= cut]
     assert f"{len(kept)} of {len(edges)} edges kept" in done.stdout
     projector = projector_for(read_origin(tmp_path / "map_projector_info.yaml"))
-    borders = [ls for ls in lanelet2.io.load(str(tmp_path / "sure.osm"),
-                                             projector).lineStringLayer if ls.attributes["type"] == "road_border"]
+    borders = [
+        ls
+        for ls in lanelet2.io.load(str(tmp_path / "sure.osm"), projector).lineStringLayer
+        if ls.attributes["type"] == "road_border"
+    ]
     assert sum(float(ls.attributes["length_m"]) for ls in borders) == pytest.approx(kept["length_m"].sum(), rel=1e-3)
     assert min(float(ls.attributes["confidence_min"]) for ls in borders) >= cut - 1e-4

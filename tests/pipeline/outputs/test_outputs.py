@@ -56,15 +56,22 @@ def test_t_junction_gives_three_chains_meeting_at_the_junction():
 
 def test_l_of_two_edges_is_one_line_with_exact_coordinates_length_and_attributes():
     # the second edge is stored from its far end, so it is walked backwards
-    g = graph([[0, 0], [10, 0], [10, 20]], [[0, 1], [2, 1]], edge_scores=np.array([0.2, 0.8]),
-              edge_kinds=["normal", "normal"], edge_patches=[[3, 4], [3, 5]])
+    g = graph(
+        [[0, 0], [10, 0], [10, 20]],
+        [[0, 1], [2, 1]],
+        edge_scores=np.array([0.2, 0.8]),
+        edge_kinds=["normal", "normal"],
+        edge_patches=[[3, 4], [3, 5]],
+    )
     (chain,) = merge_chains(g)
     assert chain.vertices.tolist() == [0, 1, 2]
     assert chain.reversed.tolist() == [False, True]
     np.testing.assert_array_equal(chain.polyline, [[0, 0], [10, 0], [10, 20]])
     boundaries, _ = graph_frames(g)
     row = boundaries.iloc[0]
-    np.testing.assert_allclose(np.asarray(row.geometry.coords), [[500000, 4400000], [500005, 4400000], [500005, 4399990]])
+    np.testing.assert_allclose(
+        np.asarray(row.geometry.coords), [[500000, 4400000], [500005, 4400000], [500005, 4399990]]
+    )
     assert row.length_m == pytest.approx(15.0)  # 5 m + 10 m
     assert row.confidence_mean == pytest.approx((0.2 * 5 + 0.8 * 10) / 15)  # 0.6: weighted by length
     assert row.confidence_min == pytest.approx(0.2)
@@ -75,8 +82,14 @@ def test_l_of_two_edges_is_one_line_with_exact_coordinates_length_and_attributes
 def test_curved_corner_edge_walked_backwards_is_reversed_into_the_line():
     # edge 0 is a corner stored from vertex 1 to vertex 0 along (10,10) -> (0,10) -> (0,0)
     corner = np.array([[10, 10], [0, 10], [0, 0]], dtype=float)
-    g = graph([[0, 0], [10, 10], [20, 10]], [[1, 0], [1, 2]], edge_kinds=["corner", "normal"],
-              edge_polylines=[corner, None], edge_scores=np.array([0.5, 1.0]), edge_patches=[[7, 1], [7, 1]])
+    g = graph(
+        [[0, 0], [10, 10], [20, 10]],
+        [[1, 0], [1, 2]],
+        edge_kinds=["corner", "normal"],
+        edge_polylines=[corner, None],
+        edge_scores=np.array([0.5, 1.0]),
+        edge_patches=[[7, 1], [7, 1]],
+    )
     (chain,) = merge_chains(g)
     assert chain.vertices.tolist() == [0, 1, 2]
     assert chain.reversed.tolist() == [True, False]
@@ -109,8 +122,11 @@ def test_parallel_edges_and_self_loops_use_every_edge_once():
     # 3 and 4 are joined by three parallel edges (degree 3: three one-edge chains)
     bump = np.array([[0, 0], [5, 5], [10, 0]], dtype=float)
     ring = np.array([[20, 0], [30, 0], [30, 10], [20, 0]], dtype=float)
-    g = graph([[0, 0], [10, 0], [20, 0], [40, 0], [50, 0]], [[0, 1], [0, 1], [2, 2], [3, 4], [3, 4], [4, 3]],
-              edge_polylines=[None, bump, ring, None, None, None])
+    g = graph(
+        [[0, 0], [10, 0], [20, 0], [40, 0], [50, 0]],
+        [[0, 1], [0, 1], [2, 2], [3, 4], [3, 4], [4, 3]],
+        edge_polylines=[None, bump, ring, None, None, None],
+    )
     merged = merge_chains(g)
     assert used_edges(merged) == list(range(6))
     by_first_edge = {int(c.edges[0]): c for c in merged}
@@ -145,17 +161,26 @@ SKEWED = Affine(0.5, 0.1, 583000.0, 0.05, -0.5, 4507200.0)  # rotation/shear: ca
 
 def scored_graph(transform=SKEWED, crs=CRS) -> BoundaryGraph:
     arc = np.array([[10, 0], [14, 2], [16, 6], [16, 10]], dtype=float)
-    return graph([[0, 0], [10, 0], [16, 10], [30, 10], [16, 30]], [[0, 1], [1, 2], [2, 3], [4, 2]],
-                 edge_polylines=[None, arc, None, None], edge_kinds=["normal", "corner", "normal", "skeleton"],
-                 edge_scores=np.array([0.9, np.nan, 0.4, 0.7]), edge_patches=[[0, 0], [0, 1], [0, 1], [-1, -1]],
-                 transform=transform, crs=crs)
+    return graph(
+        [[0, 0], [10, 0], [16, 10], [30, 10], [16, 30]],
+        [[0, 1], [1, 2], [2, 3], [4, 2]],
+        edge_polylines=[None, arc, None, None],
+        edge_kinds=["normal", "corner", "normal", "skeleton"],
+        edge_scores=np.array([0.9, np.nan, 0.4, 0.7]),
+        edge_patches=[[0, 0], [0, 1], [0, 1], [-1, -1]],
+        transform=transform,
+        crs=crs,
+    )
 
 
 def test_geopackage_reads_back_in_the_graphs_crs_and_world_coordinates(tmp_path):
     g = scored_graph()
     paths = write_graph_outputs(g, tmp_path / "out")
-    assert paths == {"gpkg": tmp_path / "out/boundaries.gpkg", "geojson": tmp_path / "out/boundaries.geojson",
-                     "graph_json": tmp_path / "out/graph.json"}
+    assert paths == {
+        "gpkg": tmp_path / "out/boundaries.gpkg",
+        "geojson": tmp_path / "out/boundaries.geojson",
+        "graph_json": tmp_path / "out/graph.json",
+    }
     assert sorted(name for name, _ in pyogrio.list_layers(paths["gpkg"])) == ["edges", "road_boundaries"]
 
     boundaries = gpd.read_file(paths["gpkg"], layer="road_boundaries")
@@ -174,7 +199,9 @@ def test_geopackage_reads_back_in_the_graphs_crs_and_world_coordinates(tmp_path)
     edges = gpd.read_file(paths["gpkg"], layer="edges")
     assert edges.crs == CRS
     for k, row in enumerate(edges.itertuples()):
-        np.testing.assert_allclose(np.asarray(row.geometry.coords), world(SKEWED, g.edge_polyline(k)), rtol=0, atol=1e-6)
+        np.testing.assert_allclose(
+            np.asarray(row.geometry.coords), world(SKEWED, g.edge_polyline(k)), rtol=0, atol=1e-6
+        )
     assert edges["u"].tolist() == [0, 1, 2, 4] and edges["v"].tolist() == [1, 2, 3, 2]
     assert edges["corner"].tolist() == [False, True, False, False]
     assert edges["kind"].tolist() == ["normal", "corner", "normal", "skeleton"]
@@ -184,7 +211,9 @@ def test_geopackage_reads_back_in_the_graphs_crs_and_world_coordinates(tmp_path)
 
     geojson = gpd.read_file(paths["geojson"])
     assert geojson.crs == CRS and len(geojson) == 3
-    np.testing.assert_allclose(np.asarray(geojson.geometry.iloc[1].coords), np.asarray(boundaries.geometry.iloc[1].coords))
+    np.testing.assert_allclose(
+        np.asarray(geojson.geometry.iloc[1].coords), np.asarray(boundaries.geometry.iloc[1].coords)
+    )
     assert len(read_ground_truth(paths["gpkg"], crs=CRS)) == 3  # usable as an evaluation input
 
     back = BoundaryGraph.read_json(paths["graph_json"])
@@ -199,13 +228,31 @@ def test_empty_graph_writes_empty_files_with_the_schema(tmp_path):
     assert paths["gpkg"].name == "city.gpkg" and paths["geojson"].name == "city.geojson"
     info = pyogrio.read_info(paths["gpkg"], layer="road_boundaries")
     assert info["features"] == 0 and info["geometry_type"] == "LineString" and info["crs"] == CRS
-    assert list(info["fields"]) == ["boundary_id", "length_m", "n_edges", "confidence_mean", "confidence_min", "review_draft",
-                                    "corner_edges",
-                                    "skeleton_edges", "patches"]
+    assert list(info["fields"]) == [
+        "boundary_id",
+        "length_m",
+        "n_edges",
+        "confidence_mean",
+        "confidence_min",
+        "review_draft",
+        "corner_edges",
+        "skeleton_edges",
+        "patches",
+    ]
     info = pyogrio.read_info(paths["gpkg"], layer="edges")
     assert info["features"] == 0
-    assert list(info["fields"]) == ["edge_id", "boundary_id", "u", "v", "confidence", "corner", "kind", "patch_row", "patch_col",
-                                    "length_m"]
+    assert list(info["fields"]) == [
+        "edge_id",
+        "boundary_id",
+        "u",
+        "v",
+        "confidence",
+        "corner",
+        "kind",
+        "patch_row",
+        "patch_col",
+        "length_m",
+    ]
     assert json.loads(paths["geojson"].read_text())["features"] == []
     assert BoundaryGraph.read_json(paths["graph_json"]).n_edges == 0
 
@@ -248,7 +295,11 @@ def test_interrupted_write_leaves_no_file_under_a_final_name(tmp_path, monkeypat
     with pytest.raises(KeyboardInterrupt):
         write_graph_outputs(graph([[0, 0], [1, 1]], [[0, 1]]), tmp_path / "old")
     assert {key: path.read_bytes() for key, path in paths.items()} == before
-    assert sorted(p.name for p in (tmp_path / "old").iterdir()) == ["boundaries.geojson", "boundaries.gpkg", "graph.json"]
+    assert sorted(p.name for p in (tmp_path / "old").iterdir()) == [
+        "boundaries.geojson",
+        "boundaries.gpkg",
+        "graph.json",
+    ]
 
 
 # -- property ------------------------------------------------------------------------------------
@@ -274,7 +325,7 @@ def test_merged_chains_cover_every_edge_once_and_keep_the_total_length(g):
     for chain in merged:
         assert len(chain.vertices) == len(chain.edges) + 1
         for i, (k, back) in enumerate(zip(chain.edges, chain.reversed)):
-            step = tuple(chain.vertices[i:i + 2][::-1]) if back else tuple(chain.vertices[i:i + 2])
+            step = tuple(chain.vertices[i : i + 2][::-1]) if back else tuple(chain.vertices[i : i + 2])
             assert step == tuple(g.edges[k])
         assert all(degree[chain.vertices[1:-1]] == 2)  # chains only pass through degree-2 vertices
         np.testing.assert_array_equal(chain.polyline[[0, -1]], g.vertices[chain.vertices[[0, -1]]])
@@ -299,7 +350,9 @@ def test_the_overview_from_core_thumbnails_is_the_reduced_mosaic(shared_tiles, s
         grid = PatchGrid.for_mosaic(mosaic, GridConfig(core=32, margin=6))
         thumbs = {p.index: core_thumbnail(mosaic.read(p.expanded), p, scale) for p in grid}
         whole = mosaic.read(mosaic.window, scale=scale) if scale != 1.0 else mosaic.read(mosaic.window)
-        assert overview_from_thumbs(grid, scale, lambda i: None if i == (1, 1) else thumbs[i]) is None  # one missing: read instead
+        assert (
+            overview_from_thumbs(grid, scale, lambda i: None if i == (1, 1) else thumbs[i]) is None
+        )  # one missing: read instead
         built = overview_from_thumbs(grid, scale, thumbs.get)
     assert built.data.shape == whole.data.shape and built.valid.all() == whole.valid.all()
     difference = np.abs(built.data.astype(int) - whole.data.astype(int))

@@ -41,8 +41,11 @@ def edits_file(path: Path, prediction: Path, features: list[dict], fingerprint: 
 
 
 def delete(graph: BoundaryGraph, k: int) -> dict:
-    return {"type": "Feature", "properties": {"action": "delete", "edge": k}, "geometry": {"type": "LineString",
-                                                                                           "coordinates": world_line(graph, k)}}
+    return {
+        "type": "Feature",
+        "properties": {"action": "delete", "edge": k},
+        "geometry": {"type": "LineString", "coordinates": world_line(graph, k)},
+    }
 
 
 def refused(prediction: Path, edits: Path, phrase: str) -> None:
@@ -70,7 +73,12 @@ def test_the_same_edits_twice_change_nothing_the_second_time(prediction, tmp_pat
 def test_edits_made_on_another_graph_are_refused(prediction, tmp_path):
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     old = edits_file(tmp_path / "old.geojson", prediction, [delete(graph, 5)])
-    assert run_cli("apply-review", str(prediction), str(edits_file(tmp_path / "e.geojson", prediction, [delete(graph, 3)]))).returncode == 0
+    assert (
+        run_cli(
+            "apply-review", str(prediction), str(edits_file(tmp_path / "e.geojson", prediction, [delete(graph, 3)]))
+        ).returncode
+        == 0
+    )
     refused(prediction, old, "another version of graph.json")
 
 
@@ -78,21 +86,48 @@ def test_an_edge_whose_geometry_does_not_match_is_refused(prediction, tmp_path):
     graph = BoundaryGraph.read_json(prediction / "graph.json")
     wrong = delete(graph, 3)
     wrong["properties"]["edge"] = 4  # the geometry of edge 3 under the id of edge 4
-    refused(prediction, edits_file(tmp_path / "e.geojson", prediction, [wrong], fingerprint=False), "does not match edge 4")
+    refused(
+        prediction, edits_file(tmp_path / "e.geojson", prediction, [wrong], fingerprint=False), "does not match edge 4"
+    )
 
 
-@pytest.mark.parametrize("edit, phrase", [
-    ({"properties": {"action": "delete", "edge": True}}, "not an edge"),
-    ({"properties": {"action": "delete", "edge": 0}}, "no geometry"),
-    ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": ["a", "b"]}}, "not two numbers"),
-    ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": [5.0]}}, "not two numbers"),
-    ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": [float("nan"), float("nan")]}},
-     "not finite"),
-    ({"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": [1e12, 1e12]}}, "outside the imagery"),
-    ({"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[-74.0, 40.7], [-74.001, 40.7]]}},
-     "outside the imagery"),
-    ({"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[1, "x"], [2, 3]]}}, "not two numbers"),
-])
+@pytest.mark.parametrize(
+    "edit, phrase",
+    [
+        ({"properties": {"action": "delete", "edge": True}}, "not an edge"),
+        ({"properties": {"action": "delete", "edge": 0}}, "no geometry"),
+        (
+            {"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": ["a", "b"]}},
+            "not two numbers",
+        ),
+        (
+            {"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": [5.0]}},
+            "not two numbers",
+        ),
+        (
+            {
+                "properties": {"action": "move", "vertex": 0},
+                "geometry": {"type": "Point", "coordinates": [float("nan"), float("nan")]},
+            },
+            "not finite",
+        ),
+        (
+            {"properties": {"action": "move", "vertex": 0}, "geometry": {"type": "Point", "coordinates": [1e12, 1e12]}},
+            "outside the imagery",
+        ),
+        (
+            {
+                "properties": {"action": "add"},
+                "geometry": {"type": "LineString", "coordinates": [[-74.0, 40.7], [-74.001, 40.7]]},
+            },
+            "outside the imagery",
+        ),
+        (
+            {"properties": {"action": "add"}, "geometry": {"type": "LineString", "coordinates": [[1, "x"], [2, 3]]}},
+            "not two numbers",
+        ),
+    ],
+)
 def test_malformed_edits_are_one_line_each(prediction, tmp_path, edit, phrase):
     feature = {"type": "Feature", "geometry": None, **edit}
     raw = json.dumps({"type": "FeatureCollection", "features": [feature]}, allow_nan=True)

@@ -33,7 +33,10 @@ def city(tmp_path_factory):
 
 
 def _files(folder) -> dict[str, object]:
-    layers = {layer: pyogrio.read_dataframe(folder / "boundaries.gpkg", layer=layer) for layer in ("road_boundaries", EDGES_LAYER)}
+    layers = {
+        layer: pyogrio.read_dataframe(folder / "boundaries.gpkg", layer=layer)
+        for layer in ("road_boundaries", EDGES_LAYER)
+    }
     return {
         "graph.json": hashlib.sha256((folder / "graph.json").read_bytes()).hexdigest(),
         "geojson": hashlib.sha256((folder / "boundaries.geojson").read_bytes()).hexdigest(),
@@ -45,7 +48,9 @@ def _files(folder) -> dict[str, object]:
 def test_blocks_give_the_files_of_one_pass(city, tmp_path, block):
     mosaic, lines = city
     model = OracleModel.from_lines(lines, mosaic)
-    model.settings = dataclasses.replace(model.settings, min_fragment_px=60.0, attach_px=40.0)  # the city steps that reach beyond an edge
+    model.settings = dataclasses.replace(
+        model.settings, min_fragment_px=60.0, attach_px=40.0
+    )  # the city steps that reach beyond an edge
     one, _ = run_prediction(mosaic, model, tmp_path / "one", progress=False, block=block, one_pass=True)
     banded, summary = run_prediction(mosaic, model, tmp_path / "blocks", progress=False, block=block)
     assert one.graph.n_edges > 100 and summary["counts"]["boundaries"] > 10
@@ -62,7 +67,9 @@ def _edge_set(graph: BoundaryGraph) -> set:
 
 def test_the_files_agree_and_read_back(city, tmp_path):
     mosaic, lines = city
-    result, summary = run_prediction(mosaic, OracleModel.from_lines(lines, mosaic), tmp_path / "run", progress=False, block=1)
+    result, summary = run_prediction(
+        mosaic, OracleModel.from_lines(lines, mosaic), tmp_path / "run", progress=False, block=1
+    )
     folder = tmp_path / "run"
     graph = BoundaryGraph.read_json(folder / "graph.json")
     # graph.json written piece by piece is what the graph's own JSON is

@@ -9,13 +9,12 @@ import threading
 import numpy as np
 import pytest
 import torch
+from conftest import make_tileset
 from scipy.spatial.distance import pdist
 
-from conftest import make_tileset
-
 from csboundary.data import city as layout
-from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.grid import GridConfig, PatchGrid
+from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
@@ -26,9 +25,9 @@ from csboundary.graph.settings import GraphSettings
 from csboundary.graph.skeleton_fill import FillConfig
 from csboundary.metrics import evaluate
 from csboundary.models.fpn import FPN, FPNConfig
-from csboundary.pipeline.prediction.city import patch_scale_graph, predict_city, run_here
 from csboundary.models.maps import predict_mosaic_maps
 from csboundary.pipeline.evaluation.oracle import OracleModel
+from csboundary.pipeline.prediction.city import patch_scale_graph, predict_city, run_here
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
@@ -70,7 +69,9 @@ def test_a_model_s_shortest_fragment_is_dropped_from_the_city_graph_only(city):
     kept = predict_city(mosaic, model, progress=False)
     assert kept.graph.n_edges == int((length[piece] >= limit).sum())
     assert np.isclose(kept.graph.edge_lengths().sum(), length[length >= limit].sum())
-    assert all(kept.patch_graphs[i].n_edges == g.n_edges for i, g in whole.patch_graphs.items())  # patch scale untouched
+    assert all(
+        kept.patch_graphs[i].n_edges == g.n_edges for i, g in whole.patch_graphs.items()
+    )  # patch scale untouched
 
 
 class _TinyModel:
@@ -103,15 +104,25 @@ def test_streamed_windows_equal_the_whole_mosaic_average(tmp_path, batch_size):
     config = GridConfig(core=64, margin=8)
     windows = {}
     with Mosaic.open(tiles.directory) as mosaic:
-        result = predict_city(mosaic, model, grid_config=config, batch_size=batch_size, progress=False,
-                              on_window=lambda p, m: windows.__setitem__(p.index, m))
-        whole = predict_mosaic_maps(model.fpn, mosaic, PatchGrid.for_mosaic(mosaic, config), torch.device("cpu"), progress=False)
+        result = predict_city(
+            mosaic,
+            model,
+            grid_config=config,
+            batch_size=batch_size,
+            progress=False,
+            on_window=lambda p, m: windows.__setitem__(p.index, m),
+        )
+        whole = predict_mosaic_maps(
+            model.fpn, mosaic, PatchGrid.for_mosaic(mosaic, config), torch.device("cpu"), progress=False
+        )
     assert set(windows) == {p.index for p in result.grid} and len(windows) == 6
     for index, maps in windows.items():
         p = result.grid.patch(*index)
         inside = p.expanded.intersection(PixelWindow(0, 0, 180, 80))
         local = inside.relative_to(p.expanded).slices()
-        assert np.allclose(maps[(slice(None), *local)], whole[(slice(None), *inside.slices())], atol=2e-3)  # float16 storage
+        assert np.allclose(
+            maps[(slice(None), *local)], whole[(slice(None), *inside.slices())], atol=2e-3
+        )  # float16 storage
     assert set(result.seconds) >= {"fpn", "map_stitching", "vertex_extraction", "afanet", "graph_stitching"}
 
 
@@ -134,7 +145,7 @@ def test_the_fpn_sees_the_imagery_mirrored_beyond_the_mosaic_edge_not_zeros(tmp_
             inside = slice(cols.min(), cols.max() + 1)
             if depth:
                 mirrored = read.data[:, last - 1 - np.arange(depth), inside]
-                assert np.array_equal(image[:, last + 1:last + 1 + depth, inside], mirrored)
+                assert np.array_equal(image[:, last + 1 : last + 1 + depth, inside], mirrored)
                 mirrored_rows += depth
     assert mirrored_rows >= 8
 
@@ -152,7 +163,9 @@ def test_the_fpn_runs_in_its_own_thread_and_the_city_graph_is_the_one_of_a_run_w
     model = OracleModel.from_lines(lines, mosaic)
     threads = []
     predict = model.patch_maps
-    model.patch_maps = lambda patches, images: threads.append(threading.current_thread().name) or predict(patches, images)
+    model.patch_maps = lambda patches, images: (
+        threads.append(threading.current_thread().name) or predict(patches, images)
+    )
     overlapped = predict_city(mosaic, model, progress=False)
     assert len(threads) == 9 and all(name.startswith("csboundary-fpn") for name in threads)
     serial = predict_city(mosaic, model, progress=False, executor=_one_step_after_another)
@@ -229,7 +242,9 @@ def test_read_batches_are_let_go_once_their_maps_are_stored(tmp_path, monkeypatc
     monkeypatch.setattr(CityJob, "read_batch", tracked)
     model = _TinyModel()
     predict = model.patch_maps
-    model.patch_maps = lambda patches, images: most_alive.append(sum(ref() is not None for ref in alive)) or predict(patches, images)
+    model.patch_maps = lambda patches, images: (
+        most_alive.append(sum(ref() is not None for ref in alive)) or predict(patches, images)
+    )
     with Mosaic.open(tiles.directory) as mosaic:
         result = predict_city(mosaic, model, grid_config=GridConfig(core=16, margin=4), progress=False)
     assert len(result.grid) == 60 and len(alive) == 60

@@ -42,8 +42,20 @@ def predictions(demo_run, confident_bundle, tmp_path_factory) -> dict[str, Path]
     for name, extra in (("all", ()), ("sure", ("--min-confidence", "0.6"))):
         out[name] = root / name
         # the torch engine: a new bundle file would otherwise be exported to ONNX and quantized first (the engine is not judged here)
-        done = run_cli("predict", str(demo_run / "city"), "--out", str(out[name]), "--weights", str(confident_bundle), *extra,
-                       "--device", "cpu", "--engine", "torch", "--quiet")
+        done = run_cli(
+            "predict",
+            str(demo_run / "city"),
+            "--out",
+            str(out[name]),
+            "--weights",
+            str(confident_bundle),
+            *extra,
+            "--device",
+            "cpu",
+            "--engine",
+            "torch",
+            "--quiet",
+        )
         assert done.returncode == 0, done.stderr
     return out
 
@@ -69,7 +81,9 @@ def test_min_confidence_keeps_exactly_the_edges_at_or_above_it(predictions):
 
 
 def test_evaluate_reports_the_confidence(predictions, demo_run, tmp_path):
-    done = run_cli("evaluate", str(predictions["all"] / "graph.json"), str(demo_run / "city"), "--json", str(tmp_path / "s.json"))
+    done = run_cli(
+        "evaluate", str(predictions["all"] / "graph.json"), str(demo_run / "city"), "--json", str(tmp_path / "s.json")
+    )
     assert done.returncode == 0, done.stderr
     assert "confidence:" in done.stdout and "AUC" in done.stdout
     report = json.loads((tmp_path / "s.json").read_text())["confidence"]
@@ -80,10 +94,25 @@ def test_evaluate_reports_the_confidence(predictions, demo_run, tmp_path):
 def test_min_confidence_needs_a_bundle_with_a_confidence(demo_run, tmp_path):
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
 
-    payload = {k: v for k, v in load_checkpoint(shipped_weights(), ("bundle",)).items() if k not in ("format", "kind", "confidence")}
+    payload = {
+        k: v
+        for k, v in load_checkpoint(shipped_weights(), ("bundle",)).items()
+        if k not in ("format", "kind", "confidence")
+    }
     plain = save_checkpoint(tmp_path / "plain.pt", "bundle", **payload)
-    done = run_cli("predict", str(demo_run / "city"), "--out", str(tmp_path / "out"), "--weights", str(plain), "--min-confidence", "0.5",
-                   "--device", "cpu", "--quiet")
+    done = run_cli(
+        "predict",
+        str(demo_run / "city"),
+        "--out",
+        str(tmp_path / "out"),
+        "--weights",
+        str(plain),
+        "--min-confidence",
+        "0.5",
+        "--device",
+        "cpu",
+        "--quiet",
+    )
     assert done.returncode != 0
     assert done.stderr.strip().startswith("error: --min-confidence") and "Traceback" not in done.stderr
     assert not (tmp_path / "out" / "graph.json").exists()
@@ -94,7 +123,9 @@ def synth_cities(folder: Path, tile_size: int) -> list[Path]:
     cities = []
     for seed in (1, 2):
         city = folder / f"city{seed}"
-        done = run_cli("synth", str(city), "--seed", str(seed), "--tile-size", str(tile_size), "--split", "valid", "--quiet")
+        done = run_cli(
+            "synth", str(city), "--seed", str(seed), "--tile-size", str(tile_size), "--split", "valid", "--quiet"
+        )
         assert done.returncode == 0, done.stderr
         cities.append(city)
     return cities
@@ -112,8 +143,18 @@ def test_fit_confidence_writes_a_bundle_predict_uses(tmp_path):
     assert [c["ground_truth_sha256"] for c in recorded] == [file_sha256(c / "ground_truth.gpkg") for c in cities]
     assert table["provenance"]["n_trees"] == 5 and len(table["tree_starts"]) == 6
     image = next((cities[0] / "tiles").glob("*.tif"))
-    done = run_cli("predict-patch", str(image), "--out", str(tmp_path / "patch"), "--weights", str(out), "--device", "cpu",
-                   "--engine", "torch")
+    done = run_cli(
+        "predict-patch",
+        str(image),
+        "--out",
+        str(tmp_path / "patch"),
+        "--weights",
+        str(out),
+        "--device",
+        "cpu",
+        "--engine",
+        "torch",
+    )
     assert done.returncode == 0, done.stderr
     scores = np.asarray(BoundaryGraph.read_json(tmp_path / "patch" / "graph.json").edge_scores, float)
     assert len(scores) and ((scores >= 0) & (scores <= 1)).all()
@@ -131,8 +172,21 @@ def test_fit_confidence_on_cities_without_ground_truth_is_one_line(tmp_path):
         truth.unlink()
         empty.to_file(truth, layer=LAYER, driver="GPKG")
     for given, needle in ((cities[:1], "needs at least two"), (cities, "no predicted edge lies on the ground truth")):
-        done = run_cli("fit-confidence", *map(str, given), "--out", str(tmp_path / "fitted.pt"), "--trees", "5", "--device", "cpu",
-                       "--engine", "torch", "--quiet")  # an error path: no ONNX export to wait for
+        done = run_cli(
+            "fit-confidence",
+            *map(str, given),
+            "--out",
+            str(tmp_path / "fitted.pt"),
+            "--trees",
+            "5",
+            "--device",
+            "cpu",
+            "--engine",
+            "torch",
+            "--quiet",
+        )  # an error path: no ONNX export to wait for
         lines = done.stderr.strip().splitlines()
-        assert done.returncode == 2 and len(lines) == 1 and needle in lines[0] and str(cities[0]) in lines[0], done.stderr
+        assert done.returncode == 2 and len(lines) == 1 and needle in lines[0] and str(cities[0]) in lines[0], (
+            done.stderr
+        )
         assert not (tmp_path / "fitted.pt").exists()

@@ -51,7 +51,9 @@ class _Averager:
         self.peak_bytes = max(self.peak_bytes, self.store.held_map_bytes())
         out = []
         for index in self.schedule.add_maps(patch.index):
-            out.append((self.grid.patch(*index), stitch_window(self.grid, self.grid.patch(*index), self.store.load_maps, 2)))
+            out.append(
+                (self.grid.patch(*index), stitch_window(self.grid, self.grid.patch(*index), self.store.load_maps, 2))
+            )
             for q in self.schedule.add_graph(index):
                 self.store.drop_maps(q)
         return out

@@ -20,14 +20,22 @@ from csboundary.graph.graph_arrays import graph_arrays, graph_from_arrays
 from csboundary.pipeline.prediction.run_store import STORE_DIR, RunMismatch, RunStore
 from helpers import run_cli
 
-COMMON = ("--device", "cpu", "--quiet", "--threads", "1")  # one torch thread: the FPN's numbers match a 1-thread worker's
+COMMON = (
+    "--device",
+    "cpu",
+    "--quiet",
+    "--threads",
+    "1",
+)  # one torch thread: the FPN's numbers match a 1-thread worker's
 
 
 @pytest.fixture(scope="module")
 def city(tmp_path_factory):
     """2200 x 2200 px at the shipped model's 0.152 m: 3 x 3 patches, real boundaries found."""
     path = tmp_path_factory.mktemp("resume") / "city"
-    done = run_cli("synth", str(path), "--tiles", "2x2", "--tile-size", "1100", "--seed", "3", "--split", "test", "--quiet")
+    done = run_cli(
+        "synth", str(path), "--tiles", "2x2", "--tile-size", "1100", "--seed", "3", "--split", "test", "--quiet"
+    )
     assert done.returncode == 0, done.stderr
     return path
 
@@ -46,13 +54,20 @@ def reference(city, tmp_path_factory):
 
 def _graphs(out: Path) -> list[str]:
     folder = out / STORE_DIR / "graphs"
-    return [p.name for p in folder.iterdir() if p.suffix == ".npz" and not p.name.startswith(".")] if folder.exists() else []
+    return (
+        [p.name for p in folder.iterdir() if p.suffix == ".npz" and not p.name.startswith(".")]
+        if folder.exists()
+        else []
+    )
 
 
 def killed_run(city: Path, out: Path, windows: int = 3) -> None:
     """``predict`` killed with SIGKILL once ``windows`` windows have their graphs stored."""
-    job = subprocess.Popen([sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), *COMMON],
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    job = subprocess.Popen(
+        [sys.executable, "-m", "csboundary", "predict", str(city), "--out", str(out), *COMMON],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.time() + 300
     while len(_graphs(out)) < windows:
         assert job.poll() is None and time.time() < deadline, "the run ended before it could be killed"
@@ -128,7 +143,9 @@ def test_a_damaged_manifest_is_one_line_with_the_way_out(tmp_path):
 
 
 def test_a_run_that_did_no_work_blocks_nothing(tmp_path):
-    RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 10, 1]], "settings": {}})  # e.g. the input was damaged: nothing stored
+    RunStore.open(
+        tmp_path / "s", {"inputs": [["a.tif", 10, 1]], "settings": {}}
+    )  # e.g. the input was damaged: nothing stored
     with pytest.warns(UserWarning, match="had done no work"):
         store = RunStore.open(tmp_path / "s", {"inputs": [["a.tif", 11, 2]], "settings": {}})  # the input fixed
     assert json.loads((store.root / "manifest.json").read_text())["inputs"] == [["a.tif", 11, 2]]
@@ -145,10 +162,15 @@ def test_the_manifest_names_what_differs(tmp_path):
 
 def test_a_graph_survives_the_store_exactly(tmp_path):
     rng = np.random.default_rng(0)
-    graph = BoundaryGraph(rng.random((5, 2)) * 1000, [[0, 1], [1, 2], [3, 4]], vertex_kinds=["isolated", "end", "end", "isolated",
-                                                                                             "isolated"],
-                          edge_kinds=["normal", "corner", "normal"], edge_polylines=[None, rng.random((7, 2)), None],
-                          edge_scores=rng.random(3), crs="EPSG:32618")
+    graph = BoundaryGraph(
+        rng.random((5, 2)) * 1000,
+        [[0, 1], [1, 2], [3, 4]],
+        vertex_kinds=["isolated", "end", "end", "isolated", "isolated"],
+        edge_kinds=["normal", "corner", "normal"],
+        edge_polylines=[None, rng.random((7, 2)), None],
+        edge_scores=rng.random(3),
+        crs="EPSG:32618",
+    )
     store = RunStore(tmp_path / "s")
     store.save_graph((2, 5), graph)
     back = store.load_graph((2, 5))
@@ -167,21 +189,29 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
     from distributed import Client, LocalCluster
 
     from csboundary.data.raster import Mosaic
-    from csboundary.models.checkpoint import file_sha256
+    from csboundary.models.checkpoint import file_sha256, shipped_weights
     from csboundary.pipeline.prediction.distributed import dask_executor
-    from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.prediction.patch import PatchPredictor
     from csboundary.pipeline.prediction.run import run_prediction
 
     predictor = PatchPredictor.load(None, torch.device("cpu"))
     # the precision the command line chose for the reference on this machine (--precision auto), and its engine: both travel to the workers
-    predictor.use_precision(json.loads((reference / "summary.json").read_text())["settings"].get("precision", "float32"))
+    predictor.use_precision(
+        json.loads((reference / "summary.json").read_text())["settings"].get("precision", "float32")
+    )
     predictor.use_engine("auto")
     out = tmp_path / "pred"
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40) as cluster, \
-            Client(cluster) as client, Mosaic.open(city / "tiles") as mosaic:
+    with (
+        LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+        ) as cluster,
+        Client(cluster) as client,
+        Mosaic.open(city / "tiles") as mosaic,
+    ):
         settings = {"weights_sha256": file_sha256(shipped_weights())}
-        _, summary = run_prediction(mosaic, predictor, out, progress=False, settings=settings, executor=dask_executor(client), threads=1)
+        _, summary = run_prediction(
+            mosaic, predictor, out, progress=False, settings=settings, executor=dask_executor(client), threads=1
+        )
         assert len(client.nthreads()) == 2
     assert summary["work"]["windows_connected"] == 9
     assert (out / "graph.json").read_bytes() == (reference / "graph.json").read_bytes()

@@ -37,8 +37,17 @@ def synthetic(tmp_path_factory) -> Path:
 
 def _geotiff(path: Path, size: int) -> Path:
     data = np.random.default_rng(0).integers(0, 255, (3, size, size), dtype=np.uint8)
-    with rasterio.open(path, "w", driver="GTiff", width=size, height=size, count=3, dtype="uint8", crs="EPSG:32618",
-                       transform=from_origin(500000, 4500000, 0.152, 0.152)) as ds:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        width=size,
+        height=size,
+        count=3,
+        dtype="uint8",
+        crs="EPSG:32618",
+        transform=from_origin(500000, 4500000, 0.152, 0.152),
+    ) as ds:
         ds.write(data)
     return path
 
@@ -77,8 +86,9 @@ def test_the_command_refuses_bad_input_in_one_line(tmp_path):
     (tmp_path / "notes.txt").write_text("x")
     result = run_cli("adapt", str(tmp_path / "notes.txt"), "--out", str(tmp_path / "a.pt"))
     assert result.returncode == 2 and not (tmp_path / "a.pt").exists()
-    assert result.stderr.strip().splitlines() == [f"error: {tmp_path / 'notes.txt'}: not a GeoTIFF (.tif), a folder of them, a city, "
-                                                  "a set or a prediction folder"]
+    assert result.stderr.strip().splitlines() == [
+        f"error: {tmp_path / 'notes.txt'}: not a GeoTIFF (.tif), a folder of them, a city, a set or a prediction folder"
+    ]
 
 
 def test_a_tiny_adapt_writes_a_bundle_with_provenance_and_resumes_without_training_again(city, synthetic, tmp_path):
@@ -99,7 +109,7 @@ def test_a_tiny_adapt_writes_a_bundle_with_provenance_and_resumes_without_traini
     assert bundle["inference"] == shipped["inference"] and bundle["confidence"] == shipped["confidence"]
     assert not all(torch.equal(bundle["fpn"][k], shipped["fpn"][k]) for k in shipped["fpn"])  # the FPN did learn
     run = load_checkpoint(done["work"] / "fpn" / "adapt-last.pt", ("adapt",))
-    teacher = {k[len("teacher."):]: v for k, v in run["adapt"].items() if k.startswith("teacher.")}
+    teacher = {k[len("teacher.") :]: v for k, v in run["adapt"].items() if k.startswith("teacher.")}
     assert all(torch.equal(bundle["fpn"][k], teacher[k]) for k in bundle["fpn"])  # the teacher is what ships
     assert load_predictor(tmp_path / "adapted.pt", "cpu", engine="torch") is not None
     stamps = {p: p.stat().st_mtime_ns for p in (done["work"] / "fpn" / "fpn.pt", done["work"] / "afanet" / "afanet.pt")}
@@ -116,17 +126,40 @@ def test_adapt_and_finetune_take_each_others_bundles(city, synthetic, tmp_path):
     from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
 
     cache = synthetic
-    adapt([city], tmp_path / "adapted.pt", work=tmp_path / "a", budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1,
-                                                                                   crop=128),
-          cache=cache, device="cpu", progress=False)
-    finetune([city], tmp_path / "adapted-tuned.pt", weights=tmp_path / "adapted.pt", work=tmp_path / "b",
-             budget=FinetuneBudget(fpn_steps=2, afanet_steps=1, synthetic_cities=1, crop=128, batch=2), cache=cache, device="cpu",
-             progress=False)
+    adapt(
+        [city],
+        tmp_path / "adapted.pt",
+        work=tmp_path / "a",
+        budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1, crop=128),
+        cache=cache,
+        device="cpu",
+        progress=False,
+    )
+    finetune(
+        [city],
+        tmp_path / "adapted-tuned.pt",
+        weights=tmp_path / "adapted.pt",
+        work=tmp_path / "b",
+        budget=FinetuneBudget(fpn_steps=2, afanet_steps=1, synthetic_cities=1, crop=128, batch=2),
+        cache=cache,
+        device="cpu",
+        progress=False,
+    )
     tuned = load_checkpoint(tmp_path / "adapted-tuned.pt", ("bundle",))
     assert tuned["provenance"]["finetune"]["base_sha256"] == file_sha256(tmp_path / "adapted.pt")
     assert tuned["provenance"]["base"]["adapt"]["method"]["mix"] is True  # the adaptation stays on record
-    adapt([city], tmp_path / "tuned-adapted.pt", weights=tmp_path / "adapted-tuned.pt", work=tmp_path / "c",
-          budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1, crop=128), cache=cache, device="cpu", progress=False)
+    adapt(
+        [city],
+        tmp_path / "tuned-adapted.pt",
+        weights=tmp_path / "adapted-tuned.pt",
+        work=tmp_path / "c",
+        budget=AdaptBudget(fpn_steps=2, afanet_steps=0, synthetic_cities=1, crop=128),
+        cache=cache,
+        device="cpu",
+        progress=False,
+    )
     again = load_checkpoint(tmp_path / "tuned-adapted.pt", ("bundle",))
     assert again["provenance"]["adapt"]["base_sha256"] == file_sha256(tmp_path / "adapted-tuned.pt")
-    assert all(torch.equal(again["afanet"][k], tuned["afanet"][k]) for k in tuned["afanet"])  # --afanet-steps 0 keeps the AfANet
+    assert all(
+        torch.equal(again["afanet"][k], tuned["afanet"][k]) for k in tuned["afanet"]
+    )  # --afanet-steps 0 keeps the AfANet

@@ -21,10 +21,10 @@ from csboundary.metrics.compare import paired_bootstrap
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.fpn import fpn_loss
-from csboundary.pipeline.training.finetune_cv import folds_of
-from csboundary.pipeline.training.labelled_inputs import labelled_cities
 from csboundary.pipeline.outputs.prediction_files import write_graph_outputs
 from csboundary.pipeline.outputs.review import apply_review
+from csboundary.pipeline.training.finetune_cv import folds_of
+from csboundary.pipeline.training.labelled_inputs import labelled_cities
 
 SIZE = 600
 
@@ -44,12 +44,19 @@ def _prediction(city: Path, folder: Path) -> tuple[Path, object]:
     tiles = sorted((city / "tiles").glob("*.tif"))
     with Mosaic.open(tiles) as mosaic:
         transform, crs = mosaic.transform, mosaic.crs.to_string()
-    graph = BoundaryGraph(np.array([[100.0, 50.0], [100.0, 550.0], [500.0, 50.0], [500.0, 550.0]]), [[0, 1], [2, 3]],
-                          edge_scores=np.array([0.9, 0.8]), transform=transform, crs=crs)
+    graph = BoundaryGraph(
+        np.array([[100.0, 50.0], [100.0, 550.0], [500.0, 50.0], [500.0, 550.0]]),
+        [[0, 1], [2, 3]],
+        edge_scores=np.array([0.9, 0.8]),
+        transform=transform,
+        crs=crs,
+    )
     folder.mkdir(parents=True)
     graph.write_json(folder / "graph.json")
     write_graph_outputs(graph, folder)
-    (folder / "summary.json").write_text(json.dumps({"inputs": [str(t.resolve()) for t in tiles], "mosaic_px": [SIZE, SIZE]}))
+    (folder / "summary.json").write_text(
+        json.dumps({"inputs": [str(t.resolve()) for t in tiles], "mosaic_px": [SIZE, SIZE]})
+    )
     return folder, transform
 
 
@@ -57,8 +64,16 @@ def _complete_left_half(folder: Path, transform, tmp_path: Path) -> None:
     """The reviewer marks the left half (columns 0-300) complete and applies it."""
     xs, ys = pixel_to_world(transform, np.array([0.0, 300.0]), np.array([0.0, float(SIZE)]))
     ring = [[float(v) for v in p] for p in box(min(xs), min(ys), max(xs), max(ys)).exterior.coords]
-    edits = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"action": "complete"},
-                                                        "geometry": {"type": "Polygon", "coordinates": [ring]}}]}
+    edits = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {"action": "complete"},
+                "geometry": {"type": "Polygon", "coordinates": [ring]},
+            }
+        ],
+    }
     (tmp_path / "edits.geojson").write_text(json.dumps(edits))
     apply_review(folder, tmp_path / "edits.geojson")
 
@@ -71,7 +86,9 @@ def test_a_reviewed_prediction_is_labelled_only_inside_its_complete_area(city, t
         window = PixelWindow(0, 0, SIZE, SIZE)
         image, targets, valid = training.fpn_sample(window)
         assert valid[:, :300].all() and not valid[:, 300:].any()  # labels known left of column 300 only
-        assert targets[1, 300, 98:103].max() > 0.5 and targets[1, 300, 498:503].max() > 0.5  # both boundaries are drawn ...
+        assert (
+            targets[1, 300, 98:103].max() > 0.5 and targets[1, 300, 498:503].max() > 0.5
+        )  # both boundaries are drawn ...
         # ... yet the one outside the area costs nothing: the loss is the same with it erased, or with any target there
         config = TrainConfig(model="fpn", worlds={"cities": 1})
         logits = torch.from_numpy(np.random.default_rng(0).normal(size=(1, 2, SIZE, SIZE)).astype(np.float32))
@@ -81,8 +98,12 @@ def test_a_reviewed_prediction_is_labelled_only_inside_its_complete_area(city, t
         assert loss(changed) == pytest.approx(loss(targets), abs=1e-7)
         changed[:, :, :300] = 1 - changed[:, :, :300]
         assert loss(changed) != pytest.approx(loss(targets), abs=1e-3)  # inside, labels count
-        assert training.labelled(np.array([[100.0, 300.0], [500.0, 300.0], [299.5, 10.0], [-5.0, 10.0]])).tolist() == [True, False, True,
-                                                                                                                       False]
+        assert training.labelled(np.array([[100.0, 300.0], [500.0, 300.0], [299.5, 10.0], [-5.0, 10.0]])).tolist() == [
+            True,
+            False,
+            True,
+            False,
+        ]
         for seed in range(20):  # every training window is centred on the complete area
             w = training.random_window(np.random.default_rng(seed), 256)
             assert w.col_off + 128 < 300 + 8
@@ -96,9 +117,23 @@ def test_predictions_that_are_not_labels_are_refused(city, tmp_path):
     folder, transform = _prediction(city, tmp_path / "pred")
     with pytest.raises(InputError, match="never reviewed"):
         labelled_cities([folder], tmp_path / "work")
-    (tmp_path / "edits.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": [
-        {"type": "Feature", "properties": {"action": "accept", "edge": 0},
-         "geometry": {"type": "LineString", "coordinates": [_world(transform, 100.0, 50.0), _world(transform, 100.0, 550.0)]}}]}))
+    (tmp_path / "edits.geojson").write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"action": "accept", "edge": 0},
+                        "geometry": {
+                            "type": "LineString",
+                            "coordinates": [_world(transform, 100.0, 50.0), _world(transform, 100.0, 550.0)],
+                        },
+                    }
+                ],
+            }
+        )
+    )
     apply_review(folder, tmp_path / "edits.geojson")
     with pytest.raises(InputError, match="no area of it is marked complete"):
         labelled_cities([folder], tmp_path / "work")
@@ -120,11 +155,24 @@ def test_user_cities_get_their_share_of_samples():
     cities = [_City(10), _City(20), _City(10), _City(30)]  # the last two are the user's
     p = city_probabilities(cities, extra=2, extra_share=0.25, by_area=True)
     assert np.allclose(p, [0.75 * 100 / 500, 0.75 * 400 / 500, 0.25 * 100 / 1000, 0.25 * 900 / 1000])
-    assert np.allclose(city_probabilities(cities, extra=2, extra_share=0.25, by_area=False), [0.375, 0.375, 0.125, 0.125])
-    assert np.allclose(city_probabilities(cities, extra=2, extra_share=0.0, by_area=True), np.array([100, 400, 100, 900]) / 1500)
-    assert np.allclose(city_probabilities(cities[2:], extra=2, extra_share=0.25, by_area=False), [0.5, 0.5])  # only user cities
-    parts = [_City(10), _City(10, "user"), _City(20, "user"), _City(30, "other")]  # the user city's scattered tiles: two parts
-    assert np.allclose(city_probabilities(parts, extra=3, extra_share=0.5, by_area=False), [0.5, 0.125, 0.125, 0.25])  # 2 cities, alike
+    assert np.allclose(
+        city_probabilities(cities, extra=2, extra_share=0.25, by_area=False), [0.375, 0.375, 0.125, 0.125]
+    )
+    assert np.allclose(
+        city_probabilities(cities, extra=2, extra_share=0.0, by_area=True), np.array([100, 400, 100, 900]) / 1500
+    )
+    assert np.allclose(
+        city_probabilities(cities[2:], extra=2, extra_share=0.25, by_area=False), [0.5, 0.5]
+    )  # only user cities
+    parts = [
+        _City(10),
+        _City(10, "user"),
+        _City(20, "user"),
+        _City(30, "other"),
+    ]  # the user city's scattered tiles: two parts
+    assert np.allclose(
+        city_probabilities(parts, extra=3, extra_share=0.5, by_area=False), [0.5, 0.125, 0.125, 0.25]
+    )  # 2 cities, alike
 
 
 def test_folds_deal_cities_in_turn_and_the_bootstrap_of_a_constant_gain_is_that_gain():
@@ -139,23 +187,34 @@ def test_folds_deal_cities_in_turn_and_the_bootstrap_of_a_constant_gain_is_that_
 
 def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_training_again(city, tmp_path, capfd):
     from csboundary.models.checkpoint import file_sha256, load_checkpoint, shipped_weights
-    from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
     from csboundary.pipeline.prediction.patch import load_predictor
+    from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
 
     budget = FinetuneBudget(fpn_steps=2, afanet_steps=2, synthetic_cities=1, crop=128, batch=2)
-    kwargs = dict(weights=None, work=tmp_path / "work", budget=budget, cache=tmp_path / "synthetic", device="cpu", progress=False)
+    kwargs = dict(
+        weights=None, work=tmp_path / "work", budget=budget, cache=tmp_path / "synthetic", device="cpu", progress=False
+    )
     capfd.readouterr()
     done = finetune([city], tmp_path / "tuned.pt", **kwargs)
-    assert "render tiles" not in capfd.readouterr().err  # progress=False (--quiet): the synthetic cities render without a bar
+    assert (
+        "render tiles" not in capfd.readouterr().err
+    )  # progress=False (--quiet): the synthetic cities render without a bar
     bundle = load_checkpoint(tmp_path / "tuned.pt", ("bundle",))
     record = bundle["provenance"]["finetune"]
     assert record["base_sha256"] == file_sha256(shipped_weights())
     assert record["labelled"][0]["ground_truth_sha256"] == file_sha256(city / "ground_truth.gpkg")
-    assert record["budget"]["fpn_steps"] == 2 and bundle["provenance"]["fpn"]["step"] == 2 and bundle["provenance"]["afanet"]["step"] == 2
+    assert (
+        record["budget"]["fpn_steps"] == 2
+        and bundle["provenance"]["fpn"]["step"] == 2
+        and bundle["provenance"]["afanet"]["step"] == 2
+    )
     shipped = load_checkpoint(shipped_weights(), ("bundle",))
     assert bundle["inference"] == shipped["inference"] and bundle["confidence"] == shipped["confidence"]
     # one 600 px city gives too few edges to refit the confidence on: kept, and said why
-    assert record["edge_confidence"]["refitted"] is False and "a refit needs at least 100" in record["edge_confidence"]["reason"]
+    assert (
+        record["edge_confidence"]["refitted"] is False
+        and "a refit needs at least 100" in record["edge_confidence"]["reason"]
+    )
     assert done["confidence"] == record["edge_confidence"]
     assert not all(torch.equal(bundle["fpn"][k], shipped["fpn"][k]) for k in shipped["fpn"])  # the FPN did learn
     assert load_predictor(tmp_path / "tuned.pt", "cpu", engine="torch") is not None
@@ -163,7 +222,11 @@ def test_a_tiny_finetune_writes_a_bundle_with_provenance_and_resumes_without_tra
     finetune([city], tmp_path / "again.pt", **kwargs)  # the same work folder: both runs are done already
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     with pytest.raises(InputError, match="other inputs or settings"):
-        finetune([city], tmp_path / "other.pt", **{**kwargs, "budget": FinetuneBudget(fpn_steps=3, afanet_steps=2, synthetic_cities=1)})
+        finetune(
+            [city],
+            tmp_path / "other.pt",
+            **{**kwargs, "budget": FinetuneBudget(fpn_steps=3, afanet_steps=2, synthetic_cities=1)},
+        )
 
 
 def test_the_confidence_is_refitted_with_the_tuned_networks_only_on_enough_edges(city, tmp_path, monkeypatch):
@@ -181,7 +244,11 @@ def test_the_confidence_is_refitted_with_the_tuned_networks_only_on_enough_edges
     before = load_checkpoint(bundle, ("bundle",))["confidence"]
     monkeypatch.setattr(fit, "MIN_REFIT_EDGES", 10**6)
     kept = fit.refit_for_tuned(bundle, [city], [other], torch.device("cpu"), progress=False)
-    assert not kept["refitted"] and kept["labelled_edges"] > 0 and load_checkpoint(bundle, ("bundle",))["confidence"] == before
+    assert (
+        not kept["refitted"]
+        and kept["labelled_edges"] > 0
+        and load_checkpoint(bundle, ("bundle",))["confidence"] == before
+    )
     monkeypatch.setattr(fit, "MIN_REFIT_EDGES", 1)
     monkeypatch.setattr(fit, "MIN_REFIT_CLASS", 0)
     done = fit.refit_for_tuned(bundle, [city], [other], torch.device("cpu"), progress=False)
@@ -198,7 +265,13 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
     from csboundary.data.synth.city import synthesize_city as synth
 
     for name in "abcd":
-        synth(tmp_path / "set" / name, seed=1, split="valid", config=style_config("classic", tile_size=300), progress=False)
+        synth(
+            tmp_path / "set" / name,
+            seed=1,
+            split="valid",
+            config=style_config("classic", tile_size=300),
+            progress=False,
+        )
     trained_on = {}
 
     def fake_finetune(train, out, **kwargs):
@@ -207,13 +280,25 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
 
     def fake_scores(cities, weights, *args):
         tuned = "fold-" in str(weights)
-        return {c.name: {"f1@5": 0.5 + (0.1 if tuned else 0.0) + 0.01 * "abcd".index(c.name), "apls": None if c.name == "d" else 0.4,
-                         "review": {"corrected_minutes": (6.0 if tuned else 10.0) + "abcd".index(c.name), "scratch_minutes": 8.0,
-                                    "km": 0.5}}
-                for c in cities}
+        return {
+            c.name: {
+                "f1@5": 0.5 + (0.1 if tuned else 0.0) + 0.01 * "abcd".index(c.name),
+                "apls": None if c.name == "d" else 0.4,
+                "review": {
+                    "corrected_minutes": (6.0 if tuned else 10.0) + "abcd".index(c.name),
+                    "scratch_minutes": 8.0,
+                    "km": 0.5,
+                },
+            }
+            for c in cities
+        }
 
     def fake_confidence(cities, tuned, base, *args):  # per held-out city: one true edge and one false
-        return {"true": [True, False] * len(cities), "base": [0.4, 0.6] * len(cities), "tuned": [0.9, 0.2] * len(cities)}
+        return {
+            "true": [True, False] * len(cities),
+            "base": [0.4, 0.6] * len(cities),
+            "tuned": [0.9, 0.2] * len(cities),
+        }
 
     monkeypatch.setattr(cv, "finetune", fake_finetune)
     monkeypatch.setattr(cv, "_scores", fake_scores)
@@ -222,16 +307,28 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
     assert trained_on == {"fold-0": ["b", "d"], "fold-1": ["a", "c"]}
     assert {n: r["fold"] for n, r in result["per_city"].items()} == {"a": 0, "c": 0, "b": 1, "d": 1}
     f1 = result["summary"]["f1@5"]
-    assert f1["base"] == pytest.approx(0.515) and f1["finetuned"] == pytest.approx(0.615) and f1["difference"] == pytest.approx(0.1)
+    assert (
+        f1["base"] == pytest.approx(0.515)
+        and f1["finetuned"] == pytest.approx(0.615)
+        and f1["difference"] == pytest.approx(0.1)
+    )
     assert result["summary"]["apls"]["base"] == pytest.approx(0.3)  # undefined counts 0, as in evaluate-set
     assert "1.5 min" in cv.format_finetune(result)
     # the mapping loop of fold 0: the base reviews b and d (11 + 13 min), the tuned re-drafts of a and c take 6 + 8
     loop = result["mapping_loop"][0]
     assert loop["train_review_minutes"] == 24.0 and loop["train_scratch_minutes"] == 16.0 and loop["train_km"] == 1.0
-    assert loop["held_out_tuned_minutes"] == 14.0 and loop["held_out_base_minutes"] == 22.0 and loop["held_out_scratch_minutes"] == 16.0
+    assert (
+        loop["held_out_tuned_minutes"] == 14.0
+        and loop["held_out_base_minutes"] == 22.0
+        and loop["held_out_scratch_minutes"] == 16.0
+    )
     assert "review the training cities' drafts 24.0 min (24.0 min/km; from scratch 16.0)" in cv.format_finetune(result)
     confidence = result["confidence"]  # pooled over both folds' held-out edges
     assert confidence["edges"] == 8 and confidence["base"]["auc"] == 0.0 and confidence["tuned"]["auc"] == 1.0
-    assert confidence["tuned"]["ece"] == pytest.approx((0.1 * 4 + 0.2 * 4) / 8)  # bins 0.9 (all true) and 0.2 (all false)
+    assert confidence["tuned"]["ece"] == pytest.approx(
+        (0.1 * 4 + 0.2 * 4) / 8
+    )  # bins 0.9 (all true) and 0.2 (all false)
     monkeypatch.setattr(cv, "finetune", lambda *a, **k: pytest.fail("a finished fold ran again"))
-    assert cv.evaluate_finetune(tmp_path / "set", tmp_path / "cv", folds=2, progress=False)["summary"] == result["summary"]
+    assert (
+        cv.evaluate_finetune(tmp_path / "set", tmp_path / "cv", folds=2, progress=False)["summary"] == result["summary"]
+    )

@@ -45,5 +45,18 @@ from csboundary.models.baselines.icurb.inference import Model
 from csboundary.models.baselines.icurb.tracing import Traces, border_starts, clip_step, rollout
 from csboundary.models.baselines.icurb.training import train
 
-__all__ = ["KIND", "TRAIN_OPTIONS", "Agent", "Expert", "ICurbConfig", "Model", "Traces", "border_starts", "clip_step", "history_channel",
-           "rollout", "split_options", "train"]
+__all__ = [
+    "KIND",
+    "TRAIN_OPTIONS",
+    "Agent",
+    "Expert",
+    "ICurbConfig",
+    "Model",
+    "Traces",
+    "border_starts",
+    "clip_step",
+    "history_channel",
+    "rollout",
+    "split_options",
+    "train",
+]

@@ -20,8 +20,12 @@ class Agent(nn.Module):
             layers += [nn.Conv2d(cin, w, 3, 2, 1, bias=False), nn.BatchNorm2d(w), nn.ReLU(inplace=True)]
             cin, side = w, (side + 1) // 2
         self.body = nn.Sequential(*layers)
-        self.head = nn.Sequential(nn.Flatten(), nn.Linear(cin * side * side, config.hidden), nn.ReLU(inplace=True), nn.Linear(config.hidden,
-                                                                                                                              3))
+        self.head = nn.Sequential(
+            nn.Flatten(),
+            nn.Linear(cin * side * side, config.hidden),
+            nn.ReLU(inplace=True),
+            nn.Linear(config.hidden, 3),
+        )
         self.half = config.roi / 2
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

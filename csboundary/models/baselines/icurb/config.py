@@ -8,15 +8,23 @@ from dataclasses import dataclass
 from csboundary.config import Config
 from csboundary.errors import reject_unknown
 
-
 KIND = "icurb"
 # training-only options (TrainConfig.options); the rest of the options are ICurbConfig fields
-TRAIN_OPTIONS = {"window": 512, "beta_min": 0.1, "beta_decay": 0.5, "buffer": 8000, "batch": 64, "rollout_every": 2, "stop_pos_weight": 5.0}
+TRAIN_OPTIONS = {
+    "window": 512,
+    "beta_min": 0.1,
+    "beta_decay": 0.5,
+    "buffer": 8000,
+    "batch": 64,
+    "rollout_every": 2,
+    "stop_pos_weight": 5.0,
+}
 
 
 @dataclass(frozen=True)
 class ICurbConfig(Config):
     """The agent and how it traces (stored in the checkpoint: inference needs all of it)."""
+
     config_name = "icurb"
 
     roi: int = 64
@@ -32,5 +40,6 @@ class ICurbConfig(Config):
 def split_options(options: dict) -> tuple[ICurbConfig, dict]:
     """TrainConfig.options -> (agent config, training options); a misspelt key is an error."""
     reject_unknown(options, {*ICurbConfig.__dataclass_fields__, *TRAIN_OPTIONS}, "icurb")
-    return ICurbConfig.from_dict({k: v for k, v in options.items() if k not in TRAIN_OPTIONS}), {k: options.get(k, v) for k,
-                                                                                                 v in TRAIN_OPTIONS.items()}
+    return ICurbConfig.from_dict({k: v for k, v in options.items() if k not in TRAIN_OPTIONS}), {
+        k: options.get(k, v) for k, v in TRAIN_OPTIONS.items()
+    }

@@ -7,8 +7,8 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString
 
-from csboundary.labels.boundaries import Boundary
 from csboundary.graph.polyline import segment_feet
+from csboundary.labels.boundaries import Boundary
 from csboundary.models.baselines.icurb.geometry import inside
 
 
@@ -20,7 +20,9 @@ class Expert:
         self.cums = [b.cumulative for b in boundaries]
         self.a = np.concatenate([b.points[:-1] for b in boundaries] or [np.zeros((0, 2))])  # all segments a -> b
         self.b = np.concatenate([b.points[1:] for b in boundaries] or [np.zeros((0, 2))])
-        self.track = np.concatenate([np.full(len(b.points) - 1, k) for k, b in enumerate(boundaries)] or [np.zeros(0, int)])
+        self.track = np.concatenate(
+            [np.full(len(b.points) - 1, k) for k, b in enumerate(boundaries)] or [np.zeros(0, int)]
+        )
         self.s0 = np.concatenate([c[:-1] for c in self.cums] or [np.zeros(0)])  # arc length at a
 
     def at(self, k: int, s) -> np.ndarray:
@@ -32,9 +34,16 @@ class Expert:
         """Track, arc length and distance of the nearest ground-truth point, and its segment's direction."""
         t, _, d = segment_feet(self.a, self.b, np.asarray(pos, float))
         j = int(np.argmin(d))
-        return int(self.track[j]), float(self.s0[j] + t[j] * np.linalg.norm(self.b[j] - self.a[j])), float(d[j]), self.b[j] - self.a[j]
+        return (
+            int(self.track[j]),
+            float(self.s0[j] + t[j] * np.linalg.norm(self.b[j] - self.a[j])),
+            float(d[j]),
+            self.b[j] - self.a[j],
+        )
 
-    def act(self, pos: np.ndarray, direction: np.ndarray, start: tuple[int, float] | None = None) -> tuple[np.ndarray, bool]:
+    def act(
+        self, pos: np.ndarray, direction: np.ndarray, start: tuple[int, float] | None = None
+    ) -> tuple[np.ndarray, bool]:
         """The next vertex and the stop flag for a tracer at ``pos`` heading along ``direction``
         (``start``: the episode's (track, arc length), for closing rings)."""
         k, s, _, seg = self.nearest(pos)
@@ -82,7 +91,9 @@ class Expert:
     def teacher(self, starts):
         """``act`` as the roll-out's teacher: the travel direction is the last step taken (the
         start's own direction before the first step)."""
+
         def action(i: int, history: np.ndarray) -> tuple[np.ndarray, bool]:
             d = history[-1] - history[-2]
             return self.act(history[-1], d if np.linalg.norm(d) > 1e-6 else starts[i][1], starts[i][2])
+
         return action

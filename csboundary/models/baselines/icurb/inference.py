@@ -43,7 +43,12 @@ class Model:
         payload = load_checkpoint(path, (KIND,), map_location=device)
         agent = restore_model(path, KIND, payload, lambda c: Agent(ICurbConfig.from_dict(c))).to(device)
         config = ICurbConfig.from_dict(payload[f"{KIND}_config"])
-        return cls(agent, config, segmentation_fpn(seg_weights or payload["train_config"].get("fpn_weights") or None, device), device)
+        return cls(
+            agent,
+            config,
+            segmentation_fpn(seg_weights or payload["train_config"].get("fpn_weights") or None, device),
+            device,
+        )
 
     def patch_maps(self, patches: list, images: list[np.ndarray]) -> list[np.ndarray]:
         """(1, S, S) segmentation probability per patch (the FPN's channel 1)."""

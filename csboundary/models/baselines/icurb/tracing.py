@@ -10,9 +10,9 @@ from scipy import ndimage
 from skimage.morphology import skeletonize
 
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.polyline import segment_feet
 from csboundary.models.baselines.icurb.agent import agent_input
 from csboundary.models.baselines.icurb.config import ICurbConfig
-from csboundary.graph.polyline import segment_feet
 from csboundary.models.baselines.icurb.geometry import inside
 
 
@@ -69,13 +69,20 @@ class Traces:
 
     def graph(self) -> BoundaryGraph:
         """Traced vertices (unused starts dropped) and their consecutive pairs as edges."""
-        pairs = [(u, v, s) for ids, sc in zip(self.ids, self.scores) for (u, v), s in zip(zip(ids, ids[1:]), sc) if u != v]
+        pairs = [
+            (u, v, s) for ids, sc in zip(self.ids, self.scores) for (u, v), s in zip(zip(ids, ids[1:]), sc) if u != v
+        ]
         used = sorted({x for u, v, _ in pairs for x in (u, v)})
         index = {j: n for n, j in enumerate(used)}
         edges = [(index[u], index[v]) for u, v, _ in pairs]
-        return BoundaryGraph(np.array([self.points[j] for j in used]).reshape(-1, 2), np.array(edges, dtype=np.int64).reshape(-1, 2),
-                             vertex_kinds=["vertex"] * len(used), edge_kinds=["normal"] * len(edges), edge_polylines=[None] * len(edges),
-                             edge_scores=np.array([s for *_, s in pairs], dtype=float))
+        return BoundaryGraph(
+            np.array([self.points[j] for j in used]).reshape(-1, 2),
+            np.array(edges, dtype=np.int64).reshape(-1, 2),
+            vertex_kinds=["vertex"] * len(used),
+            edge_kinds=["normal"] * len(edges),
+            edge_polylines=[None] * len(edges),
+            edge_scores=np.array([s for *_, s in pairs], dtype=float),
+        )
 
 
 def clip_step(p: np.ndarray, q: np.ndarray, box) -> tuple[np.ndarray, bool]:
@@ -84,13 +91,24 @@ def clip_step(p: np.ndarray, q: np.ndarray, box) -> tuple[np.ndarray, bool]:
     if inside(q, box)[0]:
         return q, False
     d = q - p
-    limit = np.where(d > 0, np.array(box[2:], float), np.array(box[:2], float)) - p  # signed room to the side it heads for
+    limit = (
+        np.where(d > 0, np.array(box[2:], float), np.array(box[:2], float)) - p
+    )  # signed room to the side it heads for
     t = min([1.0] + [limit[a] / d[a] for a in range(2) if d[a] != 0])
     return p + max(t, 0.0) * d, True
 
 
 @torch.no_grad()
-def rollout(agent, tensor: torch.Tensor, starts: np.ndarray, config: ICurbConfig, teacher=None, beta: float = 0.0, rng=None, frame=None):
+def rollout(
+    agent,
+    tensor: torch.Tensor,
+    starts: np.ndarray,
+    config: ICurbConfig,
+    teacher=None,
+    beta: float = 0.0,
+    rng=None,
+    frame=None,
+):
     """Grow a polyline from every start at once, one batched agent call per step, within
     ``frame`` (x0, y0, x1, y1; default the whole window).
 
@@ -125,7 +143,9 @@ def rollout(agent, tensor: torch.Tensor, starts: np.ndarray, config: ICurbConfig
                 if stop or left:
                     traces.done.add(i)
         if teacher is not None:
-            records.append((x.cpu(), np.array([o for o, _ in labels], np.float32), np.array([s for _, s in labels], np.float32)))
+            records.append(
+                (x.cpu(), np.array([o for o, _ in labels], np.float32), np.array([s for _, s in labels], np.float32))
+            )
         active = [i for i in active if i not in traces.done]
     return traces, records
 

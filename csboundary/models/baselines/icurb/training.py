@@ -38,8 +38,11 @@ class ReplayBuffer:
         self.size = min(self.size + len(x), len(self.x))
 
     def batch(self, index: np.ndarray, device: torch.device):
-        return (self.x[torch.from_numpy(index)].to(device).float() / 255, torch.from_numpy(self.offset[index]).to(device),
-                torch.from_numpy(self.stop[index]).to(device))
+        return (
+            self.x[torch.from_numpy(index)].to(device).float() / 255,
+            torch.from_numpy(self.offset[index]).to(device),
+            torch.from_numpy(self.stop[index]).to(device),
+        )
 
 
 def _window_data(city: TrainingCity, window, config: ICurbConfig, device: torch.device):
@@ -51,8 +54,10 @@ def _window_data(city: TrainingCity, window, config: ICurbConfig, device: torch.
         seg[0, lrows, lcols] = city.maps[rows, cols]
     tensor = torch.from_numpy(np.concatenate([unit_bands(city.mosaic.read(window).data), seg])).to(device)
     offset = np.array([window.col_off, window.row_off], float)
-    tracks = [Boundary(city.labels.boundaries[k].points - offset, city.labels.boundaries[k].closed)
-              for k in near_window(city.labels.bounds, window, pad=config.step_px)]
+    tracks = [
+        Boundary(city.labels.boundaries[k].points - offset, city.labels.boundaries[k].closed)
+        for k in near_window(city.labels.bounds, window, pad=config.step_px)
+    ]
     return tensor, Expert(tracks, (window.width, window.height), config.step_px)
 
 
@@ -73,17 +78,29 @@ def validate(agent: Agent, city: TrainingCity, windows, config: ICurbConfig, opt
     for window in windows:
         tensor, expert = _window_data(city, window, config, device)
         if starts := expert.starts():
-            traces, records = rollout(agent, tensor, np.array([s[0] for s in starts]), config, expert.teacher(starts), 0.0,
-                                      np.random.default_rng(0))
+            traces, records = rollout(
+                agent,
+                tensor,
+                np.array([s[0] for s in starts]),
+                config,
+                expert.teacher(starts),
+                0.0,
+                np.random.default_rng(0),
+            )
             for x, offset, stop in records:
                 x, offset, stop = x.to(device), torch.from_numpy(offset).to(device), torch.from_numpy(stop).to(device)
                 losses.append(float(_imitation_loss(agent, x, offset, stop, opts["stop_pos_weight"])))
                 errors += (agent(x)[0] - offset).norm(dim=1).tolist()
             drift += [expert.nearest(p)[2] for p in traces.points]
-    return {f"val_{k}": float(np.mean(v)) if v else float("nan") for k, v in (("loss", losses), ("offset_px", errors), ("drift_px", drift))}
+    return {
+        f"val_{k}": float(np.mean(v)) if v else float("nan")
+        for k, v in (("loss", losses), ("offset_px", errors), ("drift_px", drift))
+    }
 
 
-def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True) -> Path:
+def train(
+    config: TrainConfig, out_dir: Path, device: torch.device, resume: str | None = None, progress: bool = True
+) -> Path:
     """DAgger imitation of the expert on the train city (see the module docstring)."""
     seed_everything(config.seed)
     out_dir = Path(out_dir)
@@ -93,7 +110,9 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     cities = {}
     for name, spec in (("train", config.train_city), ("valid", config.valid_city)):
         city = TrainingCity(spec.ensure(config.cache))
-        city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)[1].copy()  # segmentation only
+        city.maps = predict_mosaic_maps(fpn, city.mosaic, city.labels.grid, device, progress)[
+            1
+        ].copy()  # segmentation only
         cities[name] = city
     del fpn
     agent = Agent(model_config).to(device)
@@ -103,18 +122,28 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
     rng = np.random.default_rng(config.seed)
     step, history = resume_run(resume, KIND, agent, optimizer, rng)
     buffer = ReplayBuffer(opts["buffer"], model_config.roi)  # not checkpointed: rebuilt after a resume
-    log.write(event="start", model=KIND, step=step, parameters=sum(p.numel() for p in agent.parameters()), config=config.to_dict())
+    log.write(
+        event="start",
+        model=KIND,
+        step=step,
+        parameters=sum(p.numel() for p in agent.parameters()),
+        config=config.to_dict(),
+    )
 
     def loss_at(step: int):
         beta = max(opts["beta_min"], 1 - (1 - opts["beta_min"]) * step / max(1.0, opts["beta_decay"] * config.steps))
         for attempt in range(200):
             if buffer.size >= opts["batch"] and (attempt > 0 or step % opts["rollout_every"]):
                 break
-            tensor, expert = _window_data(cities["train"], cities["train"].random_window(rng, opts["window"]), model_config, device)
+            tensor, expert = _window_data(
+                cities["train"], cities["train"].random_window(rng, opts["window"]), model_config, device
+            )
             starts = expert.starts()
             if starts:
                 agent.eval()
-                _, records = rollout(agent, tensor, np.array([s[0] for s in starts]), model_config, expert.teacher(starts), beta, rng)
+                _, records = rollout(
+                    agent, tensor, np.array([s[0] for s in starts]), model_config, expert.teacher(starts), beta, rng
+                )
                 for record in records:
                     buffer.add(*record)
         else:
@@ -123,5 +152,18 @@ def train(config: TrainConfig, out_dir: Path, device: torch.device, resume: str 
         x, offset, stop = buffer.batch(rng.integers(0, buffer.size, opts["batch"]), device)
         return _imitation_loss(agent, x, offset, stop, opts["stop_pos_weight"]), {"beta": beta, "buffer": buffer.size}
 
-    return optimize(KIND, agent, model_config, config, out_dir, optimizer, rng, step, history, log, loss_at,
-                    lambda step: validate(agent, cities["valid"], valid_windows, model_config, opts, device), progress)
+    return optimize(
+        KIND,
+        agent,
+        model_config,
+        config,
+        out_dir,
+        optimizer,
+        rng,
+        step,
+        history,
+        log,
+        loss_at,
+        lambda step: validate(agent, cities["valid"], valid_windows, model_config, opts, device),
+        progress,
+    )
