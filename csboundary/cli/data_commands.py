@@ -147,7 +147,7 @@ def import_masks_cmd(
     try:
         rule = MaskRule(kind=kind, channel=channel - 1, threshold=threshold, invert=invert)
     except ValueError as exc:
-        raise typer.BadParameter(str(exc))
+        raise typer.BadParameter(str(exc)) from None
     out_dir(out)
     report = import_masks(
         source,
@@ -251,7 +251,7 @@ def show(
         try:
             the_patch = patch_of(mosaic, row, col, labels_grid(labels) if labels is not None else GridConfig())
         except ValueError as exc:
-            raise typer.BadParameter(str(exc), param_hint="--patch")
+            raise typer.BadParameter(str(exc), param_hint="--patch") from None
         if labels is not None:
             rgb, graph = render_patch_labels(mosaic, labels, the_patch)
             write_png(out, rgb)

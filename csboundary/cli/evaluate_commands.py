@@ -68,7 +68,7 @@ def evaluate(
         taus = tuple(float(v) for v in tau.split(","))
         config = MetricConfig(taus=taus)
     except ValueError:
-        raise typer.BadParameter(f"expected positive numbers such as 2,5,10, got {tau!r}", param_hint="--tau")
+        raise typer.BadParameter(f"expected positive numbers such as 2,5,10, got {tau!r}", param_hint="--tau") from None
     if gsd is not None and not (math.isfinite(gsd) and gsd > 0):
         raise typer.BadParameter(f"must be a positive number, got {gsd}", param_hint="--gsd")
     if json_out is not None:

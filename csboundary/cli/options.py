@@ -169,7 +169,7 @@ def parse_tiles(text: str) -> tuple[int, int]:
     try:
         rows, cols = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise typer.BadParameter(f"expected ROWSxCOLS such as 2x2, got {text!r}")
+        raise typer.BadParameter(f"expected ROWSxCOLS such as 2x2, got {text!r}") from None
     if rows < 1 or cols < 1:
         raise typer.BadParameter(f"tiles must be at least 1x1, got {text!r}")
     return rows, cols

@@ -87,7 +87,8 @@ def predict(
         where = (
             f"({plan.n_rows}x{plan.n_cols})"
             if plan.planned is None
-            else f"under {counted(len(view.mosaic.footprint), 'group')} of tiles kilometres apart, of a {plan.n_rows}x{plan.n_cols} grid"
+            else f"under {counted(len(view.mosaic.footprint), 'group')} of tiles kilometres apart, "
+            f"of a {plan.n_rows}x{plan.n_cols} grid"
         )
         typer.echo(
             f"{out}: {counted(len(plan), 'patch')} {where} over {view.mosaic.width}x{view.mosaic.height} px "
@@ -220,7 +221,8 @@ def export_lanelet2(
         typer.echo(f"--min-confidence {min_confidence:g}: {kept.n_edges} of {graph.n_edges} edges kept")
         graph = kept
     if graph.n_edges == 0:
-        warnings.warn(f"{source}: no boundary to export{' in --bounds' if box else ''}; the map is empty", InputWarning)
+        where = " in --bounds" if box else ""
+        warnings.warn(f"{source}: no boundary to export{where}; the map is empty", InputWarning, stacklevel=2)
     written = write_lanelet2(graph, out, at)
     typer.echo(
         f"{out}: {written['linestrings']} road_border linestrings; origin {written['origin'][0]:.7f},{written['origin'][1]:.7f} "
@@ -260,7 +262,8 @@ def review(
     confidence, the least sure first (those not worth a look held back, hidden until asked
     for); accept, delete or cut a boundary, move a vertex, draw, delete the doubtful boundaries
     of an area, mark areas complete; edits exported as GeoJSON for apply-review. Open
-    OUT/index.html (no network needed). With --bounds, one district of the city (its edits merge into the whole city all the same)."""
+    OUT/index.html (no network needed). With --bounds, one district of the city (its edits merge
+    into the whole city all the same)."""
     from csboundary.pipeline.outputs.review import write_review, write_review_layers
 
     box = district_bounds(bounds)

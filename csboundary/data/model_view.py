@@ -192,9 +192,9 @@ def model_view(
 ) -> ModelInput:
     """``mosaic`` as the model sees it (module doc). ``gsd`` gives the pixel size in metres of
     imagery without a CRS (and overrides nothing else); ``assume_model_gsd`` takes such imagery
-    to be at the model's pixel size, with a warning (one image, as ``predict-patch`` reads it). Raises InputError for imagery without
-    a usable scale or with a pixel size outside :data:`PIXEL_SIZE_RANGE_M`; warns when resampling
-    by more than :data:`WARN_FACTOR`."""
+    to be at the model's pixel size, with a warning (one image, as ``predict-patch`` reads it).
+    Raises InputError for imagery without a usable scale or with a pixel size outside
+    :data:`PIXEL_SIZE_RANGE_M`; warns when resampling by more than :data:`WARN_FACTOR`."""
     first = mosaic.tiles[0].path
     if mosaic.crs is None:
         if gsd is None and assume_model_gsd:

@@ -30,7 +30,8 @@ from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import edge_line
 from csboundary.graph.review_edits import EditError
 
-SAME_PX = 0.01  # a position that moved less than this (graph pixels) did not move: coordinates round-trip through the layer's floats
+# a position that moved less than this (graph pixels) did not move: coordinates round-trip through the layer's floats
+SAME_PX = 0.01
 AGREE_PX = 0.5  # two features moving one vertex must put it within this of each other
 
 

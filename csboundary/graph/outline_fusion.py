@@ -26,8 +26,8 @@ the surface map is sure and the boundary map agrees:
 
 In a city the outline is traced on the whole window and its lines are cut where they cross the
 sides of the window's core: the neighbouring window, which sees the same stitched maps, traces
-the same pixels there and cuts them at the same point, where the two halves meet. Coordinates are continuous (x, y) pixels, pixel [r, c]
-centred at (c + 0.5, r + 0.5).
+the same pixels there and cuts them at the same point, where the two halves meet. Coordinates are
+continuous (x, y) pixels, pixel [r, c] centred at (c + 0.5, r + 0.5).
 """
 
 from __future__ import annotations

@@ -57,7 +57,7 @@ def straightened_line(line: np.ndarray, config: StraightenConfig = StraightenCon
         s = cum[1:-1]
         ok = (s - 2 * h >= 0) & (s + 2 * h <= cum[-1])
 
-        def at(t):
+        def at(t, cum=cum, line=line):
             return np.stack([np.interp(t, cum, line[:, 0]), np.interp(t, cum, line[:, 1])], axis=1)
 
         a2, a, b, b2 = at(s - 2 * h), at(s - h), at(s + h), at(s + 2 * h)

@@ -30,7 +30,10 @@ def format_table(result: dict) -> str:
         f"seed {result['seed']}"
     )
     if result["scale"] == "patch":
-        head += f"\n{c['patches_scored']} of {c['patches']} patches scored ({c['patches_with_gt']} with ground truth); per-patch means"
+        head += (
+            f"\n{c['patches_scored']} of {c['patches']} patches scored ({c['patches_with_gt']} with ground truth); "
+            "per-patch means"
+        )
     lines = [head, f"{'':12s}" + "".join(f"{'tau=' + format(t, 'g'):>10s}" for t in taus)]
     for label, key in (("precision", "precision"), ("recall", "recall"), ("F1", "f1")):
         lines.append(f"{label:12s}" + "".join(f"{_num(m[f'{key}@{t:g}']):>10s}" for t in taus))

@@ -47,7 +47,8 @@ def make_bundle(
     both-sides rule, surface gate of the maps, roadway outline (all three: an FPN with a surface head;
     :mod:`csboundary.graph.surface_gate`, :mod:`csboundary.graph.outline_fusion`);
     see :mod:`csboundary.graph.edge_support`, :mod:`csboundary.graph.crossings` and
-    :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`, :mod:`csboundary.graph.end_joining`), and the pixel size the
+    :mod:`csboundary.graph.fragments`, :mod:`csboundary.graph.skeleton_fill`,
+    :mod:`csboundary.graph.end_joining`), and the pixel size the
     FPN was trained at (imagery is
     resampled to it)."""
     fpn = load_checkpoint(fpn_path, ("fpn",))

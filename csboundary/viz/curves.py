@@ -42,7 +42,8 @@ def curves_svg(rows: list[dict], keys: list[str], title: str, width: int = 640, 
         lo, hi = min(v for _, v in values), max(v for _, v in values)
         span = hi - lo or 1.0
         pts = " ".join(
-            f"{left + (s - x0) / (x1 - x0) * (width - left - right):.1f},{top + (1 - (v - lo) / span) * (height - top - bottom):.1f}"
+            f"{left + (s - x0) / (x1 - x0) * (width - left - right):.1f},"
+            f"{top + (1 - (v - lo) / span) * (height - top - bottom):.1f}"
             for s, v in values
         )
         colour = COLOURS[k % len(COLOURS)]

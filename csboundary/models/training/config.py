@@ -33,7 +33,8 @@ class TrainConfig(Config):
     validation_samples: int = 8
     # city directories (imported, from masks, a user's own) trained on beside train_city
     extra_train_cities: list = field(default_factory=list)
-    # share of samples drawn from extra_train_cities (fine-tuning on a user's city); 0 = every city by its area (FPN) or alike (AfANet)
+    # share of samples drawn from extra_train_cities (fine-tuning on a user's city); 0 = every city by its area (FPN)
+    # or alike (AfANet)
     extra_share: float = 0.0
     augment: dict = field(
         default_factory=lambda: {"enabled": False}
@@ -74,7 +75,8 @@ class TrainConfig(Config):
     # afanet
     afanet: dict = field(default_factory=dict)  # AfANetConfig overrides
     fpn_weights: str = ""  # the trained FPN whose maps and vertices AfANet learns from
-    init_afanet: str = ""  # start from this trained AfANet (afanet checkpoint or bundle; its architecture, not ``afanet``): fine-tuning
+    # start from this trained AfANet (afanet checkpoint or bundle; its architecture, not ``afanet``): fine-tuning
+    init_afanet: str = ""
     window: int = 1100  # AfANet trains on whole expanded-patch-sized windows, as it infers
     gt_steps: int = 600  # stage 1 (ground-truth vertices); the rest of ``steps`` is stage 2
     vertex_jitter_px: float = 1.0  # noise on ground-truth vertices in stage 1

@@ -324,7 +324,7 @@ def write_tables(results: dict, out: Path, city_dir: Path) -> None:
     """tables.md plus one CSV per table (I patch scale, II city scale, III time, IV ablation)."""
     done = {k: r for k, r in results.items() if "scores" in r}
     rows = {"I": [], "II": [], "III": [], "IV": []}
-    for key, r in done.items():
+    for r in done.values():
         m = r["method"]
         for table, scale in (("I", "patch"), ("II", "city")):
             if m.table == "comparison":

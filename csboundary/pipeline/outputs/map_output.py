@@ -6,7 +6,8 @@ a tiled scratch GeoTIFF one core at a time, so memory stays bounded, and GDAL's 
 it (overviews, tiling, deflate) to the final name. Tiles scattered over a city (a grid planned
 over their footprint, data/grid.py) give a sparse tiled GeoTIFF instead: only the blocks under
 the imagery are written, and no overview pass reads the empty box between them. Bands: 1 = keypoint, 2 = segmentation
-probability, 3 = road-surface probability when the FPN has that head, stored as uint8 = round(255 p) (descriptions and the ``scale`` tag say
+probability, 3 = road-surface probability when the FPN has that head, stored as uint8 = round(255 p)
+(descriptions and the ``scale`` tag say
 so) to keep
 city-sized maps small.
 """

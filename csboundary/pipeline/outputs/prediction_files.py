@@ -8,7 +8,8 @@ as predicted, to trace a boundary back to its edges, scores and source patches).
 
 Geometry is in the world coordinates of ``graph.crs`` (no reprojection, so the GeoJSON is in the
 same CRS as the GeoPackage, not RFC 7946's WGS 84); ``length_m`` is true metres in every CRS
-(:mod:`csboundary.data.units`: geodesic for degrees, the unit's size for feet). The boundaries layer is the ground-truth layer name, so
+(:mod:`csboundary.data.units`: geodesic for degrees, the unit's size for feet). The boundaries layer
+is the ground-truth layer name, so
 :func:`csboundary.data.ground_truth.read_ground_truth` reads the output back directly.
 """
 

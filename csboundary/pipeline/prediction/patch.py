@@ -137,7 +137,8 @@ class PatchPredictor:
 
     def use_precision(self, precision: str) -> None:
         """``auto`` (int8 where this CPU runs the quantized FPN faster than the float32 one on
-        ONNX Runtime, timed on first use; else float32: :func:`faster_fpn`), ``float32``, ``bfloat16`` (the FPN in PyTorch under bfloat16
+        ONNX Runtime, timed on first use; else float32: :func:`faster_fpn`), ``float32``,
+        ``bfloat16`` (the FPN in PyTorch under bfloat16
         autocast, whatever the
         engine: ONNX Runtime has no bfloat16 convolutions on a CPU; AfANet stays float32 on the
         engine chosen) or ``int8`` (the FPN quantized on ONNX Runtime: made by ``use_engine``,
@@ -161,6 +162,7 @@ class PatchPredictor:
             warnings.warn(
                 "this CPU has no bfloat16 units (AMX or AVX512-BF16): --precision bfloat16 will be slower than float32",
                 InputWarning,
+                stacklevel=2,
             )
         self.precision = precision
         self.folded_fpn = fold_batch_norms(self.fpn) if precision == "bfloat16" else None
@@ -217,6 +219,7 @@ class PatchPredictor:
                     f"the int8 FPN is made for {WINDOW} px windows: this {batch.shape[-1]} x {batch.shape[-2]} px image "
                     "runs in float32",
                     InputWarning,
+                    stacklevel=2,
                 )
             probs = predict_probabilities(
                 self.fpn if self.folded_fpn is None else self.folded_fpn, batch, self.device, self.precision

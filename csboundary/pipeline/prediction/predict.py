@@ -40,6 +40,7 @@ def warn_if_sparse(grid: PatchGrid, mosaic, inputs: Sequence[str | Path]) -> Non
             f"{inputs[0]}: imagery covers {covered} of {len(grid)} patches ({covered / len(grid):.1%}) of its extent; "
             f"the empty ones are skipped without reading (about {covered * SECONDS_PER_PATCH / 60:.0f} min on a 2-core CPU)",
             InputWarning,
+            stacklevel=2,
         )
 
 

@@ -166,6 +166,7 @@ class RunStore:
                 warnings.warn(
                     f"{root.parent}: discarding an unfinished run with other {', '.join(differs)} that had done no work",
                     InputWarning,
+                    stacklevel=2,
                 )
                 shutil.rmtree(root)
             elif differs:
@@ -180,7 +181,7 @@ class RunStore:
         store = cls(root, write_behind)
         if resumed:
             for problem in store.verify():
-                warnings.warn(problem, InputWarning)
+                warnings.warn(problem, InputWarning, stacklevel=2)
         else:
             _atomic_save(path, lambda f: f.write((json.dumps(manifest, indent=1) + "\n").encode()))
         return store
