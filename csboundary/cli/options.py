@@ -13,7 +13,7 @@ from typing import Annotated, Callable, Optional, Sequence
 import typer
 
 from csboundary.errors import InputError
-from csboundary.graph.settings import GRAPH_OVERRIDE_RANGES
+from csboundary.graph.settings import OPTIONS, SETTINGS
 
 SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check)."
 LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit)."
@@ -104,8 +104,8 @@ def _graph_option(flag: str, metavar: str, help: str, low: float = 0.0, high: fl
     ]
 
 
-# The graph options: one per field of GraphOverrides, their ranges GraphOverrides' (graph/settings.py). Commands take them as one
-# ``graph: GraphOverrides`` parameter through ``with_graph_options``.
+# The graph options: one per field of GraphOverrides (graph/settings.py's OPTIONS), their ranges the settings'.
+# Commands take them as one ``graph: GraphOverrides`` parameter through ``with_graph_options``.
 GRAPH_HELP = {
     "edge_threshold": ("P", THRESHOLD_HELP),
     "min_edge_support": ("P", SUPPORT_HELP),
@@ -127,12 +127,14 @@ GRAPH_OPTIONS = {
         "--" + name.replace("_", "-"),
         metavar,
         help,
-        low=GRAPH_OVERRIDE_RANGES[name][0],
-        high=GRAPH_OVERRIDE_RANGES[name][1],
+        low=SETTINGS[name].low,
+        high=SETTINGS[name].high,
         kind=int if name == "max_degree" else float,
     )
     for name, (metavar, help) in GRAPH_HELP.items()
-}  # the ranges: GraphOverrides' own
+}  # the ranges: the settings' own
+if tuple(GRAPH_HELP) != OPTIONS:
+    raise RuntimeError("GRAPH_HELP and graph/settings.py's OPTIONS name different options")
 
 
 def with_graph_options(command: Callable) -> Callable:

@@ -89,45 +89,24 @@ def bundle_weights(
     """Bundle a trained FPN and AfANet (weights + provenance) into one weights file. Its graph
     settings are the graph options given (each one not given: off, edge threshold 0.5, at most 2
     edges per vertex)."""
-    from csboundary.models.bundle import make_bundle
+    from csboundary.graph.settings import GraphSettings
+    from csboundary.models.bundle import afanet_checkpoint, make_bundle, trained_vertex_threshold
 
     if graph.min_confidence is not None:
         raise typer.BadParameter(
             "a confidence threshold is chosen when predicting, not stored in a bundle", param_hint="--min-confidence"
         )
     out_file(out, (".pt",))
-    given = {
-        name: value
-        for name, value in (
-            ("edge_threshold", graph.edge_threshold),
-            ("max_degree", graph.max_degree),
-            ("min_support", graph.min_edge_support),
-            ("max_length_px", graph.max_edge_length),
-            ("min_fragment_px", graph.min_fragment_length),
-            ("max_gap_px", graph.max_edge_gap),
-            ("fill_min_length_px", graph.fill_min_length),
-            ("surface_strong", graph.surface_check),
-            ("join_max_px", graph.join_ends),
-            ("attach_max_px", graph.attach_ends),
-            ("join_attach_px", graph.attach_backed),
-            ("surface_gate_px", graph.surface_gate),
-            ("outline_sure", graph.roadway_outline),
-        )
-        if value is not None
-    }
-    if given.get("max_degree") == 0:
-        given["max_degree"] = None  # 0 = no cap, as when predicting
-    path = make_bundle(
-        fpn,
-        afanet,
-        out,
-        crossing_spacing_px=grid_crossings,
+    if vertex_threshold is None:
+        vertex_threshold = trained_vertex_threshold(afanet_checkpoint(afanet))
+    settings = GraphSettings().replaced(
+        grid_crossings=grid_crossings,
         vertex_threshold=vertex_threshold,
-        gap_level=gap_level,
+        edge_gap_level=gap_level,
         surface_weak=surface_weak,
         surface_both_sides=surface_both_sides,
-        **given,
     )
+    path = make_bundle(fpn, afanet, out, settings.overridden(graph))
     typer.echo(f"{path}: {path.stat().st_size / 1e6:.1f} MB")
 
 

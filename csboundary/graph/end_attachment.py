@@ -10,9 +10,9 @@ of the direction its line was going), so a line is not bent back across the road
 
 Three users: seam mending in :mod:`csboundary.graph.stitching` (ends cut by a window border, no
 heading), the city graph's attachment of every other end (``city_graph`` in
-:mod:`csboundary.pipeline.prediction.city`, the bundle's ``attach_max_px``, ``--attach-ends``), and the
+:mod:`csboundary.pipeline.prediction.city`, the bundle's ``attach_ends``, ``--attach-ends``), and the
 window's attachment where the boundary map backs the join (:mod:`csboundary.graph.end_joining`,
-``join_attach_px``, ``--attach-backed``; the ``accept`` test).
+``attach_backed``, ``--attach-backed``; the ``accept`` test).
 Pure geometry on pixel (col, row) coordinates.
 """
 

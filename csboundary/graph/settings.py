@@ -26,86 +26,96 @@ from csboundary.graph.surface_check import SurfaceCheckConfig
 from csboundary.graph.surface_gate import SurfaceGateConfig
 from csboundary.graph.vertex_extraction import VertexConfig
 
-# name -> (smallest, largest, integer) of each inference setting a bundle may carry
-INFERENCE_SETTINGS = {
-    "edge_threshold": (0.0, 1.0, False),
-    "max_degree": (0, 64, True),
-    "min_support": (0.0, 1.0, False),
-    "max_length_px": (0.0, 1e6, False),
-    "radius_px": (0.0, 100.0, False),
-    "crossing_spacing_px": (0, 100000, True),
-    "min_fragment_px": (0.0, 1e6, False),
-    "vertex_threshold": (0.01, 1.0, False),
-    "max_gap_px": (0.0, 1e6, False),
-    "gap_level": (0.0, 1.0, False),
-    "fill_min_length_px": (0.0, 1e6, False),
-    "join_max_px": (0.0, 1e6, False),
-    "join_attach_px": (0.0, 1e6, False),
-    "attach_max_px": (0.0, 1e6, False),
-    "surface_strong": (0.0, 1.0, False),
-    "surface_weak": (0.0, 1.0, False),
-    "surface_offset_px": (0.0, 100.0, False),
-    "surface_both_sides": (0.0, 1.0, False),
-    "surface_gate_px": (0.0, 200.0, False),
-    "surface_gate_full": (0.01, 1.0, False),
-    "surface_gate_min_piece_px": (0, 10**8, True),
-    "outline_sure": (0.0, 1.0, False),
-    "outline_support": (0.0, 1.0, False),
-    "outline_min_length_px": (0.0, 1e6, False),
-    "outline_max_unsure": (0.0, 1.0, False),
-}
-SUPPORT_SETTINGS = (
-    "min_support",
-    "max_length_px",
-    "radius_px",
-    "max_gap_px",
-    "gap_level",
-)  # bundle key = EdgeSupportConfig field
-SURFACE_SETTINGS = {
-    "surface_strong": "strong",
-    "surface_weak": "weak",
-    "surface_offset_px": "offset_px",
-    "surface_both_sides": "both_sides",
-}  # bundle key -> SurfaceCheckConfig field
-GATE_SETTINGS = {
-    "surface_gate_px": ("radius_px", float),
-    "surface_gate_full": ("full_change", float),
-    "surface_gate_min_piece_px": ("min_piece_px", int),
-}  # bundle key -> SurfaceGateConfig field and type
-OUTLINE_SETTINGS = {
-    "outline_sure": "sure",
-    "outline_support": "support",
-    "outline_min_length_px": "min_length_px",
-    "outline_max_unsure": "max_unsure",
-}  # bundle key -> OutlineConfig field
+
+@dataclass(frozen=True)
+class Setting:
+    """One graph setting: where it lives in :class:`GraphSettings` (a dotted field path), its range,
+    the type a bundle's value is read as (None: as stored), the bundle keys it had before, and
+    whether it takes whole numbers only."""
+
+    field: str
+    low: float
+    high: float
+    kind: type | None = float
+    old_keys: tuple[str, ...] = ()
+    integer: bool = False
 
 
-# each graph option's range (low, high; None: no upper bound), checked by GraphOverrides for the
-# command line and the Python API alike; the command line declares the same bounds from it
-GRAPH_OVERRIDE_RANGES = {
-    "edge_threshold": (0.0, 1.0),
-    "min_edge_support": (0.0, 1.0),
-    "max_edge_length": (0.0, None),
-    "max_edge_gap": (0.0, None),
-    "fill_min_length": (0.0, None),
-    "join_ends": (0.0, None),
-    "attach_ends": (0.0, None),
-    "attach_backed": (0.0, None),
-    "surface_check": (0.0, 1.0),
-    "surface_gate": (0.0, 200.0),
-    "roadway_outline": (0.0, 1.0),
-    "max_degree": (0, None),
-    "min_fragment_length": (0.0, None),
-    "min_confidence": (0.0, 1.0),
+# Every graph setting by its one name: the bundle's key and, for those the command line sets
+# (:data:`OPTIONS`), the option (``join_ends`` is ``--join-ends``, ``GraphOverrides.join_ends`` and
+# the bundle key ``join_ends``). Bundles written before the names agreed are read by ``old_keys``.
+SETTINGS = {
+    "edge_threshold": Setting("edge_threshold", 0.0, 1.0, None),
+    "max_degree": Setting("max_degree", 0, 64, None, integer=True),
+    "min_edge_support": Setting("support.min_support", 0.0, 1.0, None, ("min_support",)),
+    "max_edge_length": Setting("support.max_length_px", 0.0, 1e6, None, ("max_length_px",)),
+    "max_edge_gap": Setting("support.max_gap_px", 0.0, 1e6, None, ("max_gap_px",)),
+    "edge_support_radius": Setting("support.radius_px", 0.0, 100.0, None, ("radius_px",)),
+    "edge_gap_level": Setting("support.gap_level", 0.0, 1.0, None, ("gap_level",)),
+    "grid_crossings": Setting("crossings.spacing_px", 0, 100000, int, ("crossing_spacing_px",), True),
+    "min_fragment_length": Setting("min_fragment_px", 0.0, 1e6, float, ("min_fragment_px",)),
+    "vertex_threshold": Setting("vertices.threshold", 0.01, 1.0),
+    "fill_min_length": Setting("fill.min_length_px", 0.0, 1e6, float, ("fill_min_length_px",)),
+    "join_ends": Setting("join.max_px", 0.0, 1e6, float, ("join_max_px",)),
+    "attach_backed": Setting("join.attach_px", 0.0, 1e6, float, ("join_attach_px",)),
+    "attach_ends": Setting("attach_px", 0.0, 1e6, float, ("attach_max_px",)),
+    "surface_check": Setting("surface.strong", 0.0, 1.0, float, ("surface_strong",)),
+    "surface_weak": Setting("surface.weak", 0.0, 1.0),
+    "surface_offset": Setting("surface.offset_px", 0.0, 100.0, float, ("surface_offset_px",)),
+    "surface_both_sides": Setting("surface.both_sides", 0.0, 1.0),
+    "surface_gate": Setting("gate.radius_px", 0.0, 200.0, float, ("surface_gate_px",)),
+    "surface_gate_full": Setting("gate.full_change", 0.01, 1.0),
+    "surface_gate_min_piece": Setting("gate.min_piece_px", 0, 10**8, int, ("surface_gate_min_piece_px",), True),
+    "roadway_outline": Setting("outline.sure", 0.0, 1.0, float, ("outline_sure",)),
+    "outline_support": Setting("outline.support", 0.0, 1.0),
+    "outline_min_length": Setting("outline.min_length_px", 0.0, 1e6, float, ("outline_min_length_px",)),
+    "outline_max_unsure": Setting("outline.max_unsure", 0.0, 1.0),
+    "min_confidence": Setting("min_confidence", 0.0, 1.0),
 }
+# the settings the command line's graph options set (--NAME); min_confidence is chosen when
+# predicting and never stored in a bundle
+OPTIONS = (
+    "edge_threshold",
+    "min_edge_support",
+    "max_edge_length",
+    "max_edge_gap",
+    "fill_min_length",
+    "join_ends",
+    "attach_ends",
+    "attach_backed",
+    "surface_check",
+    "surface_gate",
+    "roadway_outline",
+    "max_degree",
+    "min_fragment_length",
+    "min_confidence",
+)
+BUNDLE_SETTINGS = tuple(name for name in SETTINGS if name != "min_confidence")
+OLD_KEYS = {old: name for name, setting in SETTINGS.items() for old in setting.old_keys}
+
+
+def setting_value(settings: "GraphSettings", name: str):
+    """The value of the setting ``name`` (a key of :data:`SETTINGS`) in ``settings``."""
+    value = settings
+    for part in SETTINGS[name].field.split("."):
+        value = getattr(value, part)
+    return value
+
+
+def with_setting(settings, path: str, value):
+    """``settings`` (a frozen dataclass) with the field at the dotted ``path`` replaced."""
+    head, _, rest = path.partition(".")
+    if rest:
+        value = with_setting(getattr(settings, head), rest, value)
+    return dataclasses.replace(settings, **{head: value})
 
 
 @dataclass(frozen=True)
 class GraphOverrides:
     """The command line's graph options, by their option names (``--edge-threshold`` is
-    ``edge_threshold``); None keeps the bundle's value. ``max_degree`` 0 means no cap. A value
-    outside its range (:data:`GRAPH_OVERRIDE_RANGES`), NaN or infinite is refused with the one line
-    the command line gives."""
+    ``edge_threshold``, the names of :data:`SETTINGS`); None keeps the bundle's value.
+    ``max_degree`` 0 means no cap. A value outside its range (:data:`SETTINGS`), NaN or infinite is
+    refused with the one line the command line gives."""
 
     edge_threshold: float | None = None
     min_edge_support: float | None = None
@@ -123,8 +133,8 @@ class GraphOverrides:
     min_confidence: float | None = None
 
     def __post_init__(self) -> None:
-        for name, (low, high) in GRAPH_OVERRIDE_RANGES.items():
-            value = getattr(self, name)
+        for name in OPTIONS:
+            value, low, high = getattr(self, name), SETTINGS[name].low, SETTINGS[name].high
             if value is None:
                 continue
             flag = "--" + name.replace("_", "-")
@@ -135,12 +145,7 @@ class GraphOverrides:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise InputError(flag, f"must be a finite number, got {value!r}")
             if value < low or (high is not None and value > high):
-                raise InputError(
-                    flag,
-                    f"must be from {low:g} to {high:g}, got {value:g}"
-                    if high is not None
-                    else f"must be >= {low:g}, got {value:g}",
-                )
+                raise InputError(flag, f"must be from {low:g} to {high:g}, got {value:g}")
 
 
 @dataclass(frozen=True)
@@ -176,102 +181,62 @@ class GraphSettings:
         return self.surface.active or self.gate.active or self.outline.active
 
     @classmethod
-    def from_bundle(cls, settings, path: str | Path) -> "GraphSettings":
+    def from_bundle(cls, table, path: str | Path) -> "GraphSettings":
         """A bundle's ``inference`` table, checked (:func:`checked_inference_settings`); what it
         leaves out takes the defaults."""
-        settings = checked_inference_settings(settings, path)
-        return cls(
-            vertices=VertexConfig(threshold=float(settings.get("vertex_threshold", 0.5))),
-            edge_threshold=settings.get("edge_threshold", 0.5),
-            max_degree=settings.get("max_degree", 2),
-            support=EdgeSupportConfig(**{k: settings[k] for k in SUPPORT_SETTINGS if k in settings}),
-            crossings=CrossingConfig(spacing_px=int(settings.get("crossing_spacing_px", 0))),
-            fill=FillConfig(min_length_px=float(settings.get("fill_min_length_px", 0.0))),
-            surface=SurfaceCheckConfig(
-                **{name: float(settings[key]) for key, name in SURFACE_SETTINGS.items() if key in settings}
-            ),
-            join=EndJoinConfig(
-                max_px=float(settings.get("join_max_px", 0.0)), attach_px=float(settings.get("join_attach_px", 0.0))
-            ),
-            gate=SurfaceGateConfig(
-                **{name: kind(settings[key]) for key, (name, kind) in GATE_SETTINGS.items() if key in settings}
-            ),
-            outline=OutlineConfig(
-                **{name: float(settings[key]) for key, name in OUTLINE_SETTINGS.items() if key in settings}
-            ),
-            min_fragment_px=float(settings.get("min_fragment_px", 0.0)),
-            attach_px=float(settings.get("attach_max_px", 0.0)),
-        )
+        settings = cls()
+        for name, value in checked_inference_settings(table, path).items():
+            kind = SETTINGS[name].kind
+            settings = with_setting(settings, SETTINGS[name].field, value if kind is None else kind(value))
+        return settings
+
+    def to_bundle(self) -> dict:
+        """The ``inference`` table of a bundle that holds these settings (every one, by its name)."""
+        return {name: setting_value(self, name) for name in BUNDLE_SETTINGS}
+
+    def replaced(self, **values) -> "GraphSettings":
+        """These settings with ``values`` given by setting name (``join_ends=40``)."""
+        settings = self
+        for name, value in values.items():
+            if name not in SETTINGS:
+                raise TypeError(f"unknown graph setting {name!r}")
+            settings = with_setting(settings, SETTINGS[name].field, value)
+        return settings
 
     def overridden(self, options: GraphOverrides) -> "GraphSettings":
         """These settings with the command line's ``options`` in place of the bundle's."""
-        replace = dataclasses.replace
-        options = replace(
-            options,
-            **{
-                f.name: float(getattr(options, f.name))
-                for f in dataclasses.fields(options)
-                if f.name != "max_degree" and getattr(options, f.name) is not None
-            },
+        given = {name: getattr(options, name) for name in OPTIONS if getattr(options, name) is not None}
+        return self.replaced(
+            **{name: (value or None) if name == "max_degree" else float(value) for name, value in given.items()}
         )
-        settings = self
-        if options.edge_threshold is not None:
-            settings = replace(settings, edge_threshold=options.edge_threshold)
-        support = {
-            name: value
-            for name, value in (
-                ("min_support", options.min_edge_support),
-                ("max_length_px", options.max_edge_length),
-                ("max_gap_px", options.max_edge_gap),
-            )
-            if value is not None
-        }
-        if support:
-            settings = replace(settings, support=replace(settings.support, **support))
-        if options.fill_min_length is not None:
-            settings = replace(settings, fill=replace(settings.fill, min_length_px=options.fill_min_length))
-        join = {
-            name: value
-            for name, value in (("max_px", options.join_ends), ("attach_px", options.attach_backed))
-            if value is not None
-        }
-        if join:
-            settings = replace(settings, join=replace(settings.join, **join))
-        if options.attach_ends is not None:
-            settings = replace(settings, attach_px=options.attach_ends)
-        if options.surface_check is not None:
-            settings = replace(settings, surface=replace(settings.surface, strong=options.surface_check))
-        if options.surface_gate is not None:
-            settings = replace(settings, gate=replace(settings.gate, radius_px=options.surface_gate))
-        if options.roadway_outline is not None:
-            settings = replace(settings, outline=replace(settings.outline, sure=options.roadway_outline))
-        if options.max_degree is not None:
-            settings = replace(settings, max_degree=options.max_degree or None)
-        if options.min_fragment_length is not None:
-            settings = replace(settings, min_fragment_px=options.min_fragment_length)
-        if options.min_confidence:
-            settings = replace(settings, min_confidence=options.min_confidence)
-        return settings
 
 
-def checked_inference_settings(settings, path: str | Path) -> dict:
-    """A bundle's inference settings, checked: an edge threshold of 7 or a degree cap of -1 would
-    silently drop every edge, so an out-of-range or unknown value is an InputError naming the file."""
-    if not isinstance(settings, dict):
+def checked_inference_settings(table, path: str | Path) -> dict:
+    """A bundle's inference settings by their names (an old key read as its setting), checked: an
+    edge threshold of 7 or a degree cap of -1 would silently drop every edge, so an out-of-range
+    or unknown value is an InputError naming the file."""
+    if not isinstance(table, dict):
         raise InputError(path, "damaged weights file: 'inference' is not a table of settings")
-    for key, value in settings.items():
-        if key not in INFERENCE_SETTINGS:
-            raise InputError(path, f"unknown inference setting {key!r} (known: {', '.join(INFERENCE_SETTINGS)})")
-        low, high, integer = INFERENCE_SETTINGS[key]
-        if key == "max_degree" and value is None:
+    settings = {}
+    for key, value in table.items():
+        name = OLD_KEYS.get(key, key)
+        if name not in BUNDLE_SETTINGS:
+            raise InputError(path, f"unknown inference setting {key!r} (known: {', '.join(BUNDLE_SETTINGS)})")
+        if name in settings:
+            raise InputError(path, f"inference setting {name} is given twice (as {key!r} too)")
+        setting = SETTINGS[name]
+        settings[name] = value
+        if name == "max_degree" and value is None:
             continue
         ok = (
             isinstance(value, (int, float))
             and not isinstance(value, bool)
             and math.isfinite(value)
-            and low <= value <= high
+            and setting.low <= value <= setting.high
         )
-        if not ok or (integer and int(value) != value):
-            kind = "an integer" if integer else "a number"
-            raise InputError(path, f"inference setting {key} = {value!r} must be {kind} from {low:g} to {high:g}")
+        if not ok or (setting.integer and int(value) != value):
+            kind = "an integer" if setting.integer else "a number"
+            raise InputError(
+                path, f"inference setting {key} = {value!r} must be {kind} from {setting.low:g} to {setting.high:g}"
+            )
     return settings

@@ -43,6 +43,7 @@ def test_lines_sit_at_the_offset_every_spacing(offset):
 def test_bundle_carries_the_crossing_setting(tmp_path):
     import torch
 
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.prediction.patch import PatchPredictor
@@ -52,10 +53,7 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
         tmp_path / "fpn.pt",
         tmp_path / "afanet.pt",
         tmp_path / "b.pt",
-        0.3,
-        min_support=0.2,
-        crossing_spacing_px=250,
-        min_fragment_px=160,
+        GraphSettings().replaced(edge_threshold=0.3, min_edge_support=0.2, grid_crossings=250, min_fragment_length=160),
     )
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
     settings = predictor.settings
@@ -73,13 +71,19 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
 def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_path):
     import torch
 
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     shipped_parts(tmp_path, train_config={"vertex_threshold": 0.35})
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "trained.pt")
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "given.pt", vertex_threshold=0.6)
+    make_bundle(
+        tmp_path / "fpn.pt",
+        tmp_path / "afanet.pt",
+        tmp_path / "given.pt",
+        GraphSettings().replaced(vertex_threshold=0.6),
+    )
     assert PatchPredictor.load(tmp_path / "trained.pt", torch.device("cpu")).settings.vertices.threshold == 0.35
     assert PatchPredictor.load(tmp_path / "given.pt", torch.device("cpu")).settings.vertices.threshold == 0.6
     shipped = torch.load(shipped_weights(), map_location="cpu", weights_only=True)["inference"]["vertex_threshold"]

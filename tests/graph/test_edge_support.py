@@ -125,12 +125,16 @@ def test_predictor_applies_the_check(tmp_path):
 def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_path):
     import torch
 
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
     make_bundle(
-        tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", min_support=0.2, max_gap_px=50, gap_level=0.4
+        tmp_path / "fpn.pt",
+        tmp_path / "afanet.pt",
+        tmp_path / "b.pt",
+        GraphSettings().replaced(min_edge_support=0.2, max_edge_gap=50, edge_gap_level=0.4),
     )
     support = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.support
     assert (support.min_support, support.max_gap_px, support.gap_level) == (0.2, 50, 0.4)
@@ -141,5 +145,5 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
         == 0
     )
     # a bundle from before the check (no such settings) loads with the check off
-    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("max_gap_px", "gap_level"))
+    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("max_edge_gap", "edge_gap_level"))
     assert PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.support.max_gap_px == 0

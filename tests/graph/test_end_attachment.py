@@ -134,21 +134,22 @@ def test_the_city_graph_drops_a_short_piece_before_attaching_the_rest():
 def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp_path):
     import torch
 
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import shipped_parts
 
     shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", attach_max_px=40)
+    make_bundle(
+        tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", GraphSettings().replaced(attach_ends=40)
+    )
     assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.attach_px == 40
     assert (
         load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(attach_ends=0), engine="torch").settings.attach_px == 0
     )
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
-    assert (
-        "attach_max_px" not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]
-    )  # off: readable by older versions
+    assert load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]["attach_ends"] == 0
     assert PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).settings.attach_px == 0
     assert (
         load_predictor(tmp_path / "off.pt", "cpu", GraphOverrides(attach_ends=25), engine="torch").settings.attach_px

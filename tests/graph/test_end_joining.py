@@ -136,25 +136,26 @@ def test_joins_are_short_new_and_keep_degrees_at_most_two(points, max_px, turn):
     assert len(pairs) == joined.n_edges  # no edge twice
 
 
-@pytest.mark.parametrize(
-    "key, option, field", [("join_max_px", "join_ends", "max_px"), ("join_attach_px", "attach_backed", "attach_px")]
-)
-def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_path, key, option, field):
+@pytest.mark.parametrize("option, field", [("join_ends", "max_px"), ("attach_backed", "attach_px")])
+def test_bundle_carries_the_setting_and_a_command_line_value_overrides_it(tmp_path, option, field):
     import torch
 
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import shipped_parts
 
     shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", **{key: 40})
+    make_bundle(
+        tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", GraphSettings().replaced(**{option: 40})
+    )
     assert getattr(PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.join, field) == 40
     assert not load_predictor(
         tmp_path / "b.pt", "cpu", GraphOverrides(**{option: 0}), engine="torch"
     ).settings.join.active
     make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "off.pt")
-    assert key not in load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"]  # off: readable by older versions
+    assert load_checkpoint(tmp_path / "off.pt", ("bundle",))["inference"][option] == 0  # the bundle key is the option
     assert not PatchPredictor.load(tmp_path / "off.pt", torch.device("cpu")).settings.join.active
     assert (
         getattr(

@@ -162,22 +162,24 @@ def test_a_bundle_carries_the_outline_and_the_command_line_turns_it_off(tmp_path
     import torch
 
     from csboundary.errors import InputError
-    from csboundary.graph.settings import GraphOverrides
+    from csboundary.graph.settings import GraphOverrides, GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import fpn_without_surface_head, shipped_parts
 
     fpn_path, afanet_path = shipped_parts(tmp_path)
-    make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", outline_sure=0.65)
+    make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", GraphSettings().replaced(roadway_outline=0.65))
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
     assert predictor.settings.outline.sure == 0.65 and predictor.reads_surface  # the maps carry the surface for it
-    assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["inference"]["outline_sure"] == 0.65
+    assert load_checkpoint(tmp_path / "b.pt", ("bundle",))["inference"]["roadway_outline"] == 0.65
     off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(roadway_outline=0), engine="torch")
     assert not off.settings.outline.active
     fpn_without_surface_head(fpn_path, tmp_path / "plain.pt")
     with pytest.raises(InputError, match="surface head"):
-        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", outline_sure=0.65)
+        make_bundle(
+            tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", GraphSettings().replaced(roadway_outline=0.65)
+        )
     make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "plain-bundle.pt")
     with pytest.raises(InputError, match="surface head"):
         load_predictor(tmp_path / "plain-bundle.pt", "cpu", GraphOverrides(roadway_outline=0.6), engine="torch")

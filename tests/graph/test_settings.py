@@ -8,7 +8,15 @@ import dataclasses
 import pytest
 
 from csboundary.errors import InputError
-from csboundary.graph.settings import GraphOverrides, GraphSettings
+from csboundary.graph.settings import (
+    BUNDLE_SETTINGS,
+    OLD_KEYS,
+    OPTIONS,
+    SETTINGS,
+    GraphOverrides,
+    GraphSettings,
+    setting_value,
+)
 
 
 def test_an_empty_bundle_table_gives_the_defaults_with_every_optional_step_off():
@@ -21,7 +29,7 @@ def test_an_empty_bundle_table_gives_the_defaults_with_every_optional_step_off()
         settings.edge_threshold = 0.1
 
 
-def test_a_bundle_table_lands_in_its_fields():
+def test_a_bundle_table_from_before_the_names_agreed_lands_in_its_fields():
     table = {
         "edge_threshold": 0.4,
         "max_degree": None,
@@ -66,6 +74,30 @@ def test_a_bundle_table_lands_in_its_fields():
     assert (s.surface.strong, s.surface.weak, s.surface.offset_px, s.surface.both_sides) == (0.5, 0.2, 8, 0.7)
     assert (s.gate.radius_px, s.gate.full_change, s.gate.min_piece_px) == (8, 0.5, 100) and s.reads_surface
     assert (s.outline.sure, s.outline.support, s.outline.min_length_px, s.outline.max_unsure) == (0.7, 0.4, 60, 0.2)
+    # the same table by the settings' names reads the same, and writing it back gives those names
+    renamed = {OLD_KEYS.get(key, key): value for key, value in table.items()}
+    assert GraphSettings.from_bundle(renamed, "b.pt") == s
+    assert GraphSettings.from_bundle(s.to_bundle(), "b.pt") == s
+    assert set(s.to_bundle()) == set(BUNDLE_SETTINGS) and {k for k in renamed if k not in BUNDLE_SETTINGS} == set()
+
+
+def test_one_name_per_setting_for_the_bundle_the_option_and_the_override():
+    assert set(OPTIONS) == {f.name for f in dataclasses.fields(GraphOverrides)} and set(OPTIONS) <= set(SETTINGS)
+    # every setting's field path exists, and replacing it by name changes that field alone
+    base = GraphSettings()
+    for name, setting in SETTINGS.items():
+        value = 3 if setting.integer else 0.75
+        changed = base.replaced(**{name: value})
+        assert setting_value(changed, name) == value, name
+        assert [n for n in SETTINGS if setting_value(changed, n) != setting_value(base, n)] == [name]
+    assert not set(OLD_KEYS) & set(SETTINGS)  # an old key never names another setting
+    with pytest.raises(TypeError, match="unknown graph setting"):
+        base.replaced(join_max_px=3)
+
+
+def test_a_setting_given_by_its_old_and_new_key_is_refused():
+    with pytest.raises(InputError, match="join_ends is given twice"):
+        GraphSettings.from_bundle({"join_max_px": 30, "join_ends": 40}, "b.pt")
 
 
 @pytest.mark.parametrize(

@@ -192,16 +192,19 @@ def test_a_long_filled_stretch_is_cut_into_edges_chained_end_to_end():
 def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path):
     import torch
 
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)
-    make_bundle(tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", fill_min_length_px=55)
+    make_bundle(
+        tmp_path / "fpn.pt", tmp_path / "afanet.pt", tmp_path / "b.pt", GraphSettings().replaced(fill_min_length=55)
+    )
     assert PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu")).settings.fill.min_length_px == 55
     assert not load_predictor(
         tmp_path / "b.pt", "cpu", GraphOverrides(fill_min_length=0), engine="torch"
     ).settings.fill.active
-    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("fill_min_length_px",))  # a bundle from before the fill
+    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("fill_min_length",))  # a bundle from before the fill
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.fill.active
 
 

@@ -92,6 +92,7 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     import torch
 
     from csboundary.errors import InputError
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
     from csboundary.models.fpn import FPNConfig, fpn_for_weights
@@ -114,7 +115,7 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     }  # an FPN from before the head
     save_checkpoint(tmp_path / "plain.pt", "fpn", fpn=plain, fpn_config={**shipped["fpn_config"], "surface": False})
     with pytest.raises(InputError, match="surface head"):
-        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_strong=0.5)
+        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", GraphSettings().replaced(surface_check=0.5))
     make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "plain-bundle.pt")
     with pytest.raises(InputError, match="surface head"):
         load_predictor(tmp_path / "plain-bundle.pt", "cpu", GraphOverrides(surface_check=0.5), engine="torch")
@@ -125,7 +126,12 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     save_checkpoint(
         tmp_path / "fpn-surface.pt", "fpn", fpn=model.state_dict(), fpn_config=FPNConfig.from_dict(config).to_dict()
     )
-    make_bundle(tmp_path / "fpn-surface.pt", afanet_path, tmp_path / "b.pt", surface_strong=0.6, surface_weak=0.25)
+    make_bundle(
+        tmp_path / "fpn-surface.pt",
+        afanet_path,
+        tmp_path / "b.pt",
+        GraphSettings().replaced(surface_check=0.6, surface_weak=0.25),
+    )
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
     assert (
         predictor.settings.surface.strong,
@@ -136,7 +142,7 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
     off = load_predictor(tmp_path / "b.pt", "cpu", GraphOverrides(surface_check=0), engine="torch")
     # nothing reads the surface
     assert not off.settings.surface.active and off.maps(np.zeros((4, 128, 128), np.uint8)).shape == (2, 128, 128)
-    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_strong", "surface_weak", "surface_offset_px"))
+    bundle_without(tmp_path / "b.pt", tmp_path / "older.pt", ("surface_check", "surface_weak", "surface_offset"))
     assert not PatchPredictor.load(tmp_path / "older.pt", torch.device("cpu")).settings.surface.active
 
 

@@ -70,12 +70,18 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
     import torch
 
     from csboundary.errors import InputError
+    from csboundary.graph.settings import GraphSettings
     from csboundary.models.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import fpn_without_surface_head, shipped_parts
 
     fpn_path, afanet_path = shipped_parts(tmp_path)
-    make_bundle(fpn_path, afanet_path, tmp_path / "b.pt", surface_strong=0.5, surface_both_sides=0.7, surface_gate_px=8)
+    make_bundle(
+        fpn_path,
+        afanet_path,
+        tmp_path / "b.pt",
+        GraphSettings().replaced(surface_check=0.5, surface_both_sides=0.7, surface_gate=8),
+    )
     predictor = PatchPredictor.load(tmp_path / "b.pt", torch.device("cpu"))
     assert predictor.settings.gate.radius_px == 8.0 and predictor.settings.surface.both_sides == 0.7
     # the gate alone needs the surface channel: it is carried with the check off
@@ -87,4 +93,4 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
     ).settings.gate.active
     fpn_without_surface_head(fpn_path, tmp_path / "plain.pt")
     with pytest.raises(InputError, match="surface head"):
-        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", surface_gate_px=8)
+        make_bundle(tmp_path / "plain.pt", afanet_path, tmp_path / "no.pt", GraphSettings().replaced(surface_gate=8))

@@ -130,11 +130,11 @@ def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Pat
         "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high},
     }
     if graph.join.active:  # only then: a run interrupted before end joining existed still resumes
-        settings["join_max_px"] = graph.join.max_px
+        settings["join_ends"] = graph.join.max_px
         if graph.join.attach_px > 0:
-            settings["join_attach_px"] = graph.join.attach_px
+            settings["attach_backed"] = graph.join.attach_px
     if graph.attach_px > 0:  # likewise
-        settings["attach_max_px"] = graph.attach_px
+        settings["attach_ends"] = graph.attach_px
     if predictor.precision != "float32":  # likewise
         settings["precision"] = predictor.precision
     settings["precision_choice"] = (
