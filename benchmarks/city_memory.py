@@ -26,7 +26,8 @@ from csboundary.pipeline.prediction.patch import PatchPredictor
 from csboundary.pipeline.prediction.run import run_prediction
 start = time.perf_counter()
 with Mosaic.open(sys.argv[1]) as mosaic:
-    _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2], progress=False, keep_graphs=False)
+    _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2],
+                                progress=False, keep_graphs=False)
 print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "peak_rss_prediction_mb": summary["peak_rss_mb"]["prediction"],
                   "map_store_peak_mb": summary["map_store_peak_mb"], "patches": summary["patches"],
@@ -80,7 +81,8 @@ def main() -> None:
         print(
             f"{row['tiles']:>4s} tiles of {args.tile_size} px: {row['patches']:4d} patches, peak RSS {row['peak_rss_mb']:7.1f} MB "
             f"(after the city pipeline {row['peak_rss_prediction_mb']:7.1f} MB; maps stored {row['map_store_peak_mb']:5.1f} MB), "
-            f"{row['seconds']:6.1f} s; {row['edges']} edges; s/patch graph stitching {row['seconds_per_patch']['graph_stitching']}, "
+            f"{row['seconds']:6.1f} s; {row['edges']} edges; "
+            f"s/patch graph stitching {row['seconds_per_patch']['graph_stitching']}, "
             f"confidence {row['seconds_per_patch']['confidence']}; outputs {row['outputs_s']:.1f} s; files (MB) {row['files_mb']}",
             flush=True,
         )

@@ -7,14 +7,13 @@ CITY defaults to data/cities/test-s7-2x2-2000 (4000 x 4000 px, 16 patches; synth
 missing). For each engine, in this one process: the FPN alone on every patch's window (read
 beforehand, batch 1: the network's time and nothing else), then ``run_prediction`` end to end on
 the same city (reading, FPN, map stitching, vertices, AfANet, graph stitching, every output
-file). ``--bfloat16`` adds a row: the onnx engine with that ``--precision``. Prints seconds per patch of both, their ratio (acceptance: at
-most 1.2), km2/h, the stage
-table, the core seconds per patch of both (every thread of the process: what the rest of the
-pipeline costs beside the FPN, and the lowest ratio a perfect overlap could reach on this
-machine's cores), the core seconds per patch of each stage (``--fpn-threads 1``: the FPN on one
-core, everything else on the other, every stage's work on the thread that ran it), and whether the two engines' graph.json are identical
-(and the largest difference in
-vertex count and edge count when not).
+file). ``--bfloat16`` adds a row: the onnx engine with that ``--precision``. Prints seconds per
+patch of both, their ratio (acceptance: at most 1.2), km2/h, the stage table, the core seconds per
+patch of both (every thread of the process: what the rest of the pipeline costs beside the FPN,
+and the lowest ratio a perfect overlap could reach on this machine's cores), the core seconds per
+patch of each stage (``--fpn-threads 1``: the FPN on one core, everything else on the other, every
+stage's work on the thread that ran it), and whether the two engines' graph.json are identical
+(and the largest difference in vertex count and edge count when not).
 """
 
 from __future__ import annotations
@@ -124,7 +123,8 @@ def main() -> None:
                 f"ratio with a perfect overlap on {cores_available()} cores {bound:.2f}\n"
                 f"       core s/patch by stage (the thread that ran it; whole with one thread per network): "
                 + ", ".join(f"{k.replace('_', ' ')} {v:.3f}" for k, v in summary["core_seconds_per_patch"].items())
-                + f"; post-processing (all but the FPN) {sum(v for k, v in summary['core_seconds_per_patch'].items() if k != 'fpn'):.3f}",
+                + "; post-processing (all but the FPN) "
+                f"{sum(v for k, v in summary['core_seconds_per_patch'].items() if k != 'fpn'):.3f}",
                 flush=True,
             )
     (tf, _, ts, tg), (of, _, os_, og) = rows["torch"], rows["onnx"]
@@ -134,14 +134,16 @@ def main() -> None:
     for engine in ("default",) + extra:
         ef, _, es, _ = rows[engine]
         print(
-            f"{engine} / torch end-to-end throughput: {es['km2_per_hour'] / ts['km2_per_hour']:.2f}x; FPN alone {tf / ef:.2f}x faster"
+            f"{engine} / torch end-to-end throughput: {es['km2_per_hour'] / ts['km2_per_hour']:.2f}x; "
+            f"FPN alone {tf / ef:.2f}x faster"
         )
     if tg == og:
         print("graph.json identical for both engines")
     else:
         a, b = json.loads(tg), json.loads(og)
         print(
-            f"graph.json differs: {len(a['vertices'])} vs {len(b['vertices'])} vertices, {len(a['edges'])} vs {len(b['edges'])} edges"
+            f"graph.json differs: {len(a['vertices'])} vs {len(b['vertices'])} vertices, "
+            f"{len(a['edges'])} vs {len(b['edges'])} edges"
         )
 
 

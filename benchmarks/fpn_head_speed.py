@@ -58,7 +58,7 @@ def main() -> None:
         ("light head, stem 24", {"head": "light", "stem": 24}),
     ):
         model = FPN(FPNConfig(backbone="efficientnet-lite0", pretrained=False, **overrides)).eval().to(memory_format=cl)
-        print(f"FPN, {label:20s} {seconds(lambda: model(patch), args.repeat):.3f} s per 1100 px patch")
+        print(f"FPN, {label:20s} {seconds(lambda model=model: model(patch), args.repeat):.3f} s per 1100 px patch")
 
 
 if __name__ == "__main__":

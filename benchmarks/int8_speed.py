@@ -47,7 +47,8 @@ def main() -> None:
     start = time.perf_counter()
     int8_model = quantize_fpn(float_model)
     print(
-        f"quantized in {time.perf_counter() - start:.1f} s; peak memory {peak_rss_mb():.0f} MB (before quantizing {before:.0f} MB); "
+        f"quantized in {time.perf_counter() - start:.1f} s; peak memory {peak_rss_mb():.0f} MB "
+        f"(before quantizing {before:.0f} MB); "
         f"{len(float_model) / 2**20:.1f} MB -> {len(int8_model) / 2**20:.1f} MB"
     )
     threads = torch.get_num_threads()
@@ -72,7 +73,8 @@ def main() -> None:
         diff = np.concatenate([np.abs(a - b).ravel() for a, b in zip(found, reference)])
         print(
             f"{name:8s} {level:9s} {statistics.median(times[name, level]):.3f} s per window, {threads} threads; "
-            f"probability difference to float32: mean {diff.mean():.5f}, largest {diff.max():.3f}, over 0.1 {np.mean(diff > 0.1):.5f}"
+            f"probability difference to float32: mean {diff.mean():.5f}, largest {diff.max():.3f}, "
+            f"over 0.1 {np.mean(diff > 0.1):.5f}"
         )
 
 

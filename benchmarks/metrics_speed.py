@@ -1,10 +1,9 @@
 """Time APLS (both variants) and TLTS at city scale on a ~20,000-vertex synthetic city graph.
 
 The ground truth is a synthetic test city's road boundaries (``plan_city``, 2x3 tiles of
-5000 px at 0.152 m/px, no rendering) resampled to 20,000 vertices (about one every 33 px); the prediction is a perturbed copy: vertices
-jittered by 1.5 px,
-3 % of edges cut out (gaps), 300 false links between nearby boundaries and 200 spurious 60 px
-boundaries. Usage:
+5000 px at 0.152 m/px, no rendering) resampled to 20,000 vertices (about one every 33 px); the
+prediction is a perturbed copy: vertices jittered by 1.5 px, 3 % of edges cut out (gaps), 300
+false links between nearby boundaries and 200 spurious 60 px boundaries. Usage:
 
     .venv/bin/python benchmarks/metrics_speed.py [--vertices 20000] [--tiles 2x3] [--seed 0] [--repeat 3]
 
@@ -105,13 +104,16 @@ def main() -> None:
         f"pred->gt {v_sym.pred_to_gt:.4f} on {v_sym.n_pairs_pred} pairs)"
     )
     print(
-        f"TLTS            {t_tlts:6.2f} s   = {v_tlts.score:.4f} (too long {v_tlts.too_long:.3f}, too short {v_tlts.too_short:.3f}, "
+        f"TLTS            {t_tlts:6.2f} s   = {v_tlts.score:.4f} "
+        f"(too long {v_tlts.too_long:.3f}, too short {v_tlts.too_short:.3f}, "
         f"infeasible {v_tlts.infeasible:.3f}; {v_tlts.n_pairs} pairs)"
     )
     total = t_paper + t_sym + t_tlts
     print(f"all three       {total:6.2f} s   (target <= 5 s on one core: {'met' if total <= 5 else 'MISSED'})")
     for apls in ("paper", "symmetric"):
-        t_all, _ = best_of(args.repeat, lambda: evaluate_city(pred, gt, apls=apls, seed=args.seed, config=config))
+        t_all, _ = best_of(
+            args.repeat, lambda apls=apls: evaluate_city(pred, gt, apls=apls, seed=args.seed, config=config)
+        )
         print(f"evaluate_city --apls {apls:9s} (P/R/F1 + APLS + TLTS, pairs shared): {t_all:6.2f} s")
 
 

@@ -91,7 +91,8 @@ def main() -> None:
     meta = json.loads(data[data.index("=") + 1 : data.rindex(";")])
     tiles = sum(1 for _ in (folder / "tiles").rglob("*.jpg"))
     print(
-        f"page of {meta['width']}x{meta['height']} px, {len(meta['edges'])} edges in {len(meta.get('boundaries') or [])} boundaries, "
+        f"page of {meta['width']}x{meta['height']} px, "
+        f"{len(meta['edges'])} edges in {len(meta.get('boundaries') or [])} boundaries, "
         f"{meta['levels']} pyramid levels, {tiles} tiles, "
         f"data.js {len(data) / 1e6:.1f} MB"
     )
@@ -115,7 +116,8 @@ def main() -> None:
                     const p = e.line[Math.floor(e.line.length / 2)];
                     const c = document.getElementById('view'); r.state.scale = Math.min(c.width / REVIEW_DATA.width, c.height /
                     REVIEW_DATA.height) * {factor};
-                    r.state.ox = p[0] - c.width / 2 / r.state.scale; r.state.oy = p[1] - c.height / 2 / r.state.scale; r.render();""")
+                    r.state.ox = p[0] - c.width / 2 / r.state.scale;
+                    r.state.oy = p[1] - c.height / 2 / r.state.scale; r.render();""")
                 time.sleep(0.5)  # let the tiles of that view load
             samples = driver.execute_script(
                 "const r = window.review; return Array.from({length: 20}, () => r.drawNow());"

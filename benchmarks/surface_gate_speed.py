@@ -62,10 +62,12 @@ def patch_gate(opencv: bool) -> None:
     surface = street_surface()
     for radius in RADII:
         config = SurfaceGateConfig(radius_px=radius, min_piece_px=0)
-        seconds, gate = median_seconds(lambda: surface_change(surface, config))
+        seconds, gate = median_seconds(lambda config=config: surface_change(surface, config))
         line = f"radius {radius:3d} px: {seconds:.3f} s"
         if opencv or radius <= 50:
-            old_seconds, old = median_seconds(lambda: opencv_change(surface, radius, config.full_change), 1)
+            old_seconds, old = median_seconds(
+                lambda radius=radius, config=config: opencv_change(surface, radius, config.full_change), 1
+            )
             line += f"  (OpenCV's kernel {old_seconds:.3f} s, identical: {bool(np.array_equal(gate, old))})"
         print(line)
 

@@ -29,7 +29,7 @@ from csboundary.pipeline.outputs.prediction_files import GraphWriter  # noqa: E4
 from csboundary.pipeline.prediction.city import predict_city  # noqa: E402
 from csboundary.pipeline.prediction.city_blocks import CityGraphRecipe, stream_city_graph  # noqa: E402
 from csboundary.pipeline.prediction.city_job import DEFAULT_CHANNELS  # noqa: E402
-from csboundary.pipeline.prediction.edge_confidence import core_sampler  # noqa: E402
+from csboundary.pipeline.prediction.edge_scoring import core_sampler  # noqa: E402
 from csboundary.pipeline.prediction.patch import load_predictor  # noqa: E402
 from csboundary.pipeline.prediction.run_store import RunStore  # noqa: E402
 

@@ -46,7 +46,8 @@ def main() -> None:
         va, vb = np.array([a[n] for n in names]), np.array([b[n] for n in names])
         mean, low, high, wins = paired_bootstrap(va, vb, args.samples, args.seed)
         print(
-            f"{metric:6s} A {va.mean():.3f}  B {vb.mean():.3f}  B-A {mean:+.3f} [{low:+.3f}, {high:+.3f}]  B wins in {wins:.0%} of draws"
+            f"{metric:6s} A {va.mean():.3f}  B {vb.mean():.3f}  B-A {mean:+.3f} [{low:+.3f}, {high:+.3f}]  "
+            f"B wins in {wins:.0%} of draws"
         )
 
 

@@ -36,7 +36,7 @@ def train(
     quiet: QuietOption = False,
 ) -> None:
     """Train the FPN, AfANet or a baseline on synthetic cities (built on first use under the config's cache)."""
-    from csboundary.models.training.runs import MODELS, train_from_file
+    from csboundary.pipeline.training.train_run import MODELS, train_from_file
 
     if model not in MODELS:
         raise typer.BadParameter(f"model must be one of {', '.join(MODELS)}")
@@ -90,7 +90,7 @@ def bundle_weights(
     settings are the graph options given (each one not given: off, edge threshold 0.5, at most 2
     edges per vertex)."""
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import afanet_checkpoint, make_bundle, trained_vertex_threshold
+    from csboundary.models.training.bundle import afanet_checkpoint, make_bundle, trained_vertex_threshold
 
     if graph.min_confidence is not None:
         raise typer.BadParameter(
@@ -132,7 +132,7 @@ def fit_confidence(
     labelled cities predicted with WEIGHTS, and write it into a copy of the bundle
     (docs/confidence.md). Fit on cities the networks never trained on."""
     from csboundary.data import city as layout
-    from csboundary.metrics.confidence import confidence_report
+    from csboundary.metrics.confidence_quality import confidence_report
     from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.evaluation.evaluate_set import set_cities
     from csboundary.pipeline.prediction.patch import load_predictor
@@ -284,7 +284,7 @@ def adapt(
     """Adapt the weights to your city from its own unlabelled imagery: self-training of the FPN
     by an averaged teacher, with synthetic cities mixed in, then AfANet on the adapted FPN's
     vertices (docs/adapt.md). The default budget takes about 13 minutes on a 2-core CPU."""
-    from csboundary.models.training.adapt import AdaptConfig
+    from csboundary.models.training.self_training import AdaptConfig
     from csboundary.pipeline.training.adapt import AdaptBudget, default_work
     from csboundary.pipeline.training.adapt import adapt as run
 

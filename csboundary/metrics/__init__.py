@@ -23,7 +23,7 @@ from csboundary.metrics.apls import (
     paper_pairs,
     symmetric_apls,
 )
-from csboundary.metrics.confidence import confidence_report, edge_truth
+from csboundary.metrics.confidence_quality import confidence_report, edge_truth
 from csboundary.metrics.config import MetricConfig
 from csboundary.metrics.graph_clip import clip_graph, grown
 from csboundary.metrics.pixel import rasterize, relaxed_scores
@@ -130,7 +130,7 @@ def evaluate(
     :data:`~csboundary.metrics.graph_clip.MARGIN_PX` (so a line far outside the imagery costs
     no more than its part inside); at city scale the pixel metrics, APLS and TLTS then clip to
     ``extent`` itself. When the prediction's edges carry scores, ``confidence`` says how well
-    they tell true edges from false ones (:func:`csboundary.metrics.confidence.confidence_report`,
+    they tell true edges from false ones (:func:`csboundary.metrics.confidence_quality.confidence_report`,
     on the graphs cut to the grown ``extent``). At city scale, ``review_effort`` is the simulated
     review at ``review`` costs (:func:`csboundary.metrics.review_time.review_report`, the same
     cut graphs, so its km of true boundary are the imagery's; per km of true boundary

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from csboundary.graph.boundary_graph import BoundaryGraph
-from csboundary.metrics.confidence import TRUE_WITHIN_PX
+from csboundary.metrics.confidence_quality import TRUE_WITHIN_PX
 from csboundary.metrics.segments import clip_parameters
 
 # what any metric looks at across the imagery's border: a line inside is judged true against the

@@ -87,7 +87,7 @@ def format_review(report: dict) -> str:
 
 
 def format_confidence(report: dict) -> str:
-    """:func:`csboundary.metrics.confidence.confidence_report` in two lines."""
+    """:func:`csboundary.metrics.confidence_quality.confidence_report` in two lines."""
     review = ", ".join(
         f"{float(share):.0%} -> {_num(r['false_length'], 2)} of false length ({_num(r['false_edges'], 2)} of false edges; "
         f"of what any order could show: {_num(r.get('false_length_of_attainable'), 2)} by length, "

@@ -47,7 +47,7 @@ from csboundary.graph.boundaries import Boundary, graph_boundaries
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.chains import merge_chains
 from csboundary.graph.polyline import points_along, polyline_between, polyline_length
-from csboundary.metrics.confidence import TRUE_SHARE, TRUE_WITHIN_PX
+from csboundary.metrics.confidence_quality import TRUE_SHARE, TRUE_WITHIN_PX
 from csboundary.metrics.pixel import rasterize
 from csboundary.metrics.review_pixels import PixelState, line_pixels, piece_pixels
 from csboundary.metrics.segments import flatten

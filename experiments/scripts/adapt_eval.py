@@ -22,9 +22,9 @@ import numpy as np
 
 from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.metrics.compare import paired_bootstrap
-from csboundary.metrics.confidence import TRUE_SHARE, edge_truth, roc_auc
+from csboundary.metrics.confidence_quality import TRUE_SHARE, edge_truth, roc_auc
 from csboundary.models.checkpoint import shipped_weights
-from csboundary.models.training.adapt import AdaptConfig
+from csboundary.models.training.self_training import AdaptConfig
 from csboundary.pipeline.evaluation.evaluate_set import predicted_city, score_value, set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.prediction.run import evaluate_run

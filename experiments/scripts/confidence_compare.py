@@ -2,8 +2,8 @@
 (synthetic test cities by style, the Ottawa crops, the dense-urban NYC patch), beside the raw
 edge score they replace. Reads the files experiments/scripts/confidence_evidence.py wrote.
 
-    .venv/bin/python experiments/scripts/confidence_compare.py runs/confidence/evidence [--features all|graph|nomaps...] [--trees 200
-    --depth 3]
+    .venv/bin/python experiments/scripts/confidence_compare.py runs/confidence/evidence [--features all|graph|nomaps...]
+    [--trees 200 --depth 3]
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.graph.edge_evidence import FEATURES
-from csboundary.metrics.confidence import TRUE_SHARE, confidence_report, precision_recall_by_threshold, roc_auc
-from csboundary.models.confidence import fit_edge_confidence
+from csboundary.metrics.confidence_quality import TRUE_SHARE, confidence_report, precision_recall_by_threshold, roc_auc
+from csboundary.models.confidence_model import fit_edge_confidence
 
 FEATURE_SETS = {
     "all": FEATURES,
@@ -98,7 +98,7 @@ def main() -> None:
     features = FEATURE_SETS.get(args.features) or tuple(args.features.split(","))
     if args.bundle:
         from csboundary.models.checkpoint import load_checkpoint
-        from csboundary.models.confidence import EdgeConfidence
+        from csboundary.models.confidence_model import EdgeConfidence
 
         model = EdgeConfidence.from_dict(load_checkpoint(args.bundle, ("bundle",))["confidence"], args.bundle)
         args.features, args.trees = f"{args.bundle}'s", model.n_trees
@@ -120,7 +120,8 @@ def main() -> None:
     sets["ottawa (14 crops)"] = sorted(glob.glob(f"{d}/ottawa-*.npz"))
     sets["nyc dense-urban"] = sorted(glob.glob(f"{d}/nyc-*.npz"))
     print(
-        f"features {args.features}, {args.trees} trees of depth {args.depth}, rate {args.rate}; fitted on {len(fit['length'])} edges"
+        f"features {args.features}, {args.trees} trees of depth {args.depth}, rate {args.rate}; "
+        f"fitted on {len(fit['length'])} edges"
     )
     print(
         f"{'set / confidence':28s} {'edges':>6s} {'true':>6s} {'AUC':>7s} {'ECE':>7s} {'fl@10':>6s} {'fl@20':>6s} {'fe@20':>6s} "

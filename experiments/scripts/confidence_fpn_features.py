@@ -8,7 +8,8 @@ either side (mean along, mean absolute side difference). The pooled vectors are 
 first ``--components`` principal axes, fitted on the fitting cities' edges; confidence models are
 fitted with and without those columns and scored on every other set.
 
-    .venv/bin/python experiments/scripts/confidence_fpn_features.py --cache DIR fit=data/conf-fit/* ottawa=/tmp/ottawa nyc=/tmp/nyc ...
+    .venv/bin/python experiments/scripts/confidence_fpn_features.py --cache DIR fit=data/conf-fit/* ottawa=/tmp/ottawa
+        nyc=/tmp/nyc ...
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from confidence_image import fit_trees, load, model_image, named_cities  # noqa:
 from csboundary.graph.chains import edge_line  # noqa: E402
 from csboundary.graph.edge_evidence import FEATURES  # noqa: E402
 from csboundary.graph.polyline import points_along  # noqa: E402
-from csboundary.metrics.confidence import confidence_report  # noqa: E402
+from csboundary.metrics.confidence_quality import confidence_report  # noqa: E402
 from csboundary.models.fpn import top_down  # noqa: E402
 from csboundary.pipeline.prediction.patch import load_predictor  # noqa: E402
 from csboundary.pipeline.training.confidence_fit import city_edges  # noqa: E402
@@ -112,9 +113,10 @@ def main() -> None:
         pca = PCA(n_components=k, random_state=0).fit((fit["fpn"] - fit["fpn"].mean(0)) / (fit["fpn"].std(0) + 1e-6))
         scale = (fit["fpn"].mean(0), fit["fpn"].std(0) + 1e-6)
         columns[f"+ fpn pca{k}"] = (
-            lambda pca, scale: (
+            lambda fitted_pca, fitted_scale: (
                 lambda d: np.concatenate(
-                    [d["evidence"][:, finite], pca.transform((d["fpn"] - scale[0]) / scale[1])], axis=1
+                    [d["evidence"][:, finite], fitted_pca.transform((d["fpn"] - fitted_scale[0]) / fitted_scale[1])],
+                    axis=1,
                 )
             )
         )(pca, scale)
@@ -124,7 +126,7 @@ def main() -> None:
     for name in names[1:]:
         d = load(sets[name], ("evidence", "fpn"))
         row = f"{name:24s} {len(d['length']):6d} "
-        for label, (make, model) in models.items():
+        for _label, (make, model) in models.items():
             r = confidence_report(model(make(d)), d["truth_share"], d["length"])
             row += f"{r['auc']:24.3f}{r['ece']:7.3f}"
         print(row, flush=True)

@@ -29,7 +29,7 @@ from csboundary.data.model_view import model_view
 from csboundary.graph.chains import edge_line
 from csboundary.graph.edge_evidence import FEATURES
 from csboundary.graph.polyline import points_along
-from csboundary.metrics.confidence import TRUE_SHARE, confidence_report
+from csboundary.metrics.confidence_quality import TRUE_SHARE, confidence_report
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.confidence_fit import TREE_SHARE, city_edges
@@ -190,7 +190,7 @@ def main() -> None:
         d = load(sets[name])
         x = with_image(d)
         row = f"{name:24s} {len(d['length']):6d} "
-        for label, (feats, model) in models.items():
+        for _label, (_feats, model) in models.items():
             p = model(x)
             r = confidence_report(p, d["truth_share"], d["length"])
             row += f"{r['auc']:22.3f}{r['ece']:7.3f}"

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.data import city as layout
-from csboundary.metrics.confidence import confidence_report
+from csboundary.metrics.confidence_quality import confidence_report
 from csboundary.models.checkpoint import load_checkpoint, shipped_weights
-from csboundary.models.confidence import EdgeConfidence
+from csboundary.models.confidence_model import EdgeConfidence
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.confidence_fit import city_edges
@@ -38,7 +38,8 @@ def main() -> None:
     table = EdgeConfidence.from_dict(load_checkpoint(weights, ("bundle",))["confidence"], weights)
     out = {}
     print(
-        f"{'set':22s} {'edges':>6s} {'true':>5s} {'AUC':>6s} {'ECE':>6s}   least sure 20 %: false edges (of attainable), false length "
+        f"{'set':22s} {'edges':>6s} {'true':>5s} {'AUC':>6s} {'ECE':>6s}   "
+        "least sure 20 %: false edges (of attainable), false length "
         f"(of attainable)"
     )
     for item in args.sets:

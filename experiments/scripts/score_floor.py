@@ -55,7 +55,8 @@ def main() -> None:
             mean, low, high, _ = paired_bootstrap(*pairs[m])
             print(
                 f"  {m}: largest |change| {max(values):.3f}, mean |change| {sum(values) / len(values):.4f}, "
-                f"mean change {mean:+.4f} [{low:+.4f}, {high:+.4f}], over {args.tolerance}: {sum(v > args.tolerance for v in values)}"
+                f"mean change {mean:+.4f} [{low:+.4f}, {high:+.4f}], "
+                f"over {args.tolerance}: {sum(v > args.tolerance for v in values)}"
             )
 
 

@@ -1,8 +1,8 @@
 """Scores of one weights bundle on validation sets for a grid of edge-support settings.
 
     python experiments/scripts/sweep_edge_support.py WEIGHTS SET_OR_CITY... [--support 0,0.2,0.3] [--length 0,300] [--gap 0,40]
-    [--vertex-threshold 0.35,0.5] [--fill 0,40] [--surface 0,0.5 --surface-weak 0.2] [--fragments 0,240] [--attach-backed 0,60,100] [--gate
-    0,8] [--both-sides 0,0.7]
+    [--vertex-threshold 0.35,0.5] [--fill 0,40] [--surface 0,0.5 --surface-weak 0.2] [--fragments 0,240]
+    [--attach-backed 0,60,100] [--gate 0,8] [--both-sides 0,0.7]
 
 Every setting not given is the bundle's own, so ``--vertex-threshold 0.4`` alone scores the
 bundle as shipped but for its vertex threshold.

@@ -8,8 +8,8 @@ import pytest
 
 from csboundary.errors import InputError
 from csboundary.graph.edge_evidence import FEATURES
-from csboundary.metrics.confidence import expected_calibration_error, roc_auc
-from csboundary.models.confidence import EdgeConfidence, fit_edge_confidence
+from csboundary.metrics.confidence_quality import expected_calibration_error, roc_auc
+from csboundary.models.confidence_model import EdgeConfidence, fit_edge_confidence
 
 sklearn = pytest.importorskip("sklearn")
 
@@ -34,7 +34,7 @@ def fitted() -> EdgeConfidence:
 def test_the_arrays_compute_what_the_fitted_trees_compute():
     from sklearn.ensemble import GradientBoostingClassifier
 
-    from csboundary.models.confidence import from_sklearn
+    from csboundary.models.confidence_model import from_sklearn
 
     evidence, positive, _ = noisy_edges()
     model = GradientBoostingClassifier(n_estimators=15, max_depth=3, init="zero", random_state=0).fit(

@@ -1,6 +1,6 @@
 """The paper's baselines (Section V-D), one per family of methods, behind the same two doors as
 csBoundary: a training function ``train(config, out_dir, device, resume, progress) -> Path`` and
-a :class:`~csboundary.pipeline.prediction.city.PatchModel` (``load(path, device)``, ``patch_maps``,
+a :class:`~csboundary.models.patch_model.PatchModel` (``load(path, device)``, ``patch_maps``,
 ``extract``, ``connect``), so the city pipeline (map averaging, stitching) and the metrics treat
 every method alike.
 

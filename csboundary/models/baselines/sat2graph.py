@@ -353,7 +353,7 @@ def train(
 
 @dataclass
 class Model:
-    """The city pipeline's :class:`~csboundary.pipeline.prediction.city.PatchModel`: maps are (20, S, S), channel
+    """The city pipeline's :class:`~csboundary.models.patch_model.PatchModel`: maps are (20, S, S), channel
     0 csBoundary's keypoint probability, 1..19 the Sat2Graph tensor (averaged across overlapping
     windows like any map; its vectors are relative, so averaging is consistent)."""
 

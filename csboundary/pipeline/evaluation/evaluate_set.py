@@ -22,8 +22,9 @@ from csboundary.data.model_view import model_view
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph.stitching import StitchConfig
 from csboundary.labels.mask_import import SET_FILE
+from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.prediction.city import predict_city
-from csboundary.pipeline.prediction.city_job import CityResult, PatchModel
+from csboundary.pipeline.prediction.city_job import CityResult
 from csboundary.pipeline.prediction.run import evaluate_run
 
 HEADLINE = ("precision@5", "recall@5", "f1@2", "f1@5", "f1@10", "apls", "tlts")

@@ -36,6 +36,7 @@ from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.graph_stream import StreamBoundary, StreamPiece
 from csboundary.graph.stitching import StitchConfig
+from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.prediction.city_blocks import BLOCK, CityCollector, CityGraphRecipe, stream_city_graph
 from csboundary.pipeline.prediction.city_job import (
     CPU,
@@ -43,12 +44,11 @@ from csboundary.pipeline.prediction.city_job import (
     STAGES,
     CityJob,
     CityResult,
-    PatchModel,
     StageTimer,
     empty_graph,
     reads_evidence,
 )
-from csboundary.pipeline.prediction.edge_confidence import core_sampler
+from csboundary.pipeline.prediction.edge_scoring import core_sampler
 from csboundary.pipeline.prediction.map_stitching import Index, WindowSchedule
 from csboundary.pipeline.prediction.run_store import RunStore
 

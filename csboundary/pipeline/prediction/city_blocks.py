@@ -42,8 +42,8 @@ from csboundary.graph.graph_stream import GraphStream, StreamBoundary, StreamPie
 from csboundary.graph.noding import node_shared_points
 from csboundary.graph.stitching import StitchConfig, edge_midpoints, owner_cores, stitch_patch_graphs
 from csboundary.graph.straightening import StraightenConfig, straighten
-from csboundary.models.confidence import EdgeConfidence
-from csboundary.pipeline.prediction.edge_confidence import scored_graph
+from csboundary.models.confidence_model import EdgeConfidence
+from csboundary.pipeline.prediction.edge_scoring import scored_graph
 
 Index = tuple[int, int]
 BLOCK = 4  # patches along a block's side: 16 patch graphs and their ring of 20 in memory at once

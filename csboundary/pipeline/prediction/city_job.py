@@ -1,8 +1,9 @@
 """One city run's work per patch, whoever runs it: the FPN's maps of a batch of patches (read ->
 model -> stored) and a window's graph (its stitched maps, averaged over the patches covering it
--> vertex extraction -> AfANet -> the patch graph in mosaic pixels, stored), in :class:`CityJob`;
-what a model must offer for it (:class:`PatchModel`) and what a run returns (:class:`CityResult`).
-:mod:`csboundary.pipeline.prediction.city` schedules the work.
+-> vertex extraction -> AfANet -> the patch graph in mosaic pixels, stored), in :class:`CityJob`,
+and what a run returns (:class:`CityResult`). What a model offers for it is
+:class:`~csboundary.models.patch_model.PatchModel`; :mod:`csboundary.pipeline.prediction.city`
+schedules the work.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ import ctypes.util
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 import rasterio
@@ -21,9 +21,8 @@ from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.settings import GraphSettings
 from csboundary.graph.stitching import to_mosaic
-from csboundary.models.confidence import EdgeConfidence
+from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.prediction.map_stitching import Index, stitch_window
 from csboundary.pipeline.prediction.run_store import RunStore
 from csboundary.viz.overlay import core_thumbnail
@@ -52,27 +51,6 @@ def _heap_trimmer():
 
 
 _trim_heap = _heap_trimmer()
-
-
-class PatchModel(Protocol):
-    """What the city pipeline runs: three steps per patch, the graph settings the city graph
-        reads (``min_fragment_px``, ``attach_px``, ``min_confidence``), an edge confidence (None:
-        scores as found), whether to keep the maps the edges' evidence is read from, and the pixel size
-    it takes imagery at."""
-
-    settings: GraphSettings
-    confidence: EdgeConfidence | None
-    collect_evidence: bool
-    pixel_size_m: float  # the pixel size the model takes imagery at
-
-    def patch_maps(self, patches: list[Patch], images: list[np.ndarray]) -> list[np.ndarray]:
-        """(C, S, S) probabilities per patch (C = 2: keypoint and segmentation)."""
-
-    def extract(self, maps: np.ndarray) -> BoundaryGraph:
-        """Vertices and corner edges of a stitched window (window pixels)."""
-
-    def connect(self, patch: Patch, image: np.ndarray, maps: np.ndarray, found: BoundaryGraph) -> BoundaryGraph:
-        """The window's graph: ``found`` plus the predicted edges."""
 
 
 @dataclass

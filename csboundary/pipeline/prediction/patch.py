@@ -7,7 +7,7 @@ the boundary both missed, from the segmentation skeleton (kind ``skeleton``, sco
 boundary probability along it; graph/skeleton_fill.py); with an FPN that maps the road surface
 and the surface check on, edges with no roadway beside them are then dropped
 (graph/surface_check.py). With a bundle that has an edge confidence, the city graph's scores are
-then replaced by it (pipeline/prediction/edge_confidence.py).
+then replaced by it (pipeline/prediction/edge_scoring.py).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from csboundary.graph.vertex_extraction import extract_vertices
 from csboundary.models.afanet import AfANet, adjacency_from_logits
 from csboundary.models.batchnorm_folding import fold_batch_norms
 from csboundary.models.checkpoint import load_afanet, load_checkpoint, load_fpn, shipped_weights
-from csboundary.models.confidence import EdgeConfidence
+from csboundary.models.confidence_model import EdgeConfidence
 from csboundary.models.decoding import graph_from_adjacency
 from csboundary.models.device import bfloat16_hardware
 from csboundary.models.fpn import FPN, SURFACE
@@ -59,7 +59,7 @@ def export_cache_usable() -> bool:
 
 @dataclass
 class PatchPredictor:
-    """The trained networks as the city pipeline's :class:`~csboundary.pipeline.prediction.city.PatchModel`,
+    """The trained networks as the city pipeline's :class:`~csboundary.models.patch_model.PatchModel`,
     with the graph settings of their bundle (``settings``, overridden from the command line by
     :meth:`override`)."""
 
@@ -75,7 +75,7 @@ class PatchPredictor:
         default=None, repr=False
     )  # the FPN with batch norms folded, for bfloat16
     confidence: EdgeConfidence | None = (
-        None  # the city graph's edge confidence (models/confidence.py; None: scores as found)
+        None  # the city graph's edge confidence (models/confidence_model.py; None: scores as found)
     )
     collect_evidence: bool = False  # keep the maps the edges' evidence is read from (to fit a confidence)
 

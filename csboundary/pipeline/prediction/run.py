@@ -42,10 +42,11 @@ from csboundary.data.raster import Mosaic
 from csboundary.data.units import GroundUnits
 from csboundary.data.windows import pixel_to_world
 from csboundary.graph.stitching import StitchConfig
+from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.outputs.map_output import write_maps_cog
 from csboundary.pipeline.outputs.prediction_files import GraphWriter, read_prediction_graph
 from csboundary.pipeline.prediction.city import CityRun, predict_city, run_here
-from csboundary.pipeline.prediction.city_job import CPU, GDAL_ENV, STAGES, CityResult, PatchModel
+from csboundary.pipeline.prediction.city_job import CPU, GDAL_ENV, STAGES, CityResult
 from csboundary.pipeline.prediction.run_folder import run_folder
 from csboundary.pipeline.prediction.run_store import RunStore
 from csboundary.viz.overlay import overview_scale

@@ -1,6 +1,6 @@
 """Adapting a weights bundle to a user's own unlabelled imagery (``csboundary adapt``).
 
-Self-training (:mod:`csboundary.models.training.adapt`) adapts the FPN from the bundle's on
+Self-training (:mod:`csboundary.models.training.self_training`) adapts the FPN from the bundle's on
 windows drawn from the user's mosaics, beside synthetic cities of the bundle's own mix; then
 AfANet is tuned, as ``finetune`` does, on the vertices the adapted FPN extracts from those
 synthetic cities (the user's imagery has no edges to learn from). The result is a bundle like
@@ -27,7 +27,7 @@ from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
-from csboundary.models.training.adapt import AdaptConfig
+from csboundary.models.training.self_training import AdaptConfig
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.outputs.review import prediction_inputs
@@ -165,7 +165,7 @@ def _adapt(
     write the adapted bundle ``out``. ``work`` keeps the runs (default ``OUT-adapt/``), ``cache``
     the synthetic cities (default: in ``work``); ``gsd`` is the pixel size of imagery without a
     CRS. Returns what was done and how long each stage took."""
-    from csboundary.models.training.adapt import train_adapt
+    from csboundary.models.training.self_training import train_adapt
 
     out, base_path = Path(out), Path(weights) if weights else shipped_weights()
     work = Path(work) if work else default_work(out)

@@ -3,8 +3,8 @@
 Each city is predicted exactly as ``predict`` predicts it, with the maps of every core kept; each
 edge of the city graph gets its evidence (:mod:`csboundary.graph.edge_evidence`) and its label,
 true when at least half its length lies within 5 px of the city's ground truth
-(:func:`csboundary.metrics.confidence.edge_truth`). The confidence model is fitted on all cities
-(:func:`csboundary.models.confidence.fit_edge_confidence`, cities held out together for its
+(:func:`csboundary.metrics.confidence_quality.edge_truth`). The confidence model is fitted on all cities
+(:func:`csboundary.models.confidence_model.fit_edge_confidence`, cities held out together for its
 calibration) and written into a copy of the bundle with its provenance.
 """
 
@@ -20,9 +20,9 @@ from csboundary.data import city as layout
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
-from csboundary.metrics.confidence import TRUE_SHARE, edge_truth
+from csboundary.metrics.confidence_quality import TRUE_SHARE, edge_truth
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint
-from csboundary.models.confidence import EdgeConfidence, fit_edge_confidence
+from csboundary.models.confidence_model import EdgeConfidence, fit_edge_confidence
 from csboundary.pipeline.evaluation.evaluate_set import predicted_city
 from csboundary.pipeline.prediction.patch import PatchPredictor
 

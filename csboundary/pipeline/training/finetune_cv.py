@@ -93,7 +93,7 @@ def _held_out_confidence(cities: list[Path], tuned: Path, base: Path, device: st
     import numpy as np
 
     from csboundary.models.checkpoint import load_checkpoint
-    from csboundary.models.confidence import EdgeConfidence
+    from csboundary.models.confidence_model import EdgeConfidence
     from csboundary.models.device import resolve_device
     from csboundary.pipeline.prediction.patch import PatchPredictor
     from csboundary.pipeline.training.confidence_fit import city_edges
@@ -120,7 +120,7 @@ def confidence_summary(records: list[dict], seed: int = 0, samples: int = 1000) 
     with 95 % intervals from resampling edges."""
     import numpy as np
 
-    from csboundary.metrics.confidence import expected_calibration_error, roc_auc
+    from csboundary.metrics.confidence_quality import expected_calibration_error, roc_auc
 
     true = np.concatenate([np.asarray(r["true"], bool) for r in records])
     out = {"edges": int(len(true)), "share_true": float(true.mean()) if len(true) else float("nan")}

@@ -24,7 +24,7 @@ def confident_bundle(tmp_path_factory) -> Path:
     the plumbing (the shipped confidence is judged in docs/confidence.md, not here)."""
     from csboundary.graph.edge_evidence import FEATURES
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint, shipped_weights
-    from csboundary.models.confidence import fit_edge_confidence
+    from csboundary.models.confidence_model import fit_edge_confidence
 
     rng = np.random.default_rng(0)
     evidence = rng.uniform(0, 1, (600, len(FEATURES)))
@@ -41,7 +41,8 @@ def predictions(demo_run, confident_bundle, tmp_path_factory) -> dict[str, Path]
     out = {}
     for name, extra in (("all", ()), ("sure", ("--min-confidence", "0.6"))):
         out[name] = root / name
-        # the torch engine: a new bundle file would otherwise be exported to ONNX and quantized first (the engine is not judged here)
+        # the torch engine: a new bundle file would otherwise be exported to ONNX and quantized first
+        # (the engine is not judged here)
         done = run_cli(
             "predict",
             str(demo_run / "city"),
@@ -67,7 +68,7 @@ def test_every_output_carries_the_confidence(predictions):
     edges = pyogrio.read_dataframe(predictions["all"] / "boundaries.gpkg", layer="edges")
     np.testing.assert_allclose(edges["confidence"].to_numpy(), scores)
     boundaries = pyogrio.read_dataframe(predictions["all"] / "boundaries.gpkg", layer="road_boundaries")
-    for b, row in boundaries.iterrows():
+    for _, row in boundaries.iterrows():
         mine = edges[edges["boundary_id"] == row["boundary_id"]]
         assert row["confidence_mean"] == pytest.approx(np.average(mine["confidence"], weights=mine["length_m"]))
 

@@ -195,7 +195,8 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
     from csboundary.pipeline.prediction.run import run_prediction
 
     predictor = PatchPredictor.load(None, torch.device("cpu"))
-    # the precision the command line chose for the reference on this machine (--precision auto), and its engine: both travel to the workers
+    # the precision the command line chose for the reference on this machine (--precision auto), and its engine:
+    # both travel to the workers
     predictor.use_precision(
         json.loads((reference / "summary.json").read_text())["settings"].get("precision", "float32")
     )

@@ -16,7 +16,7 @@ from rasterio.transform import from_origin
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.styles import style_config
 from csboundary.errors import InputError
-from csboundary.models.training.adapt import AdaptConfig
+from csboundary.models.training.self_training import AdaptConfig
 from csboundary.pipeline.training.adapt import AdaptBudget, adapt, imagery_groups
 
 SIZE = 600

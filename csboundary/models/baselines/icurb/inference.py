@@ -26,7 +26,7 @@ def segmentation_fpn(path: str | Path | None, device: torch.device) -> FPN:
 
 
 class Model:
-    """Enhanced-iCurb as a :class:`~csboundary.pipeline.prediction.city.PatchModel`."""
+    """Enhanced-iCurb as a :class:`~csboundary.models.patch_model.PatchModel`."""
 
     settings = GraphSettings()  # the city graph's steps all off
     confidence = None

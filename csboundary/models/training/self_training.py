@@ -1,4 +1,5 @@
-"""Self-training the FPN on a user's unlabelled imagery (``csboundary adapt``).
+"""The mean-teacher self-training of the FPN on unlabelled imagery: the method behind the
+``adapt`` workflow (:mod:`csboundary.pipeline.training.adapt`).
 
 The synthetic-to-real gap in dense prediction has a standard cure (DACS, DAFormer): a teacher
 that is the exponential moving average (EMA) of the student labels the target images; the

@@ -10,7 +10,7 @@ import torch
 
 from csboundary.data.raster import WindowRead
 from csboundary.data.windows import PixelWindow
-from csboundary.models.training.adapt import (
+from csboundary.models.training.self_training import (
     AdaptConfig,
     MeanTeacher,
     paste_roadway,

@@ -1,5 +1,5 @@
 """The edge confidence: a calibrated probability that a predicted edge is a true road boundary
-(at least half its length within 5 px of the ground truth; :mod:`csboundary.metrics.confidence`).
+(at least half its length within 5 px of the ground truth; :mod:`csboundary.metrics.confidence_quality`).
 
 It is computed from an edge's evidence (:mod:`csboundary.graph.edge_evidence`) by gradient-boosted
 trees (scikit-learn's ``GradientBoostingClassifier``), whose raw output is then calibrated by an

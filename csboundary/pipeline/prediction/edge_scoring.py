@@ -3,7 +3,7 @@
 Once the city graph is stitched, each edge's evidence (:mod:`csboundary.graph.edge_evidence`) is
 read from the stitched maps of the patch cores the run stored (uint8, one core at a time, so
 memory does not grow with the city), and the bundle's confidence model
-(:mod:`csboundary.models.confidence`) turns it into the probability that the edge is a true
+(:mod:`csboundary.models.confidence_model`) turns it into the probability that the edge is a true
 boundary. That probability becomes the edge's ``score``: graph.json, the GeoPackage's
 ``confidence``, Lanelet2's attributes and the review page's order all follow it.
 """
@@ -17,7 +17,7 @@ import numpy as np
 from csboundary.data.grid import PatchGrid
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.edge_evidence import Sampler
-from csboundary.models.confidence import EdgeConfidence
+from csboundary.models.confidence_model import EdgeConfidence
 
 
 def core_sampler(grid: PatchGrid, load_core, channels: int) -> Sampler:

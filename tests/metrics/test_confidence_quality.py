@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from csboundary.graph import BoundaryGraph
-from csboundary.metrics.confidence import (
+from csboundary.metrics.confidence_quality import (
     confidence_report,
     edge_truth,
     expected_calibration_error,
