@@ -1,5 +1,5 @@
 """What the pipeline knows about each edge of a finished graph: the numbers an edge confidence
-is computed from (:mod:`csboundary.models.confidence`).
+is computed from (:mod:`csboundary.models.confidence_model`).
 
 The evidence of an edge is its own score (AfANet's probability, or the mean map value along a
 corner or filled edge), its kind, its shape (length, how far it strays from straight), its

@@ -44,8 +44,8 @@ def test_bundle_carries_the_crossing_setting(tmp_path):
     import torch
 
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import shipped_weights
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     shipped_parts(tmp_path)
@@ -72,8 +72,8 @@ def test_bundle_carries_the_vertex_threshold_its_afanet_was_trained_with(tmp_pat
     import torch
 
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import shipped_weights
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     shipped_parts(tmp_path, train_config={"vertex_threshold": 0.35})

@@ -126,7 +126,7 @@ def test_bundle_carries_the_gap_check_and_a_command_line_value_overrides_it(tmp_
     import torch
 
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)

@@ -135,8 +135,8 @@ def test_bundle_carries_the_attachment_and_a_command_line_value_overrides_it(tmp
     import torch
 
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import shipped_parts
 

@@ -163,8 +163,8 @@ def test_a_bundle_carries_the_outline_and_the_command_line_turns_it_off(tmp_path
 
     from csboundary.errors import InputError
     from csboundary.graph.settings import GraphOverrides, GraphSettings
-    from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import fpn_without_surface_head, shipped_parts
 

@@ -193,7 +193,7 @@ def test_bundle_carries_the_fill_and_a_command_line_value_overrides_it(tmp_path)
     import torch
 
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
     shipped_parts(tmp_path)

@@ -93,9 +93,9 @@ def test_bundle_carries_the_surface_check_only_with_an_fpn_that_has_the_head(tmp
 
     from csboundary.errors import InputError
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
     from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
     from csboundary.models.fpn import FPNConfig, fpn_for_weights
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import bundle_without, shipped_parts
 

@@ -71,7 +71,7 @@ def test_a_bundle_carries_the_gate_and_the_both_sides_rule_and_the_maps_carry_th
 
     from csboundary.errors import InputError
     from csboundary.graph.settings import GraphSettings
-    from csboundary.models.bundle import make_bundle
+    from csboundary.models.training.bundle import make_bundle
     from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
     from helpers import fpn_without_surface_head, shipped_parts
 
