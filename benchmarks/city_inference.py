@@ -22,8 +22,10 @@ from csboundary.data.raster import Mosaic
 from csboundary.metrics.report import format_rows, write_scores
 from csboundary.models.device import resolve_device
 from csboundary.pipeline.evaluation.oracle import OracleModel
+from csboundary.pipeline.jobs.prediction_run import run_prediction
+from csboundary.pipeline.outputs.run_summary import stage_table
+from csboundary.pipeline.prediction.city_scores import evaluate_run
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import evaluate_run, run_prediction, stage_table
 
 
 def main() -> None:

@@ -23,7 +23,7 @@ import json, os, resource, sys, time
 from csboundary.data.raster import Mosaic
 from csboundary.models.device import resolve_device
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import run_prediction
+from csboundary.pipeline.jobs.prediction_run import run_prediction
 start = time.perf_counter()
 with Mosaic.open(sys.argv[1]) as mosaic:
     _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2],

@@ -31,8 +31,9 @@ import torch
 
 from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
+from csboundary.pipeline.jobs.prediction_run import run_prediction
+from csboundary.pipeline.outputs.run_summary import stage_table
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import run_prediction, stage_table
 
 
 def fpn_only(predictor: PatchPredictor, images: list, repeat: int) -> tuple[float, float]:

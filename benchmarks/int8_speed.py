@@ -28,8 +28,8 @@ from csboundary.models.maps import unit_bands
 from csboundary.models.onnx_engine import export_fpn
 from csboundary.models.onnx_quantization import quantize_fpn
 from csboundary.models.onnx_session import LEVELS, open_session
+from csboundary.pipeline.outputs.run_summary import peak_rss_mb
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import peak_rss_mb
 
 
 def main() -> None:

@@ -28,8 +28,8 @@ import torch
 from csboundary.data.grid import PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
+from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import run_prediction
 
 
 class StoredMaps:

@@ -61,10 +61,10 @@ def predict(
 ) -> dict:
     """Predict a city (GeoTIFF tiles, a folder of them or a city folder) into the folder ``out``
     and return its ``summary.json``; ``model`` defaults to :func:`load_model`. ``options`` are
-    :func:`csboundary.pipeline.prediction.predict.predict_to_folder`'s (``gsd``, ``batch_size``,
+    :func:`csboundary.pipeline.jobs.predict.predict_to_folder`'s (``gsd``, ``batch_size``,
     ``write_maps``, ``lanelet2``, ``restart``, ``workers``, ...). A run stopped part-way is
     continued by the same call."""
-    from csboundary.pipeline.prediction.predict import predict_to_folder
+    from csboundary.pipeline.jobs.predict import predict_to_folder
 
     inputs = [imagery] if isinstance(imagery, (str, Path)) else list(imagery)
     return predict_to_folder(inputs, out, _model(model), progress=progress, **options)
@@ -75,7 +75,7 @@ def predict_patch(
 ) -> BoundaryGraph:
     """The graph of one image of at most 1100 x 1100 px at the model's pixel size, as ``predict``
     would make it, written into ``out`` (graph.json, boundaries.geojson, overlay.png)."""
-    from csboundary.pipeline.prediction.predict import predict_patch_to_folder
+    from csboundary.pipeline.jobs.predict import predict_patch_to_folder
 
     return predict_patch_to_folder(image, out, _model(model), gsd)
 
@@ -108,7 +108,7 @@ def evaluate_model(
     city: str | Path, model: PatchPredictor | None = None, *, seed: int = 0, progress: bool = False
 ) -> dict:
     """A model's scores on a labelled city, at patch and city scale (``evaluate-model``)."""
-    from csboundary.pipeline.evaluation.evaluate_set import evaluate_city
+    from csboundary.pipeline.prediction.city_scores import evaluate_city
 
     return evaluate_city(city, model or load_model(), seed, progress=progress)
 

@@ -26,7 +26,7 @@ import numpy as np
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.chains import edge_line
-from csboundary.pipeline.evaluation.evaluate_set import set_cities
+from csboundary.pipeline.prediction.city_scores import set_cities
 
 
 def cli(*args: str) -> float:

@@ -2,8 +2,13 @@
 
     errors < config < data < graph < labels, metrics, viz < models < pipeline, qgis_plugin < api, cli
 
+and so do the sub-packages inside the two largest layers (:data:`SUB_LAYERS`):
+
+    models:   the networks and their files (models/*.py) < training < baselines
+    pipeline: prediction < outputs < jobs < training < evaluation
+
 Every ``import`` of every module is read (top-level and inside functions alike); an import of a
-higher layer, or between the three peers of one layer, fails with the module and line named.
+higher layer or sub-package, or between two peers, fails with the module and line named.
 """
 
 from __future__ import annotations
@@ -29,6 +34,11 @@ LAYERS = {
     "api": 7,
     "cli": 7,
     "__main__": 8,
+}
+# inside a layer: the order of its sub-packages; "." is the layer's own modules (models/fpn.py)
+SUB_LAYERS = {
+    "models": {".": 0, "training": 1, "baselines": 2},
+    "pipeline": {"prediction": 0, "outputs": 1, "jobs": 2, "training": 3, "evaluation": 4},
 }
 PACKAGE = Path(csboundary.__file__).parent
 
@@ -80,16 +90,72 @@ def test_every_import_points_down():
     assert upward_imports() == []
 
 
+def sub_layer_of(parts: tuple[str, ...], root: Path = PACKAGE) -> str:
+    """The sub-package of a module inside a layer (``("models", "training", "fpn")`` ->
+    ``training``), "." for the layer's own modules."""
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and (root / parts[0] / parts[1]).is_dir()) else "."
+
+
+def sideways_imports(root: Path = PACKAGE) -> list[str]:
+    """Imports inside a layer of :data:`SUB_LAYERS` that point to a higher or peer sub-package."""
+    problems = []
+    for layer, order in SUB_LAYERS.items():
+        for path in sorted((root / layer).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            if parts[-1] == "__init__" and len(parts) == 2:
+                continue
+            source = sub_layer_of(parts, root)
+            if source not in order:
+                problems.append(f"{path.relative_to(root)}: not in any {layer} sub-layer (add it to SUB_LAYERS)")
+                continue
+            for line, module in imports_of(path):
+                target_parts = tuple(module.split(".")[1:])
+                if target_parts[:1] != (layer,) or len(target_parts) < 2:
+                    continue
+                target = sub_layer_of(target_parts, root)
+                if target == source:
+                    continue
+                if target not in order:
+                    problems.append(f"{path.relative_to(root)}:{line} imports {module}: not in any {layer} sub-layer")
+                elif order[target] >= order[source]:
+                    problems.append(
+                        f"{path.relative_to(root)}:{line} imports {module}: {layer}/{target} is not below {layer}/{source}"
+                    )
+    return problems
+
+
+def test_every_import_inside_models_and_pipeline_points_down():
+    assert sideways_imports() == []
+
+
+def test_an_upward_import_between_sub_packages_is_caught(tmp_path):
+    for folder in ("models/training", "models/baselines", "pipeline/prediction", "pipeline/outputs"):
+        (tmp_path / folder).mkdir(parents=True)
+    (tmp_path / "models" / "fpn.py").write_text("from csboundary.models.training.loop import optimize\n")
+    (tmp_path / "models" / "training" / "loop.py").write_text("from csboundary.models.fpn import LiteFPN\n")
+    (tmp_path / "models" / "training" / "runs.py").write_text("from csboundary.models.baselines import METHODS\n")
+    (tmp_path / "pipeline" / "prediction" / "run.py").write_text(
+        "def f():\n    from csboundary.pipeline.outputs.files import write\n"
+    )
+    (tmp_path / "pipeline" / "outputs" / "files.py").write_text("from csboundary.pipeline.prediction.run import f\n")
+    assert sideways_imports(tmp_path) == [
+        "models/fpn.py:1 imports csboundary.models.training.loop: models/training is not below models/.",
+        "models/training/runs.py:1 imports csboundary.models.baselines: models/baselines is not below models/training",
+        "pipeline/prediction/run.py:2 imports csboundary.pipeline.outputs.files: "
+        "pipeline/outputs is not below pipeline/prediction",
+    ]
+
+
 def test_an_upward_import_is_caught(tmp_path):
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / "fine.py").write_text("from csboundary.errors import InputError\n")
     (tmp_path / "data" / "bad.py").write_text(
-        "def f():\n    from csboundary.pipeline.prediction.run import run_prediction\n"
+        "def f():\n    from csboundary.pipeline.jobs.prediction_run import run_prediction\n"
     )
     (tmp_path / "viz").mkdir()
     (tmp_path / "viz" / "peer.py").write_text("import csboundary.metrics.apls\n")
     assert upward_imports(tmp_path) == [
-        "data/bad.py:2 imports csboundary.pipeline.prediction.run: pipeline is not below data",
+        "data/bad.py:2 imports csboundary.pipeline.jobs.prediction_run: pipeline is not below data",
         "viz/peer.py:1 imports csboundary.metrics.apls: metrics is not below viz",
     ]
 

@@ -124,7 +124,7 @@ def evaluate_model(
         out_file(json_out, (".json",))
     readable_inputs([city])
     from csboundary.metrics.report import format_rows, write_scores
-    from csboundary.pipeline.evaluation.evaluate_set import evaluate_city
+    from csboundary.pipeline.prediction.city_scores import evaluate_city
     from csboundary.pipeline.prediction.patch import load_predictor
 
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)

@@ -77,9 +77,9 @@ def predict(
         raise typer.BadParameter("give --scheduler or --workers, not both")
     readable_inputs(inputs)
     out_dir(out, inputs)
+    from csboundary.pipeline.jobs.predict import predict_to_folder
+    from csboundary.pipeline.outputs.run_summary import counted, stage_table, written_files
     from csboundary.pipeline.prediction.patch import load_predictor
-    from csboundary.pipeline.prediction.predict import predict_to_folder
-    from csboundary.pipeline.prediction.run import counted, stage_table, written_files
 
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
 
@@ -142,8 +142,8 @@ def predict_patch(
     the maps and the graph over the image."""
     out_dir(out, [image] if image.is_dir() else [])
     readable_inputs([image])
+    from csboundary.pipeline.jobs.predict import predict_patch_to_folder
     from csboundary.pipeline.prediction.patch import load_predictor
-    from csboundary.pipeline.prediction.predict import predict_patch_to_folder
 
     predictor = load_predictor(weights, device, graph, fpn_weights=fpn_weights, engine=engine, precision=precision)
     drawn = predict_patch_to_folder(image, out, predictor, gsd)
@@ -355,9 +355,9 @@ def demo(
     against the ground truth at patch and city scale (OUT/scores.json) and prints the table.
     """
     from csboundary.metrics.report import format_rows
-    from csboundary.pipeline.demo import run_demo
+    from csboundary.pipeline.jobs.demo import run_demo
+    from csboundary.pipeline.outputs.run_summary import stage_table
     from csboundary.pipeline.prediction.patch import load_predictor
-    from csboundary.pipeline.prediction.run import stage_table
 
     out_dir(out)
     done = run_demo(out, load_predictor(None, device, engine=engine, precision=precision), seed)

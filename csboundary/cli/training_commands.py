@@ -134,7 +134,7 @@ def fit_confidence(
     from csboundary.data import city as layout
     from csboundary.metrics.confidence_quality import confidence_report
     from csboundary.models.checkpoint import shipped_weights
-    from csboundary.pipeline.evaluation.evaluate_set import set_cities
+    from csboundary.pipeline.prediction.city_scores import set_cities
     from csboundary.pipeline.prediction.patch import load_predictor
     from csboundary.pipeline.training.confidence_fit import fit_bundle_confidence
 
@@ -335,8 +335,8 @@ def evaluate_finetune(
 ) -> None:
     """What fine-tuning on a labelled set is worth: K-fold cross-validation, base against
     fine-tuned scores on every held-out city, with the 95 % interval of the gain."""
-    from csboundary.pipeline.training.finetune_cv import evaluate_finetune as run
-    from csboundary.pipeline.training.finetune_cv import format_finetune
+    from csboundary.pipeline.evaluation.finetune_cv import evaluate_finetune as run
+    from csboundary.pipeline.evaluation.finetune_cv import format_finetune
 
     out_dir(out, [set_dir])
     budget = _budget(

@@ -21,7 +21,7 @@ from csboundary.data import city as layout
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics import apls_paper_pairs
 from csboundary.metrics.apls import pair_costs
-from csboundary.pipeline.evaluation.evaluate_set import predicted_city, set_cities
+from csboundary.pipeline.prediction.city_scores import predicted_city, set_cities
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 COLUMNS = ("unmatched", "disconnected", "too long", "path cost")

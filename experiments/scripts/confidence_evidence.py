@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.data import city as layout
-from csboundary.pipeline.evaluation.evaluate_set import set_cities
+from csboundary.pipeline.prediction.city_scores import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.confidence_fit import city_edges
 

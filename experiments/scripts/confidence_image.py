@@ -30,7 +30,7 @@ from csboundary.graph.chains import edge_line
 from csboundary.graph.edge_evidence import FEATURES
 from csboundary.graph.polyline import points_along
 from csboundary.metrics.confidence_quality import TRUE_SHARE, confidence_report
-from csboundary.pipeline.evaluation.evaluate_set import set_cities
+from csboundary.pipeline.prediction.city_scores import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.confidence_fit import TREE_SHARE, city_edges
 

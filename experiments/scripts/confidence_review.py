@@ -22,7 +22,7 @@ from csboundary.data import city as layout
 from csboundary.metrics.confidence_quality import confidence_report
 from csboundary.models.checkpoint import load_checkpoint, shipped_weights
 from csboundary.models.confidence_model import EdgeConfidence
-from csboundary.pipeline.evaluation.evaluate_set import set_cities
+from csboundary.pipeline.prediction.city_scores import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.confidence_fit import city_edges
 

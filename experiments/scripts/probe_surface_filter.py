@@ -20,7 +20,8 @@ from probe_surface import SurfaceHead, fused_features  # noqa: E402
 
 from csboundary.data import city as layout  # noqa: E402
 from csboundary.models.maps import unit_bands  # noqa: E402
-from csboundary.pipeline.evaluation.evaluate_set import evaluate_city_dir, evaluate_set  # noqa: E402
+from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
+from csboundary.pipeline.prediction.city_scores import evaluate_city_dir
 from csboundary.pipeline.prediction.patch import PatchPredictor  # noqa: E402
 
 STATE = {"rule": "maxside", "threshold": 0.0, "offset": 8.0, "low": None}

@@ -25,9 +25,9 @@ def main() -> None:
     if "--one-thread" in sys.argv:
         torch.set_num_threads(1)  # ONNX Runtime's sessions take their thread count from it: the FPN on one core
     from csboundary.data.raster import Mosaic
+    from csboundary.pipeline.jobs.prediction_run import run_prediction
     from csboundary.pipeline.prediction import city, city_job
     from csboundary.pipeline.prediction.patch import PatchPredictor
-    from csboundary.pipeline.prediction.run import run_prediction
 
     moments: dict[str, float] = {}
     start = [0.0]

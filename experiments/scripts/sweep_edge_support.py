@@ -22,7 +22,8 @@ from pathlib import Path
 import torch
 
 from csboundary.data import city as layout
-from csboundary.pipeline.evaluation.evaluate_set import evaluate_city_dir, evaluate_set
+from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
+from csboundary.pipeline.prediction.city_scores import evaluate_city_dir
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 

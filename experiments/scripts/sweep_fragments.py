@@ -20,7 +20,7 @@ from csboundary.data import city as layout
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.fragments import drop_short_fragments
 from csboundary.metrics import evaluate
-from csboundary.pipeline.evaluation.evaluate_set import predicted_city, set_cities
+from csboundary.pipeline.prediction.city_scores import predicted_city, set_cities
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 

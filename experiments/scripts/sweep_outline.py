@@ -18,7 +18,8 @@ import time
 from pathlib import Path
 
 from csboundary.data import city as layout
-from csboundary.pipeline.evaluation.evaluate_set import evaluate_city_dir, evaluate_set
+from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
+from csboundary.pipeline.prediction.city_scores import evaluate_city_dir
 from csboundary.pipeline.prediction.patch import load_predictor
 
 

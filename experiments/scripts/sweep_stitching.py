@@ -24,8 +24,8 @@ from csboundary.data import city as layout
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig
 from csboundary.metrics import evaluate
-from csboundary.pipeline.evaluation.evaluate_set import predicted_city, set_cities
 from csboundary.pipeline.prediction.city import city_graph
+from csboundary.pipeline.prediction.city_scores import predicted_city, set_cities
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 FIELDS = ("mend_px", "border_px", "snap_px", "attach_px", "node_shared")

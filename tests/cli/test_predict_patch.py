@@ -271,8 +271,8 @@ def test_an_fpn_with_a_surface_head_writes_a_third_map_band_and_its_check_drops_
 
 def test_an_interrupted_predict_leaves_no_final_file(bundle, four_patch_city, tmp_path, monkeypatch):
     from csboundary.data.raster import Mosaic
+    from csboundary.pipeline.jobs import prediction_run as job
     from csboundary.pipeline.prediction import map_stitching
-    from csboundary.pipeline.prediction import run as job
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     out = tmp_path / "pred"

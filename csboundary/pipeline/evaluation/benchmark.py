@@ -288,7 +288,8 @@ def run_benchmark(
     from csboundary.data import city as layout
     from csboundary.data.ground_truth import read_ground_truth
     from csboundary.data.raster import Mosaic
-    from csboundary.pipeline.prediction.run import evaluate_run, run_prediction
+    from csboundary.pipeline.jobs.prediction_run import run_prediction
+    from csboundary.pipeline.prediction.city_scores import evaluate_run
 
     chosen = [m for m in METHODS if methods is None or m.key in methods]
     results: dict[str, dict] = {}

@@ -29,8 +29,8 @@ from csboundary.models.checkpoint import code_version, file_sha256, load_checkpo
 from csboundary.models.device import resolve_device
 from csboundary.models.training.self_training import AdaptConfig
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
-from csboundary.pipeline.evaluation.evaluate_set import set_cities
 from csboundary.pipeline.outputs.review import prediction_inputs
+from csboundary.pipeline.prediction.city_scores import set_cities
 from csboundary.pipeline.training.finetune import (
     FinetuneBudget,
     _train,

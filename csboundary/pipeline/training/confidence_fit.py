@@ -23,7 +23,7 @@ from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
 from csboundary.metrics.confidence_quality import TRUE_SHARE, edge_truth
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint
 from csboundary.models.confidence_model import EdgeConfidence, fit_edge_confidence
-from csboundary.pipeline.evaluation.evaluate_set import predicted_city
+from csboundary.pipeline.prediction.city_scores import predicted_city
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 TREE_SHARE = 0.7  # the trees learn to rank edges mostly on the ground truth; the calibration then targets TRUE_SHARE

@@ -17,8 +17,8 @@ from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.graph import BoundaryGraph
 from csboundary.pipeline.evaluation.oracle import OracleModel
+from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.outputs.prediction_files import EDGES_LAYER, read_prediction_graph
-from csboundary.pipeline.prediction.run import run_prediction
 
 
 @pytest.fixture(scope="module")

@@ -16,8 +16,8 @@ from csboundary.data import city as layout
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
+from csboundary.pipeline.jobs.predict import predict_patch_to_folder, predict_to_folder
 from csboundary.pipeline.prediction.patch import load_predictor
-from csboundary.pipeline.prediction.predict import predict_patch_to_folder, predict_to_folder
 
 
 @pytest.fixture(scope="module")

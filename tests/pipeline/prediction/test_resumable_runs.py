@@ -190,9 +190,9 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
 
     from csboundary.data.raster import Mosaic
     from csboundary.models.checkpoint import file_sha256, shipped_weights
+    from csboundary.pipeline.jobs.prediction_run import run_prediction
     from csboundary.pipeline.prediction.distributed import dask_executor
     from csboundary.pipeline.prediction.patch import PatchPredictor
-    from csboundary.pipeline.prediction.run import run_prediction
 
     predictor = PatchPredictor.load(None, torch.device("cpu"))
     # the precision the command line chose for the reference on this machine (--precision auto), and its engine:

@@ -23,7 +23,7 @@ from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.fpn import fpn_loss
 from csboundary.pipeline.outputs.prediction_files import write_graph_outputs
 from csboundary.pipeline.outputs.review import apply_review
-from csboundary.pipeline.training.finetune_cv import folds_of
+from csboundary.pipeline.evaluation.finetune_cv import folds_of
 from csboundary.pipeline.training.labelled_inputs import labelled_cities
 
 SIZE = 600
@@ -261,7 +261,7 @@ def test_cross_validation_scores_every_city_once_by_a_bundle_that_never_trained_
     """The folds' bookkeeping, with fine-tuning and scoring stood in for: each held-out city is
     scored by its own fold's bundle, the means and gains are over all cities, and a finished fold
     is read back instead of being run again."""
-    import csboundary.pipeline.training.finetune_cv as cv
+    import csboundary.pipeline.evaluation.finetune_cv as cv
     from csboundary.data.synth.city import synthesize_city as synth
 
     for name in "abcd":

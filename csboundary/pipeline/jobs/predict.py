@@ -19,9 +19,9 @@ from csboundary.data.model_view import ModelInput, model_view
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph import BoundaryGraph
 from csboundary.models.checkpoint import file_sha256, shipped_weights
+from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.prediction.city import predict_city
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import run_prediction
 from csboundary.viz.labels import draw_patch_labels
 from csboundary.viz.overlay import to_display, write_png
 

@@ -18,7 +18,7 @@ from csboundary.data.folder_lock import locked_folder
 from csboundary.errors import InputError
 from csboundary.metrics.compare import paired_bootstrap
 from csboundary.models.checkpoint import shipped_weights
-from csboundary.pipeline.evaluation.evaluate_set import evaluate_city_dir, score_value, set_cities
+from csboundary.pipeline.prediction.city_scores import evaluate_city_dir, score_value, set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
 

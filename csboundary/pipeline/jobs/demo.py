@@ -10,8 +10,9 @@ from csboundary.data.inputs import open_imagery
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.metrics.report import write_scores
+from csboundary.pipeline.jobs.prediction_run import run_prediction
+from csboundary.pipeline.prediction.city_scores import evaluate_run
 from csboundary.pipeline.prediction.patch import PatchPredictor
-from csboundary.pipeline.prediction.run import evaluate_run, run_prediction
 
 TILES = (2, 2)  # 2x2 tiles of 1500 px: a 3000 px city, 3x3 patches
 TILE_SIZE = 1500
