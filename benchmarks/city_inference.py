@@ -25,6 +25,7 @@ from csboundary.pipeline.evaluation.oracle import OracleModel
 from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.outputs.run_summary import stage_table
 from csboundary.pipeline.prediction.city_scores import evaluate_run
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
@@ -51,7 +52,12 @@ def main() -> None:
             "city": args.city,
         }
         result, summary = run_prediction(
-            mosaic, model, args.out, batch_size=args.batch_size, settings=settings, ground_truth=lines
+            mosaic,
+            model,
+            args.out,
+            PredictionOptions(batch_size=args.batch_size),
+            settings=settings,
+            ground_truth=lines,
         )
     scores = evaluate_run(result, lines, seed=args.seed)
     write_scores(f"{args.out}/scores.json", scores)

@@ -24,10 +24,11 @@ from csboundary.data.raster import Mosaic
 from csboundary.models.device import resolve_device
 from csboundary.pipeline.prediction.patch import PatchPredictor
 from csboundary.pipeline.jobs.prediction_run import run_prediction
+from csboundary.pipeline.prediction.options import PredictionOptions
 start = time.perf_counter()
 with Mosaic.open(sys.argv[1]) as mosaic:
     _, summary = run_prediction(mosaic, PatchPredictor.load(None, resolve_device("cpu")), sys.argv[2],
-                                progress=False, keep_graphs=False)
+                                PredictionOptions(progress=False), keep_graphs=False)
 print(json.dumps({"peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "peak_rss_prediction_mb": summary["peak_rss_mb"]["prediction"],
                   "map_store_peak_mb": summary["map_store_peak_mb"], "patches": summary["patches"],

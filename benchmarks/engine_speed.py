@@ -33,6 +33,7 @@ from csboundary.data.grid import PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.outputs.run_summary import stage_table
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
@@ -109,7 +110,9 @@ def main() -> None:
             fpn, fpn_cores = fpn_only(predictor, images, args.repeat)
             out = Path(tmp) / engine
             cores = time.process_time()
-            _, summary = run_prediction(mosaic, predictor, out, progress=False, settings={"engine": engine})
+            _, summary = run_prediction(
+                mosaic, predictor, out, PredictionOptions(progress=False), settings={"engine": engine}
+            )
             n = summary["patches"]
             total, run_cores = summary["seconds"]["total"] / n, (time.process_time() - cores) / n
             rows[engine] = (fpn, total, summary, (out / "graph.json").read_bytes())

@@ -29,6 +29,7 @@ from csboundary.data.grid import PatchGrid
 from csboundary.data.nodata import fill_nodata
 from csboundary.data.raster import Mosaic
 from csboundary.pipeline.jobs.prediction_run import run_prediction
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
@@ -100,10 +101,10 @@ def main() -> None:
             read = mosaic.read(patch.expanded)
             maps[patch.index] = predictor.patch_maps([patch], [fill_nodata(read.data, read.valid)])[0]
         model = StoredMaps(predictor, maps)
-        run_prediction(mosaic, model, Path(tmp) / "warm", progress=False, settings={})
+        run_prediction(mosaic, model, Path(tmp) / "warm", PredictionOptions(progress=False), settings={})
         clock = ThreadClock()
         start, cores = time.perf_counter(), time.process_time()
-        _, summary = run_prediction(mosaic, model, Path(tmp) / "run", progress=False, settings={})
+        _, summary = run_prediction(mosaic, model, Path(tmp) / "run", PredictionOptions(progress=False), settings={})
         wall, cores = time.perf_counter() - start, time.process_time() - cores
         threads = clock.stop()
     n = summary["patches"]

@@ -11,17 +11,20 @@ back as a :class:`~csboundary.graph.BoundaryGraph`). Bad input raises
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Sequence
 
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.settings import GraphOverrides, GraphSettings
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 __all__ = [
     "GraphOverrides",
     "GraphSettings",
+    "PredictionOptions",
     "adapt",
     "evaluate",
     "evaluate_model",
@@ -55,19 +58,20 @@ def predict(
     imagery: str | Path | Sequence[str | Path],
     out: str | Path,
     model: PatchPredictor | None = None,
-    *,
-    progress: bool = False,
-    **options,
+    options: PredictionOptions | None = None,
+    **changes,
 ) -> dict:
     """Predict a city (GeoTIFF tiles, a folder of them or a city folder) into the folder ``out``
-    and return its ``summary.json``; ``model`` defaults to :func:`load_model`. ``options`` are
-    :func:`csboundary.pipeline.jobs.predict.predict_to_folder`'s (``gsd``, ``batch_size``,
-    ``write_maps``, ``lanelet2``, ``restart``, ``workers``, ...). A run stopped part-way is
-    continued by the same call."""
+    and return its ``summary.json``; ``model`` defaults to :func:`load_model`. ``options`` (a
+    :class:`PredictionOptions`; default: the command's, without progress bars) say how, and
+    ``changes`` replace some of them by name (``gsd``, ``batch_size``, ``write_maps``,
+    ``lanelet2``, ``restart``, ``workers``, ...). A run stopped part-way is continued by the same
+    call."""
     from csboundary.pipeline.jobs.predict import predict_to_folder
 
     inputs = [imagery] if isinstance(imagery, (str, Path)) else list(imagery)
-    return predict_to_folder(inputs, out, _model(model), progress=progress, **options)
+    options = dataclasses.replace(options or PredictionOptions(progress=False), **changes)
+    return predict_to_folder(inputs, out, _model(model), options)
 
 
 def predict_patch(

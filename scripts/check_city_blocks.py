@@ -30,6 +30,7 @@ from csboundary.pipeline.prediction.city import predict_city  # noqa: E402
 from csboundary.pipeline.prediction.city_blocks import CityGraphRecipe, stream_city_graph  # noqa: E402
 from csboundary.pipeline.prediction.city_job import DEFAULT_CHANNELS  # noqa: E402
 from csboundary.pipeline.prediction.edge_scoring import core_sampler  # noqa: E402
+from csboundary.pipeline.prediction.options import PredictionOptions  # noqa: E402
 from csboundary.pipeline.prediction.patch import load_predictor  # noqa: E402
 from csboundary.pipeline.prediction.run_store import RunStore  # noqa: E402
 
@@ -78,7 +79,7 @@ def main() -> None:
     for city in args.cities:
         with Mosaic.open(layout.tiles_dir(city)) as mosaic:
             store = RunStore()
-            result = predict_city(mosaic, model, progress=False, store=store)
+            result = predict_city(mosaic, model, PredictionOptions(progress=False), store=store)
             store.mosaic = mosaic
             for block in args.blocks:
                 with tempfile.TemporaryDirectory() as a, tempfile.TemporaryDirectory() as b:

@@ -79,6 +79,7 @@ def predict(
     out_dir(out, inputs)
     from csboundary.pipeline.jobs.predict import predict_to_folder
     from csboundary.pipeline.outputs.run_summary import counted, stage_table, written_files
+    from csboundary.pipeline.prediction.options import PredictionOptions
     from csboundary.pipeline.prediction.patch import load_predictor
 
     predictor = load_predictor(weights, device, graph, engine=engine, precision=precision)
@@ -96,22 +97,18 @@ def predict(
             err=True,
         )
 
-    summary = predict_to_folder(
-        inputs,
-        out,
-        predictor,
-        weights=weights,
+    options = PredictionOptions(
         gsd=gsd,
         batch_size=batch_size,
+        threads=threads,
+        scheduler=scheduler,
+        workers=workers,
         write_maps=write_maps,
         lanelet2=lanelet2,
         restart=restart,
-        scheduler=scheduler,
-        workers=workers,
-        threads=threads,
         progress=not quiet,
-        on_plan=announce,
     )
+    summary = predict_to_folder(inputs, out, predictor, options, weights=weights, on_plan=announce)
     c = summary["counts"]
     typer.echo(
         f"{out}: {counted(c['edges'], 'edge')}, {counted(c['vertices'], 'vertex', 'vertices')}, {c['boundary_km']} km of boundary\n"

@@ -21,11 +21,15 @@ within ``match_px``), and every coordinate must be a pair of finite numbers insi
 transit are refused (:class:`EditError`) instead of changing the wrong edge.
 
 :func:`apply_edits` is pure: it returns the new graph and a record of what changed, with the
-old and new edge indices of every edge that was kept.
+old and new edge indices of every edge that was kept. It takes three steps, so each can be read
+(and tested) alone: :func:`parse_edit` reads a feature into an :class:`Edit`, :func:`check_edits`
+checks the edits against the graph into :class:`CheckedEdits` (indices and graph pixels) and
+:func:`apply_checked` makes the new graph from them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +70,32 @@ class ReviewRecord:
 EXTENT_MARGIN_PX = 100.0  # edits may reach this far beyond the imagery
 
 
+@dataclass(frozen=True)
+class Edit:
+    """One feature of the edit log as read: nothing in it is trusted yet (:func:`check_edits` does that)."""
+
+    number: int  # its place in the log, to name it in errors
+    action: object  # as given
+    index: object  # the ``vertex`` property of a ``move``, the ``edge`` property of any other action, as given
+    shape: object  # the geometry's ``type``
+    coordinates: object  # the geometry's ``coordinates``, as given
+
+    @property
+    def what(self) -> str:
+        return f"edit {self.number} ({self.action})"
+
+
+@dataclass(frozen=True)
+class CheckedEdits:
+    """A log's edits once checked against the graph: indices that exist and positions in graph pixels."""
+
+    deleted: frozenset[int] = frozenset()  # edge indices
+    accepted: frozenset[int] = frozenset()  # edge indices
+    moves: tuple[tuple[int, np.ndarray], ...] = ()  # (vertex, its new (2,) place), in log order: the last one wins
+    added: tuple[np.ndarray, ...] = ()  # (N, 2) lines, N >= 2, in log order
+    areas: tuple[list[list[float]], ...] = ()  # closed rings in the graph's CRS
+
+
 def apply_edits(
     graph: BoundaryGraph,
     features: list[dict],
@@ -78,154 +108,202 @@ def apply_edits(
     around) is where edits may lie, :data:`EXTENT_MARGIN_PX` beyond it."""
     if graph.transform is None:
         raise EditError("the graph has no transform: world coordinates of the edits cannot be placed")
-    if extent is None:
-        low, high = (
-            (graph.vertices.min(axis=0), graph.vertices.max(axis=0)) if graph.n_vertices else (np.zeros(2), np.zeros(2))
-        )
-        extent = (low[0] - 1000, low[1] - 1000, high[0] + 1000, high[1] + 1000)
-    vertices = graph.vertices.copy()
-    n_edges = graph.n_edges
-    kinds = list(graph.edge_kinds or ["normal"] * n_edges)
-    polylines = list(graph.edge_polylines or [None] * n_edges)
-    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(n_edges, np.nan), float).copy()
-    patches = np.asarray(
-        graph.edge_patches if graph.edge_patches is not None else np.full((n_edges, 2), -1), np.int64
-    ).copy()
-    vertex_kinds = list(graph.vertex_kinds or ["vertex"] * graph.n_vertices)
-    edges = [tuple(int(x) for x in e) for e in graph.edges]
-    deleted, accepted, moved = set(), set(), []
-    added: list[np.ndarray] = []
-    areas: list[list[list[float]]] = []
+    # parsed one at a time as they are checked, so the first bad feature of the log is the one refused
+    edits = (parse_edit(number, feature) for number, feature in enumerate(features))
+    checked = check_edits(graph, edits, _default_extent(graph) if extent is None else extent, match_px)
+    return apply_checked(graph, checked, snap_px)
 
-    def pixels(coordinates, what: str, points: bool = True) -> np.ndarray:
-        """(N, 2) graph pixels of GeoJSON positions (a Point's one position when not ``points``)."""
-        rows = coordinates if points else [coordinates]
-        try:
-            if not isinstance(rows, list) or not all(isinstance(p, list) and len(p) >= 2 for p in rows):
-                raise ValueError
-            xy = np.array(
-                [[float(p[0]), float(p[1])] for p in rows if not any(isinstance(v, bool) for v in p[:2])], float
-            )
-            if len(xy) != len(rows):
-                raise ValueError
-        except (TypeError, ValueError):
-            raise EditError(f"{what}: coordinates are not two numbers per position") from None
-        if not np.isfinite(xy).all():
-            raise EditError(f"{what}: coordinates are not finite")
-        cols, rows_px = world_to_pixel(graph.transform, xy[:, 0], xy[:, 1])
-        px = np.stack([np.asarray(cols, float), np.asarray(rows_px, float)], axis=-1)
-        m = EXTENT_MARGIN_PX
-        inside = (
-            (px[:, 0] >= extent[0] - m)
-            & (px[:, 0] <= extent[2] + m)
-            & (px[:, 1] >= extent[1] - m)
-            & (px[:, 1] <= extent[3] + m)
-        )
-        if not (np.isfinite(px).all() and inside.all()):
-            crs = f" ({graph.crs})" if graph.crs else ""
-            raise EditError(f"{what}: coordinates lie outside the imagery: are they in the prediction's CRS{crs}?")
-        return px
 
-    def edge_index(props: dict, geometry: dict, what: str) -> int:
-        k = props.get("edge")
-        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < n_edges:
-            raise EditError(f"{what}: edge {k!r} is not an edge of the graph (0..{n_edges - 1})")
-        if geometry.get("type") != "LineString":
-            raise EditError(
-                f"{what}: no geometry of edge {k} to check it against (export the edits from the review page)"
-            )
-        line = pixels(geometry.get("coordinates"), what)
-        if len(line) < 2:
-            raise EditError(f"{what}: the geometry of edge {k} needs at least 2 positions")
-        ends = edge_line(graph, k)[[0, -1]]
-        gap = min(np.abs(line[[0, -1]] - ends).max(), np.abs(line[[-1, 0]] - ends).max())
-        if gap > match_px:
-            raise EditError(
-                f"{what}: its geometry does not match edge {k} (ends {gap:.1f} px apart): "
-                "the edits were made on another graph"
-            )
-        return k
+def _default_extent(graph: BoundaryGraph) -> tuple[float, float, float, float]:
+    """The graph's vertices with 1000 px around: where edits may lie when the imagery is not known."""
+    low, high = (
+        (graph.vertices.min(axis=0), graph.vertices.max(axis=0)) if graph.n_vertices else (np.zeros(2), np.zeros(2))
+    )
+    return (low[0] - 1000, low[1] - 1000, high[0] + 1000, high[1] + 1000)
 
-    for number, feature in enumerate(features):
-        if not isinstance(feature, dict):
-            raise EditError(f"edit {number}: not a GeoJSON feature")
-        props = feature.get("properties") or {}
-        geometry = feature.get("geometry") or {}
-        if not isinstance(props, dict) or not isinstance(geometry, dict):
-            raise EditError(f"edit {number}: properties and geometry must be objects")
-        action = props.get("action")
-        what = f"edit {number} ({action})"
-        if action == "delete":
-            deleted.add(edge_index(props, geometry, what))
-        elif action == "accept":
-            accepted.add(edge_index(props, geometry, what))
-        elif action == "move":
-            i = props.get("vertex")
-            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(vertices):
-                raise EditError(f"{what}: vertex {i!r} is not a vertex of the graph")
-            if geometry.get("type") != "Point":
-                raise EditError(f"{what}: needs a Point geometry")
-            vertices[i] = pixels(geometry.get("coordinates"), what, points=False)[0]
-            moved.append(i)
-        elif action == "add":
-            if geometry.get("type") != "LineString":
-                raise EditError(f"{what}: needs a LineString geometry")
-            line = pixels(geometry.get("coordinates"), what)
-            if len(line) < 2:
-                raise EditError(f"{what}: needs a LineString of at least 2 positions")
-            added.append(line)
-        elif action == "complete":
-            areas.append(_complete_ring(geometry, what, pixels, extent))
+
+# --- parse: a feature read into an Edit ---
+
+
+def parse_edit(number: int, feature: object) -> Edit:
+    """The edit of the ``number``-th feature; only that it is a feature with object parts is
+    checked here, its content is checked against the graph by :func:`check_edits`."""
+    if not isinstance(feature, dict):
+        raise EditError(f"edit {number}: not a GeoJSON feature")
+    props = feature.get("properties") or {}
+    geometry = feature.get("geometry") or {}
+    if not isinstance(props, dict) or not isinstance(geometry, dict):
+        raise EditError(f"edit {number}: properties and geometry must be objects")
+    action = props.get("action")
+    index = props.get("vertex" if action == "move" else "edge")
+    return Edit(number, action, index, geometry.get("type"), geometry.get("coordinates"))
+
+
+# --- check: the edits against the graph ---
+
+
+def check_edits(
+    graph: BoundaryGraph, edits: Iterable[Edit], extent: tuple[float, float, float, float], match_px: float = 1.0
+) -> CheckedEdits:
+    """``edits`` checked in log order (the first bad one raises :class:`EditError`); ``extent``
+    and ``match_px`` as for :func:`apply_edits`. ``graph`` needs a transform."""
+    found: dict[str, list] = {action: [] for action in ACTIONS}
+    for edit in edits:
+        if edit.action in ("delete", "accept"):
+            found[edit.action].append(_checked_edge(edit, graph, extent, match_px))
+        elif edit.action == "move":
+            found["move"].append(_checked_move(edit, graph, extent))
+        elif edit.action == "add":
+            found["add"].append(_checked_line(edit, graph, extent))
+        elif edit.action == "complete":
+            found["complete"].append(_complete_ring(edit, graph, extent))
         else:
-            raise EditError(f"{what}: unknown action (one of {', '.join(ACTIONS)})")
+            raise EditError(f"{edit.what}: unknown action (one of {', '.join(ACTIONS)})")
+    return CheckedEdits(
+        deleted=frozenset(found["delete"]),
+        accepted=frozenset(found["accept"]),
+        moves=tuple(found["move"]),
+        added=tuple(found["add"]),
+        areas=tuple(found["complete"]),
+    )
 
-    # moved vertices carry the ends of their edges' polylines
-    for k, (u, v) in enumerate(edges):
-        if polylines[k] is not None and (u in moved or v in moved):
-            line = np.asarray(polylines[k], float).copy()
-            line[0], line[-1] = vertices[u], vertices[v]
-            polylines[k] = line
 
-    record = ReviewRecord(deleted=sorted(deleted), moved=sorted(set(moved)), complete_areas=areas)
-    new_edges, new_kinds, new_lines, new_scores, new_patches = [], [], [], [], []
-    for k in range(n_edges):
-        if k in deleted:
-            continue
-        record.kept[k] = len(new_edges)
-        new_edges.append(edges[k])
-        new_kinds.append(kinds[k])
-        new_lines.append(polylines[k])
-        new_scores.append(scores[k])
-        new_patches.append(patches[k])
-    record.accepted = sorted(record.kept[k] for k in accepted if k in record.kept)
+def _pixels(
+    coordinates: object, what: str, graph: BoundaryGraph, extent: tuple[float, float, float, float]
+) -> np.ndarray:
+    """(N, 2) graph pixels of GeoJSON positions, refused unless each is two finite numbers that
+    land on the imagery: a damaged file or one in another CRS must not move anything."""
+    try:
+        if not isinstance(coordinates, list) or not all(isinstance(p, list) and len(p) >= 2 for p in coordinates):
+            raise ValueError
+        xy = np.array(
+            [[float(p[0]), float(p[1])] for p in coordinates if not any(isinstance(v, bool) for v in p[:2])], float
+        )
+        if len(xy) != len(coordinates):
+            raise ValueError
+    except (TypeError, ValueError):
+        raise EditError(f"{what}: coordinates are not two numbers per position") from None
+    if not np.isfinite(xy).all():
+        raise EditError(f"{what}: coordinates are not finite")
+    cols, rows = world_to_pixel(graph.transform, xy[:, 0], xy[:, 1])
+    px = np.stack([np.asarray(cols, float), np.asarray(rows, float)], axis=-1)
+    m = EXTENT_MARGIN_PX
+    inside = (
+        (px[:, 0] >= extent[0] - m)
+        & (px[:, 0] <= extent[2] + m)
+        & (px[:, 1] >= extent[1] - m)
+        & (px[:, 1] <= extent[3] + m)
+    )
+    if not (np.isfinite(px).all() and inside.all()):
+        crs = f" ({graph.crs})" if graph.crs else ""
+        raise EditError(f"{what}: coordinates lie outside the imagery: are they in the prediction's CRS{crs}?")
+    return px
 
-    def vertex_at(point: np.ndarray) -> int:
-        nonlocal vertices
-        if len(vertices):
-            d = np.linalg.norm(vertices - point, axis=1)
-            if d.min() <= snap_px:
-                return int(d.argmin())
-        vertices = np.vstack([vertices, point[None]])
-        vertex_kinds.append(MANUAL)
-        return len(vertices) - 1
 
-    for line in added:
-        u, v = vertex_at(line[0]), vertex_at(line[-1])
-        if u == v:
-            raise EditError("an added edge starts and ends on the same vertex")
-        line = line.copy()
-        line[0], line[-1] = vertices[u], vertices[v]
+def _checked_edge(edit: Edit, graph: BoundaryGraph, extent: tuple[float, float, float, float], match_px: float) -> int:
+    """The edge a ``delete`` or ``accept`` names, once its geometry shows it is that edge of this
+    graph (its ends within ``match_px``, either way round): an index alone could name any edge."""
+    k, n_edges = edit.index, graph.n_edges
+    if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < n_edges:
+        raise EditError(f"{edit.what}: edge {k!r} is not an edge of the graph (0..{n_edges - 1})")
+    if edit.shape != "LineString":
+        raise EditError(
+            f"{edit.what}: no geometry of edge {k} to check it against (export the edits from the review page)"
+        )
+    line = _pixels(edit.coordinates, edit.what, graph, extent)
+    if len(line) < 2:
+        raise EditError(f"{edit.what}: the geometry of edge {k} needs at least 2 positions")
+    ends = edge_line(graph, k)[[0, -1]]
+    gap = min(np.abs(line[[0, -1]] - ends).max(), np.abs(line[[-1, 0]] - ends).max())
+    if gap > match_px:
+        raise EditError(
+            f"{edit.what}: its geometry does not match edge {k} (ends {gap:.1f} px apart): "
+            "the edits were made on another graph"
+        )
+    return k
+
+
+def _checked_move(
+    edit: Edit, graph: BoundaryGraph, extent: tuple[float, float, float, float]
+) -> tuple[int, np.ndarray]:
+    """The vertex a ``move`` names and its new place in graph pixels."""
+    i = edit.index
+    if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(graph.vertices):
+        raise EditError(f"{edit.what}: vertex {i!r} is not a vertex of the graph")
+    if edit.shape != "Point":
+        raise EditError(f"{edit.what}: needs a Point geometry")
+    return i, _pixels([edit.coordinates], edit.what, graph, extent)[0]
+
+
+def _checked_line(edit: Edit, graph: BoundaryGraph, extent: tuple[float, float, float, float]) -> np.ndarray:
+    """The line of an ``add`` in graph pixels."""
+    if edit.shape != "LineString":
+        raise EditError(f"{edit.what}: needs a LineString geometry")
+    line = _pixels(edit.coordinates, edit.what, graph, extent)
+    if len(line) < 2:
+        raise EditError(f"{edit.what}: needs a LineString of at least 2 positions")
+    return line
+
+
+def _complete_ring(edit: Edit, graph: BoundaryGraph, extent: tuple[float, float, float, float]) -> list[list[float]]:
+    """The outer ring of a ``complete`` edit's Polygon in world coordinates, closed, checked to
+    lie on the imagery, to enclose an area and to cover at least a pixel of the imagery itself,
+    not only the margin around it (fine-tuning labels nothing there)."""
+    rings = edit.coordinates if edit.shape == "Polygon" else None
+    if not isinstance(rings, list) or not rings:
+        raise EditError(f"{edit.what}: needs a Polygon geometry")
+    ring = _pixels(rings[0], edit.what, graph, extent)
+    if len(ring) < 3 or not Polygon(ring).is_valid or Polygon(ring).area < 1.0:
+        raise EditError(
+            f"{edit.what}: the polygon needs 3 corners around an area of at least one pixel, without crossing itself"
+        )
+    if Polygon(ring).intersection(box(*extent)).area < 1.0:
+        raise EditError(f"{edit.what}: the polygon covers no pixel of the imagery, only the margin around it")
+    world = [[float(x), float(y)] for x, y in (p[:2] for p in rings[0])]
+    return world if world[0] == world[-1] else [*world, world[0]]
+
+
+# --- apply: the checked edits make the new graph ---
+
+
+def apply_checked(
+    graph: BoundaryGraph, edits: CheckedEdits, snap_px: float = 1.0
+) -> tuple[BoundaryGraph, ReviewRecord]:
+    """The new graph and its record: kept edges first, in their old order, then the added ones in
+    log order, whose ends join vertices within ``snap_px`` (earlier added ends included)."""
+    vertices = graph.vertices.copy()
+    for i, place in edits.moves:
+        vertices[i] = place
+    n = graph.n_edges
+    edges = [tuple(int(x) for x in e) for e in graph.edges]
+    polylines = _follow_moves(list(graph.edge_polylines or [None] * n), edges, vertices, {i for i, _ in edits.moves})
+    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(n, np.nan), float)
+    patches = np.asarray(graph.edge_patches if graph.edge_patches is not None else np.full((n, 2), -1), np.int64)
+    kinds = list(graph.edge_kinds or ["normal"] * n)
+    kept = {k: new for new, k in enumerate(k for k in range(n) if k not in edits.deleted)}
+    new_edges = [edges[k] for k in kept]
+    new_kinds, new_lines = [kinds[k] for k in kept], [polylines[k] for k in kept]
+    new_scores, new_patches = [scores[k] for k in kept], [patches[k] for k in kept]
+    record = ReviewRecord(
+        deleted=sorted(edits.deleted),
+        accepted=sorted(kept[k] for k in edits.accepted if k in kept),
+        moved=sorted({i for i, _ in edits.moves}),
+        kept=kept,
+        complete_areas=list(edits.areas),
+    )
+    vertices, added = _join_lines(vertices, edits.added, snap_px)
+    for u, v, line in added:
         record.added.append(len(new_edges))
         new_edges.append((u, v))
         new_kinds.append(MANUAL)
         new_lines.append(line if len(line) > 2 else None)
         new_scores.append(1.0)
         new_patches.append(np.array([-1, -1]))
-
     result = BoundaryGraph(
         vertices,
         np.array(new_edges, np.int64).reshape(-1, 2),
-        vertex_kinds=vertex_kinds,
+        vertex_kinds=list(graph.vertex_kinds or ["vertex"] * graph.n_vertices)
+        + [MANUAL] * (len(vertices) - len(graph.vertices)),
         edge_kinds=new_kinds,
         edge_polylines=new_lines,
         edge_scores=np.array(new_scores, float),
@@ -236,19 +314,42 @@ def apply_edits(
     return result, record
 
 
-def _complete_ring(geometry: dict, what: str, pixels, extent: tuple[float, float, float, float]) -> list[list[float]]:
-    """The outer ring of a ``complete`` edit's Polygon in world coordinates, closed, checked to
-    lie on the imagery (``pixels`` raises otherwise), to enclose an area and to cover at least a
-    pixel of the imagery itself, not only the margin around it (fine-tuning labels nothing there)."""
-    rings = geometry.get("coordinates") if geometry.get("type") == "Polygon" else None
-    if not isinstance(rings, list) or not rings:
-        raise EditError(f"{what}: needs a Polygon geometry")
-    ring = pixels(rings[0], what)
-    if len(ring) < 3 or not Polygon(ring).is_valid or Polygon(ring).area < 1.0:
-        raise EditError(
-            f"{what}: the polygon needs 3 corners around an area of at least one pixel, without crossing itself"
-        )
-    if Polygon(ring).intersection(box(*extent)).area < 1.0:
-        raise EditError(f"{what}: the polygon covers no pixel of the imagery, only the margin around it")
-    world = [[float(x), float(y)] for x, y in (p[:2] for p in rings[0])]
-    return world if world[0] == world[-1] else [*world, world[0]]
+def _with_ends(line: object, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """A float copy of ``line`` from ``start`` to ``end``: the caller's line stays as it was."""
+    line = np.asarray(line, float).copy()
+    line[0], line[-1] = start, end
+    return line
+
+
+def _follow_moves(
+    polylines: list[np.ndarray | None], edges: list[tuple[int, int]], vertices: np.ndarray, moved: set[int]
+) -> list[np.ndarray | None]:
+    """``polylines`` whose ends follow the moved vertices of their edges (new arrays: the graph's stay)."""
+    return [
+        line if line is None or (u not in moved and v not in moved) else _with_ends(line, vertices[u], vertices[v])
+        for line, (u, v) in zip(polylines, edges)
+    ]
+
+
+def _join_lines(
+    vertices: np.ndarray, lines: tuple[np.ndarray, ...], snap_px: float
+) -> tuple[np.ndarray, list[tuple[int, int, np.ndarray]]]:
+    """``vertices`` with the new ends of ``lines``, and each line as (u, v, line with its ends on
+    u and v); an end within ``snap_px`` of a vertex (an earlier line's new end included) joins it."""
+    joined = []
+    for line in lines:
+        vertices, u = _vertex_at(vertices, line[0], snap_px)
+        vertices, v = _vertex_at(vertices, line[-1], snap_px)
+        if u == v:
+            raise EditError("an added edge starts and ends on the same vertex")
+        joined.append((u, v, _with_ends(line, vertices[u], vertices[v])))
+    return vertices, joined
+
+
+def _vertex_at(vertices: np.ndarray, point: np.ndarray, snap_px: float) -> tuple[np.ndarray, int]:
+    """The nearest vertex within ``snap_px`` of ``point``, else ``vertices`` with ``point`` appended and its index."""
+    if len(vertices):
+        d = np.linalg.norm(vertices - point, axis=1)
+        if d.min() <= snap_px:
+            return vertices, int(d.argmin())
+    return np.vstack([vertices, point[None]]), len(vertices)

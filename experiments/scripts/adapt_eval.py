@@ -25,10 +25,10 @@ from csboundary.metrics.compare import paired_bootstrap
 from csboundary.metrics.confidence_quality import TRUE_SHARE, edge_truth, roc_auc
 from csboundary.models.checkpoint import shipped_weights
 from csboundary.models.training.self_training import AdaptConfig
+from csboundary.pipeline.evaluation.finetune_cv import folds_of
 from csboundary.pipeline.prediction.city_scores import evaluate_run, predicted_city, score_value, set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.adapt import AdaptBudget, adapt
-from csboundary.pipeline.evaluation.finetune_cv import folds_of
 
 COMPARED = ("f1@5", "precision@5", "recall@5", "apls", "tlts")
 

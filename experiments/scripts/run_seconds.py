@@ -27,6 +27,7 @@ def main() -> None:
     from csboundary.data.raster import Mosaic
     from csboundary.pipeline.jobs.prediction_run import run_prediction
     from csboundary.pipeline.prediction import city, city_job
+    from csboundary.pipeline.prediction.options import PredictionOptions
     from csboundary.pipeline.prediction.patch import PatchPredictor
 
     moments: dict[str, float] = {}
@@ -50,10 +51,10 @@ def main() -> None:
     predictor.use_precision(precision)
     predictor.use_engine("onnx", None)
     with Mosaic.open(town / "tiles") as mosaic, tempfile.TemporaryDirectory() as tmp:
-        run_prediction(mosaic, predictor, Path(tmp) / "warm-up", progress=False)
+        run_prediction(mosaic, predictor, Path(tmp) / "warm-up", PredictionOptions(progress=False))
         moments.clear()
         start[0] = time.perf_counter()
-        _, summary = run_prediction(mosaic, predictor, Path(tmp) / "run", progress=False)
+        _, summary = run_prediction(mosaic, predictor, Path(tmp) / "run", PredictionOptions(progress=False))
         print(
             json.dumps(
                 {

@@ -10,6 +10,7 @@ import torch
 from csboundary.models.afanet import AfANet, AfANetConfig
 from csboundary.models.checkpoint import save_checkpoint
 from csboundary.models.fpn import FPN, FPNConfig
+from csboundary.pipeline.prediction.options import PredictionOptions
 from helpers import run_cli
 
 run = run_cli
@@ -290,7 +291,7 @@ def test_an_interrupted_predict_leaves_no_final_file(bundle, four_patch_city, tm
     monkeypatch.setattr(map_stitching.WindowSchedule, "add_maps", add_then_interrupt)
     predictor = PatchPredictor.load(bundle, torch.device("cpu"))
     with Mosaic.open(four_patch_city / "tiles") as mosaic, pytest.raises(KeyboardInterrupt):
-        job.run_prediction(mosaic, predictor, out, write_maps=True, progress=False)
+        job.run_prediction(mosaic, predictor, out, PredictionOptions(write_maps=True, progress=False))
     assert [p.name for p in out.iterdir()] == [
         ".csboundary-run"
     ]  # no outputs, no scratch maps, no stale summary; the work kept

@@ -1,5 +1,5 @@
-"""Mosaic opening, validation and windowed reading (csboundary.data.raster), plus the GeoTIFF writer
-and the atomic writer it relies on."""
+"""Mosaic opening, validation and windowed reading (csboundary.data.raster and .raster_files), plus
+the GeoTIFF writer and the atomic writer it relies on."""
 
 from __future__ import annotations
 
@@ -17,9 +17,11 @@ from hypothesis import strategies as st
 
 from csboundary.data.atomic import atomic_path
 from csboundary.data.geotiff import BAND_NAMES, write_geotiff
-from csboundary.data.raster import Mosaic, find_rasters
+from csboundary.data.raster import Mosaic
+from csboundary.data.raster_files import find_rasters
 from csboundary.data.windows import PixelWindow
 from csboundary.errors import InputError, InputWarning
+from csboundary.pipeline.prediction.options import PredictionOptions
 
 X0, Y0 = ORIGIN
 
@@ -637,7 +639,7 @@ def test_patches_without_imagery_skip_the_model(tmp_path):
 
     model = Counting()
     with Mosaic.open(tmp_path) as mosaic:
-        result = predict_city(mosaic, model, grid_config=GridConfig(core=100, margin=10), progress=False)
+        result = predict_city(mosaic, model, PredictionOptions(grid=GridConfig(core=100, margin=10), progress=False))
     # windows of 120 px (cores 100 + 10 px margins): only the middle one (cols 190-310) sees no tile; 300 px apart, the
     # tiles are one group (data/footprint.py), so every patch between them is planned as before
     assert result.n_patches == 5 and result.patches_without_imagery == 1 and model.seen == 4

@@ -9,7 +9,8 @@ import rasterio
 from rasterio.transform import from_origin
 from rasterio.windows import Window
 
-from csboundary.data.raster import Mosaic, written_blocks
+from csboundary.data.raster import Mosaic
+from csboundary.data.raster_files import written_blocks
 from csboundary.data.windows import PixelWindow
 
 

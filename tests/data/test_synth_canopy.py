@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 from shapely.geometry import box
 
 from csboundary.data.synth.city import plan_city
-from csboundary.data.synth.render import TileFrame, _Canvas, _draw_lobed_crown
-from csboundary.data.synth.scene import Scene, Tree, _add_canopy
+from csboundary.data.synth.render import Canvas, TileFrame, draw_lobed_crown
+from csboundary.data.synth.scene import Scene, Tree, add_canopy
 from csboundary.data.synth.styles import STYLES, style_config
 
 
@@ -42,7 +42,7 @@ def test_canopy_crowns_add_up_to_the_cover_asked_for(cover, side, seed):
     one clump (8 crowns of 7 m), and every clump is centred inside the yard."""
     yard = box(0, 0, side, side)
     scene = Scene(network=None)  # type: ignore[arg-type]
-    _add_canopy(np.random.default_rng(seed), scene, yard, cover, lobes=12)
+    add_canopy(np.random.default_rng(seed), scene, yard, cover, lobes=12)
     area = sum(math.pi * t.radius**2 for t in scene.trees)
     assert cover * yard.area <= area < cover * yard.area + 8 * math.pi * 7.0**2
     assert all(3.0 <= t.radius <= 7.0 and t.lobes == 12 for t in scene.trees)
@@ -52,9 +52,9 @@ def test_a_lobed_crown_is_brighter_on_the_sun_side():
     """Shadows fall to +x (sun offset (0.5, 0)), so the sun is in the west: the crown's west half
     is lit, its east half shaded; the ground around it is untouched."""
     frame = TileFrame(x0=0.0, y1=40.0, size=200, gsd=0.2)
-    canvas = _Canvas(frame, road=(100, 100, 100, 100))
+    canvas = Canvas(frame, road=(100, 100, 100, 100))
     tree = Tree(20.0, 20.0, 6.0, (60, 90, 45, 190), shape_seed=7, lobes=40)
-    _draw_lobed_crown(canvas, tree, np.random.default_rng(tree.shape_seed), sun=(0.5, 0.0))
+    draw_lobed_crown(canvas, tree, np.random.default_rng(tree.shape_seed), sun=(0.5, 0.0))
     green = canvas.image[..., 1].astype(float)
     west, east = green[80:120, 75:100].mean(), green[80:120, 100:125].mean()
     assert west > east + 5  # 0.35 x offset of brightness: about 10 % on a crown of many lobes

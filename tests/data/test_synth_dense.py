@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 import shapely
 
+from csboundary.data.synth.camera import CameraLook, apply_look
 from csboundary.data.synth.city import draw_look, plan_city
 from csboundary.data.synth.config import SynthConfig
-from csboundary.data.synth.render import CameraLook, TileFrame, _Canvas, _draw_detailed_car, apply_look
-from csboundary.data.synth.scene import WHITE_PAINT, WINDOW, Car, _centred_rect
+from csboundary.data.synth.render import Canvas, TileFrame, draw_detailed_car
+from csboundary.data.synth.scene import WHITE_PAINT, WINDOW, Car, centred_rect
 from csboundary.data.synth.styles import STYLES, style_config
 
 PHOTO_KNOBS = (
@@ -210,10 +211,10 @@ def test_dense_photo_knobs_change_the_pixels_but_not_the_ground_truth():
 
 def test_a_detailed_white_car_has_dark_windows_and_a_lit_roof():
     frame = TileFrame(0.0, 20.0, 200, 0.1)
-    canvas = _Canvas(frame)
-    body = _centred_rect(np.array([10.0, 10.0]), np.array([1.0, 0.0]), 4.6, 1.9)
+    canvas = Canvas(frame)
+    body = centred_rect(np.array([10.0, 10.0]), np.array([1.0, 0.0]), 4.6, 1.9)
     car = Car(body, (200, 200, 200, 180), body, detail=True)  # a light car facing east
-    _draw_detailed_car(canvas, car)
+    draw_detailed_car(canvas, car)
     row = canvas.image[100, :, 0].astype(int)  # along the car's axis through its centre
     length = car.body.bounds[2] - car.body.bounds[0]
     rear = 10.0 - length / 2

@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point
 
+from csboundary.data.synth.camera import HAZE_VEIL, CameraLook, apply_look, resample
 from csboundary.data.synth.city import draw_look, plan_city
 from csboundary.data.synth.config import SynthConfig
-from csboundary.data.synth.render import HAZE_VEIL, CameraLook, apply_look, resample
 from csboundary.data.synth.scene import CONCRETE, GRAVEL, SOIL
 from csboundary.data.synth.streets import rng_share
 from csboundary.data.synth.styles import DEFAULT_MIX, MAJOR_STYLES, STYLES, draw_style, style_config

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from affine import Affine
@@ -53,7 +55,7 @@ def test_negative_size_rejected(width, height):
 def test_windows_are_hashable_values():
     assert W(1, 2, 3, 4) == W(1, 2, 3, 4)
     assert len({W(1, 2, 3, 4), W(1, 2, 3, 4), W(1, 2, 3, 5)}) == 2
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         W(1, 2, 3, 4).width = 7  # frozen
 
 

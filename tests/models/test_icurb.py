@@ -28,6 +28,7 @@ from csboundary.models.checkpoint import load_checkpoint
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import CitySpec, TrainingCity
 from csboundary.pipeline.prediction.city import predict_city
+from csboundary.pipeline.prediction.options import PredictionOptions
 
 
 def line(*points, closed=False) -> Boundary:
@@ -221,7 +222,9 @@ def test_smoke_training_gives_a_model_the_city_pipeline_runs(tmp_path):
     model = Model.load(weights, torch.device("cpu"))
     city = TrainingCity(CitySpec("valid", 1, (1, 1), 600).path(cache))
     windows = []
-    result = predict_city(city.mosaic, model, progress=False, on_window=lambda patch, maps: windows.append(maps.shape))
+    result = predict_city(
+        city.mosaic, model, PredictionOptions(progress=False), on_window=lambda patch, maps: windows.append(maps.shape)
+    )
     assert windows == [(1, 1100, 1100)]
     graph = result.patch_graphs[(0, 0)]
     assert len(graph.edge_scores) == graph.n_edges

@@ -11,9 +11,9 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Polygon
 
-from csboundary.data.synth.buildings import _add_buildings
+from csboundary.data.synth.buildings import add_buildings
 from csboundary.data.synth.config import SynthConfig, rng_share
-from csboundary.data.synth.grounds import _add_court, _add_stalls
+from csboundary.data.synth.grounds import add_parking_stalls, add_sports_ground
 from csboundary.data.synth.materials import (
     ASPHALT,
     CONCRETE,
@@ -23,12 +23,12 @@ from csboundary.data.synth.materials import (
     PARKING,
     SOIL,
     Colour,
-    _jitter,
+    jitter_colour,
 )
 from csboundary.data.synth.objects import Painted, Scene
-from csboundary.data.synth.shapes import _centred_rect, _rect
-from csboundary.data.synth.vegetation import _add_canopy, _add_trees_in, _tree
-from csboundary.data.synth.vehicles import _car
+from csboundary.data.synth.shapes import centred_rect, rect
+from csboundary.data.synth.vegetation import add_canopy, make_tree, scatter_trees
+from csboundary.data.synth.vehicles import make_car
 
 
 def _frontage(ring: LineString, spacing_fn, step_back: float = 3.0):
@@ -63,23 +63,23 @@ def _edge_strips(
     """
     if not cfg.raised_curb:
         shoulder = rng.uniform(*cfg.shoulder_width)
-        scene.ground.append(Painted(block, _jitter(rng, GRAVEL if rng.random() < 0.6 else SOIL, 0.1), 12))
+        scene.ground.append(Painted(block, jitter_colour(rng, GRAVEL if rng.random() < 0.6 else SOIL, 0.1), 12))
         return shoulder
     if rng_share(rng, cfg.gutter_share):
         gutter = block.buffer(rng.uniform(*cfg.gutter_width), quad_segs=8).difference(block)
-        scene.ground.append(Painted(gutter, _jitter(rng, CONCRETE, 0.08), 4))
+        scene.ground.append(Painted(gutter, jitter_colour(rng, CONCRETE, 0.08), 4))
     if cfg.sidewalk_materials == ("concrete",):
-        scene.ground.append(Painted(block, _jitter(rng, CONCRETE, 0.06), 5))
+        scene.ground.append(Painted(block, jitter_colour(rng, CONCRETE, 0.06), 5))
     else:
-        scene.ground.append(Painted(block, _jitter(rng, sidewalk_colour, 0.06), 5))
+        scene.ground.append(Painted(block, jitter_colour(rng, sidewalk_colour, 0.06), 5))
     verge = rng.uniform(*cfg.verge_width) if rng_share(rng, cfg.verge_share) else 0.0
     if verge > 0:
         strip = block.difference(block.buffer(-verge))
-        scene.ground.append(Painted(strip, _jitter(rng, GRASS, 0.1), 14))
+        scene.ground.append(Painted(strip, jitter_colour(rng, GRASS, 0.1), 14))
     return verge
 
 
-def _populate_block(
+def populate_block(
     cfg: SynthConfig,
     rng: np.random.Generator,
     scene: Scene,
@@ -87,6 +87,8 @@ def _populate_block(
     roadway,
     sidewalk_colour: Colour = CONCRETE,
 ) -> None:
+    """Fill one block: sidewalk and edge strips, then a park (with courts), a parking lot, a
+    field or lots of buildings and yards, with driveways, street trees and cars parked at the curb."""
     sidewalk = rng.uniform(*cfg.sidewalk_width)
     if rng_share(rng, cfg.bare_block_share):
         sidewalk = 0.0  # the lawn runs to the curb
@@ -104,36 +106,38 @@ def _populate_block(
         for p, d, left in _frontage(ring, lambda: rng.uniform(*cfg.driveway_spacing)):
             if rng.random() < 0.5:
                 w, depth = rng.uniform(2.8, 4.0), sidewalk + rng.uniform(3.0, 8.0)
-                driveways.append(_rect(p - d * w / 2 - left * 0.2, d, left, w, depth).intersection(block))
+                driveways.append(rect(p - d * w / 2 - left * 0.2, d, left, w, depth).intersection(block))
     if not inner.is_empty:
         for part in getattr(inner, "geoms", [inner]):
             if part.geom_type != "Polygon" or part.area < 20:
                 continue
             if kind == "field":
                 scene.ground.append(
-                    Painted(part, _jitter(rng, CROP_COLOURS[int(rng.integers(len(CROP_COLOURS)))], 0.1), 18)
+                    Painted(part, jitter_colour(rng, CROP_COLOURS[int(rng.integers(len(CROP_COLOURS)))], 0.1), 18)
                 )
                 continue
             ground = {"park": GRASS, "lot": PARKING, "residential": SOIL if rng.random() < 0.4 else GRASS}[kind]
             if kind == "residential" and rng_share(rng, cfg.paved_yard_share):
-                ground = _jitter(rng, CONCRETE if rng.random() < 0.5 else PARKING, 0.1)
-            scene.ground.append(Painted(part, _jitter(rng, ground, 0.08), 14 if ground in (GRASS, SOIL) else 6))  # type: ignore[arg-type]
+                ground = jitter_colour(rng, CONCRETE if rng.random() < 0.5 else PARKING, 0.1)
+            scene.ground.append(Painted(part, jitter_colour(rng, ground, 0.08), 14 if ground in (GRASS, SOIL) else 6))  # type: ignore[arg-type]
             if kind == "park" and rng_share(rng, cfg.court_share):
-                _add_court(rng, scene, part)
-                _add_trees_in(rng, scene, part.difference(part.buffer(-3.0)), density=0.01)
+                add_sports_ground(rng, scene, part)
+                scatter_trees(rng, scene, part.difference(part.buffer(-3.0)), density=0.01)
             elif kind == "park":
-                _add_trees_in(rng, scene, part, density=rng.uniform(0.004, 0.012))
+                scatter_trees(rng, scene, part, density=rng.uniform(0.004, 0.012))
             elif kind == "lot" and cfg.lot_stalls:
-                _add_stalls(cfg, rng, scene, part)
+                add_parking_stalls(cfg, rng, scene, part)
             else:
-                _add_buildings(cfg, rng, scene, part, kind, driveways, block, sidewalk)
+                add_buildings(cfg, rng, scene, part, kind, driveways, block, sidewalk)
                 if kind == "residential":
-                    _add_trees_in(rng, scene, part, density=rng.uniform(0.0, 0.004), lobes=cfg.crown_lobes)
+                    scatter_trees(rng, scene, part, density=rng.uniform(0.0, 0.004), lobes=cfg.crown_lobes)
                     if cfg.yard_canopy[1] > 0:
-                        _add_canopy(rng, scene, part, rng.uniform(*cfg.yard_canopy), cfg.crown_lobes)
+                        add_canopy(rng, scene, part, rng.uniform(*cfg.yard_canopy), cfg.crown_lobes)
     for driveway in driveways:
         if not driveway.is_empty:
-            scene.ground.append(Painted(driveway, _jitter(rng, CONCRETE if rng.random() < 0.6 else ASPHALT, 0.08), 5))
+            scene.ground.append(
+                Painted(driveway, jitter_colour(rng, CONCRETE if rng.random() < 0.6 else ASPHALT, 0.08), 5)
+            )
 
     # Street trees along the curb; big crowns overhang the road.
     if rng.random() < cfg.street_tree_share:
@@ -141,16 +145,16 @@ def _populate_block(
         for p, d, left in _frontage(ring, lambda: rng.uniform(*cfg.street_tree_spacing)):
             if rng.random() < density:
                 c = p + left * max(sidewalk, 2.0) * rng.uniform(*cfg.street_tree_setback)
-                scene.trees.append(_tree(rng, c[0], c[1], rng.uniform(*cfg.street_tree_radius), cfg.crown_lobes))
+                scene.trees.append(make_tree(rng, c[0], c[1], rng.uniform(*cfg.street_tree_radius), cfg.crown_lobes))
                 if cfg.tree_pits:
-                    pit = _centred_rect(c, d, rng.uniform(1.2, 1.8), rng.uniform(1.1, 1.5)).intersection(block)
-                    scene.ground.append(Painted(pit, _jitter(rng, (88, 76, 62, 110), 0.12), 16))
+                    pit = centred_rect(c, d, rng.uniform(1.2, 1.8), rng.uniform(1.1, 1.5)).intersection(block)
+                    scene.ground.append(Painted(pit, jitter_colour(rng, (88, 76, 62, 110), 0.12), 16))
 
     # Parked cars along the curb, on the road side.
     occupancy = rng.uniform(*cfg.parked_car_occupancy)
     for p, d, left in _frontage(ring, lambda: cfg.parked_car_spacing * rng.uniform(0.95, 1.15)):
         if rng.random() < occupancy:
             centre = p - left * rng.uniform(1.15, 1.5)
-            car = _car(rng, centre, d, cfg.car_detail)
+            car = make_car(rng, centre, d, cfg.car_detail)
             if roadway.contains(car.body):
                 scene.cars.append(car)

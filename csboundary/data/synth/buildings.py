@@ -9,11 +9,11 @@ import shapely
 from shapely.geometry import LineString, Polygon
 
 from csboundary.data.synth.config import SynthConfig, rng_share
-from csboundary.data.synth.materials import CONCRETE, DRIVEWAYS, FENCES, GRASS, HEDGE, TAR_ROOFS, WATER, _jitter
+from csboundary.data.synth.materials import CONCRETE, DRIVEWAYS, FENCES, GRASS, HEDGE, TAR_ROOFS, WATER, jitter_colour
 from csboundary.data.synth.objects import Building, Painted, Scene
-from csboundary.data.synth.roofs import _roof, _roof_details, roof_facets
-from csboundary.data.synth.shapes import _centred_rect, _rect
-from csboundary.data.synth.vehicles import _car
+from csboundary.data.synth.roofs import add_flat_roof_details, roof_colour, roof_facets
+from csboundary.data.synth.shapes import centred_rect, rect
+from csboundary.data.synth.vehicles import make_car
 
 
 def _yard(
@@ -38,9 +38,9 @@ def _yard(
     into the block; ``front`` the sidewalk strip between the lot and the curb. Painted into
     ``yard``'s lists (lawns first, then fences and pools, then paving), no ground truth."""
     if rng_share(rng, cfg.lawn_patch_share):
-        lot = _rect(origin, d, left, width + gap, setback + depth + rng.uniform(4.0, 14.0)).intersection(area)
+        lot = rect(origin, d, left, width + gap, setback + depth + rng.uniform(4.0, 14.0)).intersection(area)
         base = GRASS if rng.random() < 0.75 else (118, 124, 70, 170)  # green or dry lawn
-        yard["lawns"].append(Painted(lot, _jitter(rng, base, 0.16), 14))
+        yard["lawns"].append(Painted(lot, jitter_colour(rng, base, 0.16), 14))
     if gap > 1.0 and rng_share(rng, cfg.lot_fence_share):
         start = origin + d * (width + gap / 2)
         line = LineString(
@@ -48,36 +48,38 @@ def _yard(
         )
         if rng.random() < 0.4:
             yard["things"].append(
-                Painted(line.buffer(rng.uniform(0.5, 0.9)).intersection(area), _jitter(rng, HEDGE, 0.12), 22)
+                Painted(line.buffer(rng.uniform(0.5, 0.9)).intersection(area), jitter_colour(rng, HEDGE, 0.12), 22)
             )
         else:
             fence = FENCES[int(rng.integers(len(FENCES)))]
             yard["things"].append(
                 Painted(
                     line.buffer(rng.uniform(0.07, 0.15), cap_style="flat").intersection(area),
-                    _jitter(rng, fence, 0.08),
+                    jitter_colour(rng, fence, 0.08),
                     3,
                 )
             )
     if rng_share(rng, cfg.pool_share):
         centre = origin + d * width * rng.uniform(0.3, 0.7) + left * (setback + depth + rng.uniform(3.5, 7.0))
-        pool = _centred_rect(centre, d, rng.uniform(5.0, 10.0), rng.uniform(3.0, 5.0))
+        pool = centred_rect(centre, d, rng.uniform(5.0, 10.0), rng.uniform(3.0, 5.0))
         if area.contains(pool.buffer(1.0)):
-            yard["things"].append(Painted(pool.buffer(0.9, join_style="mitre"), _jitter(rng, CONCRETE, 0.06), 4))
-            yard["things"].append(Painted(pool.buffer(0.4), _jitter(rng, WATER, 0.1), 3))
+            yard["things"].append(Painted(pool.buffer(0.9, join_style="mitre"), jitter_colour(rng, CONCRETE, 0.06), 4))
+            yard["things"].append(Painted(pool.buffer(0.4), jitter_colour(rng, WATER, 0.1), 3))
     if setback > 2.0 and rng_share(rng, cfg.house_driveway_share):
         dw = rng.uniform(2.8, 6.0)  # one or two cars wide
         s = max(0.0, width - dw) * float(rng.random() < 0.5)  # at one end of the house (the garage)
-        paving = _rect(origin + d * s - left * (front + 0.3), d, left, dw, front + 0.3 + setback + 0.5)
+        paving = rect(origin + d * s - left * (front + 0.3), d, left, dw, front + 0.3 + setback + 0.5)
         paving = paving.intersection(block) if block is not None else paving.intersection(area)
-        yard["paved"].append(Painted(paving, _jitter(rng, DRIVEWAYS[int(rng.integers(len(DRIVEWAYS)))], 0.08), 5))
+        yard["paved"].append(Painted(paving, jitter_colour(rng, DRIVEWAYS[int(rng.integers(len(DRIVEWAYS)))], 0.08), 5))
         if setback > 5.5 and rng.random() < 0.4:
             scene.cars.append(
-                _car(rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left, cfg.car_detail)
+                make_car(
+                    rng, origin + d * (s + dw / 2) + left * (setback - rng.uniform(2.7, 3.4)), left, cfg.car_detail
+                )
             )
 
 
-def _add_buildings(
+def add_buildings(
     cfg: SynthConfig,
     rng: np.random.Generator,
     scene: Scene,
@@ -115,7 +117,7 @@ def _add_buildings(
             depth = rng.uniform(15, 35) if wide else rng.uniform(*cfg.house_depth)
             setback = rng.uniform(8, 25) if wide else rng.uniform(*cfg.house_setback)
             t0, fw = t, min(w, length - t)
-            footprint = _rect(a + d * t + left * setback, d, left, fw, depth)
+            footprint = rect(a + d * t + left * setback, d, left, fw, depth)
             gap = rng.uniform(*cfg.house_gap) if rng.random() < cfg.house_gap_share else 0.1  # mostly row houses
             t += w + gap
             if footprint.area < 25 or not usable.contains(footprint):
@@ -126,9 +128,9 @@ def _add_buildings(
                 continue
             placed.append(footprint)
             roof = (
-                _roof(rng, cfg.roof_palette)
+                roof_colour(rng, cfg.roof_palette)
                 if cfg.roof_palette != "tar"
-                else _jitter(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))], 0.1)
+                else jitter_colour(rng, TAR_ROOFS[int(rng.integers(len(TAR_ROOFS)))], 0.1)
             )
             height = rng.uniform(8, 40) if wide else rng.uniform(*cfg.house_height)
             if rng_share(rng, cfg.tower_share):
@@ -140,12 +142,12 @@ def _add_buildings(
                 )
             elif rng.random() < 0.35:
                 c = np.array(footprint.centroid.coords[0]) + rng.uniform(-0.2, 0.2, 2) * min(w, depth)
-                building.detail = _centred_rect(
+                building.detail = centred_rect(
                     c, d, min(w, depth) * rng.uniform(0.2, 0.4), min(w, depth) * rng.uniform(0.15, 0.35)
                 )
-                building.detail_colour = _jitter(rng, roof, 0.3)  # type: ignore[arg-type]
+                building.detail_colour = jitter_colour(rng, roof, 0.3)  # type: ignore[arg-type]
             if not building.facets and rng_share(rng, cfg.flat_roof_detail):
-                _roof_details(rng, building, d, scene.sun)
+                add_flat_roof_details(rng, building, d, scene.sun)
             scene.buildings.append(building)
             if not wide:
                 _yard(cfg, rng, scene, yard, a + d * t0, d, left, fw, gap, setback, depth, front, block, area)

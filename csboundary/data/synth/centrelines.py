@@ -34,11 +34,12 @@ class Street:
         return shape
 
 
-def _unit(angle: float) -> np.ndarray:
+def unit_vector(angle: float) -> np.ndarray:
+    """The unit vector at ``angle`` radians from the x axis (east), counter-clockwise."""
     return np.array([math.cos(angle), math.sin(angle)])
 
 
-def _line(
+def offset_line(
     centre: np.ndarray, along: np.ndarray, across: np.ndarray, offset: float, half: float, bend=None
 ) -> LineString:
     """A line through ``centre + across*offset`` in direction ``along``; ``bend(t)`` shifts it sideways."""

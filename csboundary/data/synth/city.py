@@ -25,8 +25,9 @@ from csboundary.data import city as layout
 from csboundary.data.folder_lock import locked_folder
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
+from csboundary.data.synth.camera import CameraLook, apply_look, resample
 from csboundary.data.synth.config import SynthConfig, city_rng
-from csboundary.data.synth.render import CameraLook, TileFrame, apply_look, render_tile, resample
+from csboundary.data.synth.render import TileFrame, render_tile
 from csboundary.data.synth.scene import Scene, build_scene
 from csboundary.data.synth.streets import build_network
 from csboundary.data.units import GroundUnits, ground_units

@@ -27,10 +27,12 @@ def _crossings(streets: list[Street], min_width: float) -> list[tuple[Point, int
     return out
 
 
-def _roundabouts(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street]) -> list[tuple[Polygon, Polygon]]:
+def roundabout_rings(
+    cfg: SynthConfig, rng: np.random.Generator, streets: list[Street]
+) -> list[tuple[Polygon, Polygon]]:
     """(ring disc, central island) at a share of crossings; rings never overlap one another."""
     out: list[tuple[Polygon, Polygon]] = []
-    for hit, i, j in _crossings(streets, 6.0):
+    for hit, _, _ in _crossings(streets, 6.0):
         if rng.random() >= cfg.roundabout_share:
             continue
         outer = rng.uniform(*cfg.roundabout_radius)
@@ -43,7 +45,7 @@ def _roundabouts(cfg: SynthConfig, rng: np.random.Generator, streets: list[Stree
     return out
 
 
-def _bulb_islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street]) -> list[Polygon]:
+def bulb_islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street]) -> list[Polygon]:
     """Planted centre islands in a share of the cul-de-sac bulbs of radius 8 m or more."""
     out = []
     for s in streets:
@@ -62,7 +64,7 @@ def round_convex_corners(polygon: Polygon, radius: float) -> list[Polygon]:
     return [p for p in getattr(opened, "geoms", [opened]) if p.geom_type == "Polygon" and p.area > 30.0]
 
 
-def _islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], roadway) -> list[Polygon]:
+def traffic_islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], roadway) -> list[Polygon]:
     """Small rounded triangles at some intersections of wide streets, well inside the roadway."""
     wide = [s for s in streets if s.width >= 10.5 and s.kind not in ("boulevard", "highway")]
     inside = roadway.buffer(-2.0)
@@ -88,7 +90,9 @@ def _islands(cfg: SynthConfig, rng: np.random.Generator, streets: list[Street], 
     return islands
 
 
-def _medians(streets: list[Street], road_by_street: list[Polygon], roadway, avoid: list[Polygon] = ()) -> list[Polygon]:
+def boulevard_medians(
+    streets: list[Street], road_by_street: list[Polygon], roadway, avoid: list[Polygon] = ()
+) -> list[Polygon]:
     """Boulevard medians, interrupted at every crossing street and roundabout (``avoid``), with rounded noses."""
     medians: list[Polygon] = []
     tree = shapely.STRtree(road_by_street)

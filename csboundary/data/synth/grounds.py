@@ -9,10 +9,10 @@ import shapely
 from shapely.geometry import LineString, Polygon
 
 from csboundary.data.synth.config import SynthConfig
-from csboundary.data.synth.materials import COURTS, PARKING, WHITE_PAINT, _jitter
+from csboundary.data.synth.materials import COURTS, PARKING, WHITE_PAINT, jitter_colour
 from csboundary.data.synth.objects import Painted, Scene
-from csboundary.data.synth.shapes import _centred_rect
-from csboundary.data.synth.vehicles import _car
+from csboundary.data.synth.shapes import centred_rect
+from csboundary.data.synth.vehicles import make_car
 
 
 def _axes(area: Polygon) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
@@ -25,11 +25,13 @@ def _axes(area: Polygon) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, flo
     return c, e1 / np.linalg.norm(e1), e2 / np.linalg.norm(e2), float(np.linalg.norm(e1)), float(np.linalg.norm(e2))
 
 
-def _add_court(rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
+def add_sports_ground(rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
     """A schoolyard or park as a sports field or a grid of courts: paving, turf or red/green
     courts and their white lines (outline, halfway line, centre circle, boxes). Painted, never a
     road boundary."""
-    scene.ground.append(Painted(area, _jitter(rng, (128, 124, 118, 110) if rng.random() < 0.6 else PARKING, 0.08), 8))
+    scene.ground.append(
+        Painted(area, jitter_colour(rng, (128, 124, 118, 110) if rng.random() < 0.6 else PARKING, 0.08), 8)
+    )
     c, u, v, lu, lv = _axes(area)
     margin = rng.uniform(2.0, 6.0)
     lu, lv = lu - 2 * margin, lv - 2 * margin
@@ -52,11 +54,11 @@ def _add_court(rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
             for j in range(nv)
         ]
     for centre, length, width, colour in courts:
-        court = _centred_rect(centre, u, length, width).intersection(area)
+        court = centred_rect(centre, u, length, width).intersection(area)
         if court.is_empty or court.area < 50:
             continue
-        scene.ground.append(Painted(court, _jitter(rng, colour, 0.08), 7))
-        inset = _centred_rect(centre, u, length - 1.0, width - 1.0)
+        scene.ground.append(Painted(court, jitter_colour(rng, colour, 0.08), 7))
+        inset = centred_rect(centre, u, length - 1.0, width - 1.0)
         lines = [
             inset.exterior,
             LineString([centre - v * (width / 2 - 0.5), centre + v * (width / 2 - 0.5)]),
@@ -78,7 +80,7 @@ def _add_court(rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
             scene.ground.append(Painted(line.buffer(0.07).intersection(area), WHITE_PAINT, 3))
 
 
-def _add_stalls(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
+def add_parking_stalls(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: Polygon) -> None:
     """A parking lot of painted stalls in double rows along the lot's long axis, cars in some of
     them (``lot_stalls``). The lot's outline and its paint are not road boundaries."""
     c, u, v, lu, lv = _axes(area)
@@ -100,6 +102,6 @@ def _add_stalls(cfg: SynthConfig, rng: np.random.Generator, scene: Scene, area: 
         if inner.contains(line):
             scene.ground.append(Painted(line.buffer(0.06, cap_style="flat"), WHITE_PAINT, 3))
     for centre, d in cars:
-        car = _car(rng, centre, d, cfg.car_detail)
+        car = make_car(rng, centre, d, cfg.car_detail)
         if inner.contains(car.body):
             scene.cars.append(car)

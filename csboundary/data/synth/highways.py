@@ -11,7 +11,7 @@ import shapely
 from shapely.geometry import LineString, Point
 
 from csboundary.data.ground_truth import as_linestrings
-from csboundary.data.synth.centrelines import Street, _line, _unit
+from csboundary.data.synth.centrelines import Street, offset_line, unit_vector
 from csboundary.data.synth.config import SynthConfig, rng_share
 
 
@@ -29,8 +29,13 @@ def with_highways(
         through = centre + rng.uniform(-0.25, 0.25, 2) * 2 * centre
         amp, wavelength = rng.uniform(0.0, 40.0), rng.uniform(1200.0, 2500.0)
         bend = lambda t, a=amp, wl=wavelength: a * np.sin(2 * math.pi * t / wl)  # noqa: E731
-        line = _line(
-            through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + float(np.linalg.norm(through - centre)), bend
+        line = offset_line(
+            through,
+            unit_vector(angle),
+            unit_vector(angle + math.pi / 2),
+            0.0,
+            half + float(np.linalg.norm(through - centre)),
+            bend,
         )
         median = rng.uniform(*cfg.highway_median)
         width = 2 * rng.uniform(*cfg.highway_carriageway) + median

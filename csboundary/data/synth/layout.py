@@ -13,7 +13,7 @@ from shapely.geometry import LineString, box
 from shapely.ops import substring
 
 from csboundary.data.ground_truth import as_linestrings
-from csboundary.data.synth.centrelines import Street, _line, _unit
+from csboundary.data.synth.centrelines import Street, offset_line, unit_vector
 from csboundary.data.synth.config import SynthConfig, rng_share
 from csboundary.data.synth.highways import with_highways
 from csboundary.data.synth.suburbs import local_streets
@@ -53,7 +53,7 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     centre = np.array([width / 2, height / 2])
     half = math.hypot(width + 2 * m, height + 2 * m) / 2 + 40.0
     bearing = rng.uniform(math.radians(cfg.bearing_deg[0]), math.radians(cfg.bearing_deg[1]))
-    along, across = _unit(bearing), _unit(bearing + math.pi / 2)
+    along, across = unit_vector(bearing), unit_vector(bearing + math.pi / 2)
 
     streets: list[Street] = []
     avenues: list[LineString] = []
@@ -63,7 +63,7 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
             if rng_share(rng, cfg.avenue_curve_share)
             else None
         )
-        line = _line(centre, along, across, offset, half, bend)
+        line = offset_line(centre, along, across, offset, half, bend)
         w = rng.uniform(*cfg.avenue_width)
         if rng.random() < cfg.boulevard_share:
             streets.append(
@@ -81,8 +81,8 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     offsets = _spaced_offsets(rng, half, cfg.street_spacing)
     for i, offset in enumerate(offsets):
         skew = math.radians(rng.uniform(-cfg.cross_street_skew_deg, cfg.cross_street_skew_deg))
-        direction = _unit(bearing + math.pi / 2 + skew)
-        normal = _unit(bearing + skew)
+        direction = unit_vector(bearing + math.pi / 2 + skew)
+        normal = unit_vector(bearing + skew)
         gap = (
             min(abs(offset - offsets[j]) for j in (i - 1, i + 1) if 0 <= j < len(offsets))
             if len(offsets) > 1
@@ -91,7 +91,7 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         bend, kind = None, "street"
         if rng.random() < cfg.curved_street_share:
             bend, kind = _bend(rng, cfg.curve_amplitude, 0.22 * gap), "curved"
-        line = _line(centre, direction, normal, offset, half, bend)
+        line = offset_line(centre, direction, normal, offset, half, bend)
         w = rng.uniform(*cfg.street_width)
         for piece in _split_between(line, avenues):
             u = rng.random()
@@ -116,8 +116,13 @@ def build_streets(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         if rng.random() < 0.5:
             amp, wl = rng.uniform(15, 40), rng.uniform(700, 1400)
             bend = lambda t, a=amp, wl=wl: a * np.sin(2 * math.pi * t / wl)  # noqa: E731
-        line = _line(
-            through, _unit(angle), _unit(angle + math.pi / 2), 0.0, half + np.linalg.norm(through - centre), bend
+        line = offset_line(
+            through,
+            unit_vector(angle),
+            unit_vector(angle + math.pi / 2),
+            0.0,
+            half + np.linalg.norm(through - centre),
+            bend,
         )
         streets.append(Street(line, rng.uniform(*cfg.street_width) + 1.0, "diagonal"))
 

@@ -12,12 +12,12 @@ from shapely.ops import substring
 
 from csboundary.data.ground_truth import as_linestrings
 from csboundary.data.synth.config import SynthConfig, rng_share
-from csboundary.data.synth.materials import WHITE_PAINT, YELLOW_PAINT, _jitter, _scaled_colour
+from csboundary.data.synth.materials import WHITE_PAINT, YELLOW_PAINT, jitter_colour, scaled_colour
 from csboundary.data.synth.objects import Painted, Scene
-from csboundary.data.synth.shapes import _centred_rect, _rect
+from csboundary.data.synth.shapes import centred_rect, rect
 
 
-def _add_markings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:
+def add_road_markings(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:
     """Centre lines, lane dashes, stop lines and zebra crosswalks, interrupted at intersections."""
     streets = scene.network.streets
     roads = [s.roadway() for s in streets]
@@ -45,7 +45,7 @@ def _bus_or_bike_lane(rng: np.random.Generator, scene: Scene, street, piece: Lin
     sides = (-1, 1) if rng.random() < 0.4 else (int(rng.choice([-1, 1])),)
     for side in sides:
         for line in _offset(piece, side * (street.width / 2 - 2.5 - width / 2)):
-            scene.markings.append(Painted(line.buffer(width / 2, cap_style="flat"), _jitter(rng, colour, 0.1), 5))
+            scene.markings.append(Painted(line.buffer(width / 2, cap_style="flat"), jitter_colour(rng, colour, 0.1), 5))
             if not bus:
                 for edge in (-1, 1):
                     for e in _offset(line, edge * width / 2):
@@ -114,12 +114,12 @@ def _crosswalk(rng: np.random.Generator, scene: Scene, piece: LineString, width:
     stripe, gap = 0.55, 0.6
     half = width / 2
     for s in np.arange(-half + 0.3, half - 0.3 - stripe, stripe + gap):
-        scene.markings.append(Painted(_rect(p0 + across * s, along, across, 3.0, stripe), WHITE_PAINT, 3))
+        scene.markings.append(Painted(rect(p0 + across * s, along, across, 3.0, stripe), WHITE_PAINT, 3))
     stop = p0 + along * 4.0 - across * half
-    scene.markings.append(Painted(_rect(stop, along, across, 0.45, width), WHITE_PAINT, 3))
+    scene.markings.append(Painted(rect(stop, along, across, 0.45, width), WHITE_PAINT, 3))
 
 
-def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:
+def add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> None:
     """Asphalt patches of another shade, dark tar seams and cracks and manhole covers on the
     roadway (``road_wear_per_km``), painted first so lane paint lies on them and curbs clip them."""
     road = scene.road
@@ -135,9 +135,9 @@ def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> 
             off = rng.uniform(-0.5, 0.5) * s.width
             u = rng.random()
             if u < 0.35:  # a patch of newer or older asphalt (a utility cut, a resurfaced lane)
-                patch = _centred_rect(p + n * off, d, rng.uniform(2.0, 25.0), rng.uniform(1.0, max(1.2, s.width / 2)))
+                patch = centred_rect(p + n * off, d, rng.uniform(2.0, 25.0), rng.uniform(1.0, max(1.2, s.width / 2)))
                 scene.markings.append(
-                    Painted(patch, _scaled_colour(road, rng.uniform(0.7, 1.3)), int(rng.integers(3, 8)))
+                    Painted(patch, scaled_colour(road, rng.uniform(0.7, 1.3)), int(rng.integers(3, 8)))
                 )
             elif u < 0.8:  # a crack or tar seam: a thin dark wandering line
                 pts = [p + n * off]
@@ -147,15 +147,15 @@ def _add_road_wear(cfg: SynthConfig, rng: np.random.Generator, scene: Scene) -> 
                     heading /= np.linalg.norm(heading)
                     pts.append(pts[-1] + heading * rng.uniform(0.8, 3.0))
                 seam = LineString(pts).buffer(rng.uniform(0.03, 0.08), cap_style="flat")
-                scene.markings.append(Painted(seam, _scaled_colour(road, rng.uniform(0.65, 0.85)), 2))
+                scene.markings.append(Painted(seam, scaled_colour(road, rng.uniform(0.65, 0.85)), 2))
             elif u < 0.9:  # a long seam between paving passes
-                seam = _centred_rect(p + n * off, d, rng.uniform(15.0, 60.0), rng.uniform(0.1, 0.25))
-                scene.markings.append(Painted(seam, _scaled_colour(road, rng.uniform(0.45, 0.7)), 2))
+                seam = centred_rect(p + n * off, d, rng.uniform(15.0, 60.0), rng.uniform(0.1, 0.25))
+                scene.markings.append(Painted(seam, scaled_colour(road, rng.uniform(0.45, 0.7)), 2))
             else:  # a manhole cover
                 scene.markings.append(
                     Painted(
                         shapely.Point(p + n * off).buffer(0.35, quad_segs=4),
-                        _scaled_colour(road, rng.uniform(0.5, 0.8)),
+                        scaled_colour(road, rng.uniform(0.5, 0.8)),
                         3,
                     )
                 )

@@ -81,10 +81,13 @@ CAR_COLOURS: tuple[Colour, ...] = (
 )
 
 
-def _jitter(rng: np.random.Generator, colour: Colour, amount: float) -> Colour:
+def jitter_colour(rng: np.random.Generator, colour: Colour, amount: float) -> Colour:
+    """``colour`` brightened or darkened by up to ``amount`` (a fraction) and each band nudged by
+    up to 6, clipped to 0..255: two lawns or two roofs of one material never look alike."""
     scale = 1 + rng.uniform(-amount, amount)
     return tuple(int(np.clip(c * scale + rng.uniform(-6, 6), 0, 255)) for c in colour)  # type: ignore[return-value]
 
 
-def _scaled_colour(colour: Colour, factor: float) -> Colour:
+def scaled_colour(colour: Colour, factor: float) -> Colour:
+    """``colour`` brightened or darkened by ``factor``, each band truncated to 0..255."""
     return tuple(int(np.clip(c * factor, 0, 255)) for c in colour)  # type: ignore[return-value]

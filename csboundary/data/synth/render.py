@@ -57,7 +57,7 @@ def _contours(frame: TileFrame, polygon) -> list[np.ndarray]:
     return contours
 
 
-class _Canvas:
+class Canvas:
     """The colour image (rows, cols, 4) and a roughness map drawn in step with it."""
 
     def __init__(self, frame: TileFrame, road=ASPHALT):
@@ -95,7 +95,7 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
     ``rng`` drives only per-tile appearance (illumination, colour, noise), so geometry is the
     same whichever tiles are rendered and in which order.
     """
-    canvas = _Canvas(frame, scene.road)
+    canvas = Canvas(frame, scene.road)
     for item in scene.markings:
         canvas.fill(item.polygon, item.colour, item.roughness)
     for item in scene.ground:
@@ -104,7 +104,7 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
         _car_shadows(canvas, scene)
     for car in scene.cars:
         if canvas.visible(car.body) and car.detail:
-            _draw_detailed_car(canvas, car)
+            draw_detailed_car(canvas, car)
         elif canvas.visible(car.body):
             canvas.fill(car.body, car.colour, 3)
             canvas.fill(car.cabin, _scaled(car.colour, 0.7), 3)
@@ -120,7 +120,7 @@ def render_tile(scene: Scene, frame: TileFrame, rng: np.random.Generator, noise_
     return _finish(canvas, rng, noise_sigma, scene.texture)
 
 
-def _draw_roof(canvas: _Canvas, b, shift: tuple[float, float] = (0.0, 0.0)) -> None:
+def _draw_roof(canvas: Canvas, b, shift: tuple[float, float] = (0.0, 0.0)) -> None:
     """A building's roof moved by ``shift`` metres: pitched facets lit by the sun (textured
     shingles) and a ridge, or a flat roof with its structure, parapet rim and rooftop items."""
     move = (lambda g: shapely.affinity.translate(g, *shift)) if shift != (0.0, 0.0) else (lambda g: g)
@@ -140,7 +140,7 @@ def _draw_roof(canvas: _Canvas, b, shift: tuple[float, float] = (0.0, 0.0)) -> N
             canvas.fill(move(item), colour, 5)
 
 
-def _draw_leaning_buildings(canvas: _Canvas, scene: Scene) -> None:
+def _draw_leaning_buildings(canvas: Canvas, scene: Scene) -> None:
     """Relief displacement: every roof drawn ``lean * height`` metres from its footprint, over
     the facade strip between them (the wall seen at an angle). Facades first, then roofs, so an
     attached neighbour's roof covers the wall it leans over. Roof pixels only; the ground truth
@@ -179,7 +179,7 @@ def _band(centre, along, across, a0: float, a1: float, width: float) -> Polygon:
     )
 
 
-def _draw_detailed_car(canvas: _Canvas, car) -> None:
+def draw_detailed_car(canvas: Canvas, car) -> None:
     """A car from above: a darker rim, dark windshield and rear window, a lit roof between them."""
     c, along, across, length, width = _car_axes(car)
     rear = c - along * length / 2
@@ -195,7 +195,7 @@ def _draw_detailed_car(canvas: _Canvas, car) -> None:
     canvas.fill(_band(rear, along, across, 0.56 * length, 0.72 * length, width * 0.8), WINDOW, 2)
 
 
-def _car_shadows(canvas: _Canvas, scene: Scene) -> None:
+def _car_shadows(canvas: Canvas, scene: Scene) -> None:
     """Short shadows of detailed cars (1.5 m tall) on the ground away from the sun."""
     frame = canvas.frame
     shade = np.zeros(canvas.rough.shape, np.uint8)
@@ -216,7 +216,7 @@ def _scaled(colour, factor: float) -> tuple[int, ...]:
     return tuple(int(np.clip(c * factor, 0, 255)) for c in colour)
 
 
-def _cast_shadows(canvas: _Canvas, scene: Scene) -> None:
+def _cast_shadows(canvas: Canvas, scene: Scene) -> None:
     """Darken the ground where buildings and crowns cast shadows (sun fixed per city)."""
     frame = canvas.frame
     shade = np.zeros(canvas.rough.shape, np.uint8)
@@ -239,7 +239,7 @@ def _cast_shadows(canvas: _Canvas, scene: Scene) -> None:
     canvas.image[:] = (canvas.image * factor[..., None]).astype(np.uint8)
 
 
-def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None:
+def _draw_trees(canvas: Canvas, scene: Scene, rng: np.random.Generator) -> None:
     """Crowns as clusters of overlapping discs of varied shade, rough in texture."""
     frame = canvas.frame
     x0, y0, x1, y1 = canvas.clip
@@ -251,7 +251,7 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             _draw_bare_crown(canvas, t, local)
             continue
         if t.lobes != 5:
-            _draw_lobed_crown(canvas, t, local, scene.sun)
+            draw_lobed_crown(canvas, t, local, scene.sun)
             continue
         for k in range(5):
             r = t.radius * (0.55 if k else 0.85) * local.uniform(0.8, 1.1)
@@ -271,7 +271,7 @@ def _draw_trees(canvas: _Canvas, scene: Scene, rng: np.random.Generator) -> None
             cv2.circle(canvas.rough, (int(p[0]), int(p[1])), int(r / frame.gsd * SCALE), 22, -1, shift=SHIFT)
 
 
-def _draw_bare_crown(canvas: _Canvas, t: Tree, local: np.random.Generator) -> None:
+def _draw_bare_crown(canvas: Canvas, t: Tree, local: np.random.Generator) -> None:
     """A leafless crown: the ground seen through a grey-brown veil, dark branches radiating from
     the trunk and forking (spring imagery of a dense city)."""
     frame = canvas.frame
@@ -318,7 +318,7 @@ def _draw_bare_crown(canvas: _Canvas, t: Tree, local: np.random.Generator) -> No
     canvas.rough[y0:y1, x0:x1] = np.maximum(canvas.rough[y0:y1, x0:x1], (mask[..., 0] > 0.3) * 14).astype(np.uint8)
 
 
-def _draw_lobed_crown(canvas: _Canvas, t: Tree, local: np.random.Generator, sun: tuple[float, float]) -> None:
+def draw_lobed_crown(canvas: Canvas, t: Tree, local: np.random.Generator, sun: tuple[float, float]) -> None:
     """A crown of ``t.lobes`` small lobes over a dark core: lobes on the sun's side are lit, those
     away from it shaded, and the gaps between them stay dark, as a real canopy looks from above."""
     frame = canvas.frame
@@ -336,7 +336,7 @@ def _draw_lobed_crown(canvas: _Canvas, t: Tree, local: np.random.Generator, sun:
         cv2.circle(canvas.rough, centre, radius, 26, -1, shift=SHIFT)
 
 
-def _finish(canvas: _Canvas, rng: np.random.Generator, noise_sigma: float, photo_texture: float = 0.0) -> np.ndarray:
+def _finish(canvas: Canvas, rng: np.random.Generator, noise_sigma: float, photo_texture: float = 0.0) -> np.ndarray:
     """Texture, illumination, per-tile colour balance and sensor noise; returns (4, H, W) uint8."""
     size = canvas.frame.size
     texture = _smooth_noise(rng, size, 1.2) * canvas.rough.astype(np.float32)
@@ -356,7 +356,7 @@ def _finish(canvas: _Canvas, rng: np.random.Generator, noise_sigma: float, photo
     return out
 
 
-def _photo_texture(canvas: _Canvas, rng: np.random.Generator, amplitude: float) -> np.ndarray:
+def _photo_texture(canvas: Canvas, rng: np.random.Generator, amplitude: float) -> np.ndarray:
     """Texture at every scale (``photo_texture``): stains and blotches of 1-20 m, a grain of a
     few pixels and sparse gravel specks, strongest on rough ground and roofs, weak on cars and
     paint. Pixel scales are those of the frame (metres / gsd), so a coarse sensor sees the same."""
@@ -380,77 +380,3 @@ def _smooth_noise(rng: np.random.Generator, size: int, scale: float) -> np.ndarr
     if coarse == size:
         return field
     return cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC)
-
-
-@dataclass(frozen=True)
-class CameraLook:
-    """How the sensor and the air change a city's pixels, drawn once per city.
-
-    ``source_gsd`` is the sensor's pixel size: the tile is rendered at it and resampled to the
-    city's pixel size (a coarse sensor upsampled looks soft, a fine one downsampled looks crisp).
-    """
-
-    source_gsd: float | None = None
-    haze: float = 0.0
-    saturation: float = 1.0
-    gamma: float = 1.0
-    gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
-    blur: float = 0.0  # Gaussian blur sigma (px) of the finished tile
-    jpeg: int = 0  # JPEG round-trip quality (0: none), the compression of real orthophotos
-
-    @property
-    def is_identity(self) -> bool:
-        return (
-            self.haze == 0
-            and self.saturation == 1
-            and self.gamma == 1
-            and self.gains == (1.0, 1.0, 1.0, 1.0)
-            and self.blur == 0
-            and self.jpeg == 0
-        )
-
-
-HAZE_VEIL = np.array([196, 202, 212, 180], np.float32)  # a bright, slightly blue veil (NIR less)
-
-
-def apply_look(image: np.ndarray, look: CameraLook) -> np.ndarray:
-    """(4, H, W) uint8 -> same, with saturation, gamma, per-band gains and haze applied."""
-    if look.is_identity:
-        return image
-    x = image.astype(np.float32)
-    if look.saturation != 1:
-        grey = x[:3].mean(axis=0, keepdims=True)
-        x[:3] = grey + (x[:3] - grey) * look.saturation
-    if look.gamma != 1:
-        x = 255.0 * (np.clip(x, 0, 255) / 255.0) ** look.gamma
-    x *= np.asarray(look.gains, np.float32)[:, None, None]
-    if look.haze:
-        x = x * (1 - look.haze) + HAZE_VEIL[:, None, None] * look.haze
-    out = np.clip(x, 0, 255).astype(np.uint8)
-    if look.blur > 0:
-        out = np.stack([cv2.GaussianBlur(band, (0, 0), look.blur) for band in out])
-    if look.jpeg > 0:
-        out = jpeg_round_trip(out, look.jpeg)
-    return out
-
-
-def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
-    """(4, H, W) uint8 -> same after JPEG compression (RGB as one colour image, NIR as grey)."""
-    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
-    bgr = np.ascontiguousarray(image[2::-1].transpose(1, 2, 0))  # OpenCV's colour order
-    ok, buf = cv2.imencode(".jpg", bgr, params)
-    ok2, buf2 = cv2.imencode(".jpg", np.ascontiguousarray(image[3]), params)
-    if not (ok and ok2):
-        raise RuntimeError("JPEG encoding failed")
-    out = np.empty_like(image)
-    out[:3] = cv2.imdecode(buf, cv2.IMREAD_COLOR).transpose(2, 0, 1)[::-1]
-    out[3] = cv2.imdecode(buf2, cv2.IMREAD_GRAYSCALE)
-    return out
-
-
-def resample(image: np.ndarray, size: int) -> np.ndarray:
-    """(4, h, w) uint8 -> (4, size, size): area averaging when shrinking, cubic when enlarging."""
-    if image.shape[1] == size:
-        return image
-    interpolation = cv2.INTER_AREA if image.shape[1] > size else cv2.INTER_CUBIC
-    return np.stack([cv2.resize(band, (size, size), interpolation=interpolation) for band in image])

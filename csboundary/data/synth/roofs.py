@@ -11,12 +11,12 @@ import shapely
 import shapely.affinity
 from shapely.geometry import LineString, Polygon
 
-from csboundary.data.synth.materials import Colour, _jitter, _scaled_colour
+from csboundary.data.synth.materials import Colour, jitter_colour, scaled_colour
 from csboundary.data.synth.objects import Building
-from csboundary.data.synth.shapes import _centred_rect
+from csboundary.data.synth.shapes import centred_rect
 
 
-def _roof(rng: np.random.Generator, palette: str) -> Colour:
+def roof_colour(rng: np.random.Generator, palette: str) -> Colour:
     """A roof colour: grey concrete and tar (the original palette), warm tiles and shingles, or dark."""
     if palette == "mixed":
         palette = ("grey", "warm", "dark")[int(rng.integers(3))]
@@ -69,11 +69,11 @@ def roof_facets(
     return facets, ridge
 
 
-def _roof_details(rng: np.random.Generator, b: Building, d: np.ndarray, sun: tuple[float, float]) -> None:
+def add_flat_roof_details(rng: np.random.Generator, b: Building, d: np.ndarray, sun: tuple[float, float]) -> None:
     """A flat roof as photographed: a parapet rim, a light well or two, rooftop units and a water
     tank on the taller ones, each item with its short shadow on the roof (``flat_roof_detail``)."""
     roof = b.roof
-    b.parapet = _scaled_colour(roof, 1.3 if rng.random() < 0.5 else 0.72)
+    b.parapet = scaled_colour(roof, 1.3 if rng.random() < 0.5 else 0.72)
     b.parapet_width = float(rng.uniform(0.3, 0.6))
     inner = b.footprint.buffer(-1.2)
     if inner.is_empty:
@@ -91,24 +91,24 @@ def _roof_details(rng: np.random.Generator, b: Building, d: np.ndarray, sun: tup
     for _ in range(int(rng.integers(0, 4))):  # patches of newer or older roofing
         p = spot()
         if p is not None:
-            patch = _centred_rect(p, d, rng.uniform(3.0, 12.0), rng.uniform(3.0, 10.0)).intersection(inner)
-            b.roof_items.append((patch, _scaled_colour(roof, rng.uniform(0.75, 1.25))))
+            patch = centred_rect(p, d, rng.uniform(3.0, 12.0), rng.uniform(3.0, 10.0)).intersection(inner)
+            b.roof_items.append((patch, scaled_colour(roof, rng.uniform(0.75, 1.25))))
     if rng.random() < 0.45:  # light well / courtyard: a small dark shaft
         p = spot()
         if p is not None:
-            well = _centred_rect(p, d, rng.uniform(2.0, 4.5), rng.uniform(1.5, 3.5)).intersection(inner)
-            b.roof_items.append((well, _jitter(rng, (34, 34, 36, 30), 0.15)))
+            well = centred_rect(p, d, rng.uniform(2.0, 4.5), rng.uniform(1.5, 3.5)).intersection(inner)
+            b.roof_items.append((well, jitter_colour(rng, (34, 34, 36, 30), 0.15)))
     for _ in range(int(rng.poisson(min(b.footprint.area / 120.0, 6.0)))):
         p = spot()
         if p is None:
             continue
-        unit = _centred_rect(p, d, rng.uniform(0.8, 3.0), rng.uniform(0.8, 2.2))
+        unit = centred_rect(p, d, rng.uniform(0.8, 3.0), rng.uniform(0.8, 2.2))
         tall = rng.uniform(0.6, 2.0)
         b.roof_items.append(
-            (shapely.affinity.translate(unit, *(sun_v * tall)).intersection(b.footprint), _scaled_colour(roof, 0.5))
+            (shapely.affinity.translate(unit, *(sun_v * tall)).intersection(b.footprint), scaled_colour(roof, 0.5))
         )
         b.roof_items.append(
-            (unit, _jitter(rng, (188, 190, 192, 170) if rng.random() < 0.7 else (120, 122, 126, 110), 0.1))
+            (unit, jitter_colour(rng, (188, 190, 192, 170) if rng.random() < 0.7 else (120, 122, 126, 110), 0.1))
         )
     if b.height > 14 and rng.random() < 0.3:  # a timber water tank on its stand
         p = spot()
@@ -116,7 +116,9 @@ def _roof_details(rng: np.random.Generator, b: Building, d: np.ndarray, sun: tup
             r = rng.uniform(1.4, 2.4)
             tank = shapely.Point(p).buffer(r, quad_segs=6)
             b.roof_items.append(
-                (shapely.affinity.translate(tank, *(sun_v * 5.0)).intersection(b.footprint), _scaled_colour(roof, 0.45))
+                (shapely.affinity.translate(tank, *(sun_v * 5.0)).intersection(b.footprint), scaled_colour(roof, 0.45))
             )
-            b.roof_items.append((tank, _jitter(rng, (118, 100, 82, 100), 0.12)))
-            b.roof_items.append((shapely.Point(p).buffer(r * 0.55, quad_segs=6), _jitter(rng, (96, 82, 68, 80), 0.1)))
+            b.roof_items.append((tank, jitter_colour(rng, (118, 100, 82, 100), 0.12)))
+            b.roof_items.append(
+                (shapely.Point(p).buffer(r * 0.55, quad_segs=6), jitter_colour(rng, (96, 82, 68, 80), 0.1))
+            )

@@ -30,7 +30,13 @@ from shapely.geometry import LineString, Polygon, box
 from csboundary.data.ground_truth import as_linestrings
 from csboundary.data.synth.centrelines import QUAD_SEGS, Street
 from csboundary.data.synth.config import SynthConfig, rng_share
-from csboundary.data.synth.curbs import _bulb_islands, _islands, _medians, _roundabouts, round_convex_corners
+from csboundary.data.synth.curbs import (
+    boulevard_medians,
+    bulb_islands,
+    round_convex_corners,
+    roundabout_rings,
+    traffic_islands,
+)
 from csboundary.data.synth.highways import with_highways
 from csboundary.data.synth.layout import build_streets
 from csboundary.data.synth.suburbs import local_streets
@@ -74,7 +80,7 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
     """Streets -> roadway -> rounded blocks -> islands and medians -> ground-truth boundaries."""
     streets = build_streets(cfg, rng, width, height)
     road_by_street = [s.roadway() for s in streets]
-    rings = _roundabouts(cfg, rng, streets) if cfg.roundabout_share > 0 else []
+    rings = roundabout_rings(cfg, rng, streets) if cfg.roundabout_share > 0 else []
     raw_roadway = shapely.union_all(road_by_street + [disc for disc, _ in rings])
     m = cfg.margin
     domain = box(-m, -m, width + m, height + m)
@@ -88,11 +94,11 @@ def build_network(cfg: SynthConfig, rng: np.random.Generator, width: float, heig
         blocks.extend(Block(p, radius) for p in round_convex_corners(polygon, radius))
 
     roadway = domain.difference(shapely.union_all([b.polygon for b in blocks]))
-    islands = _islands(cfg, rng, streets, roadway)
+    islands = traffic_islands(cfg, rng, streets, roadway)
     if rings or cfg.bulb_island_share > 0:
-        extra = [island for _, island in rings] + _bulb_islands(cfg, rng, streets)
+        extra = [island for _, island in rings] + bulb_islands(cfg, rng, streets)
         islands = [i for i in islands if not any(i.intersects(e.buffer(3.0)) for e in extra)] + extra
-    medians = _medians(streets, road_by_street, roadway, [disc for disc, _ in rings])
+    medians = boulevard_medians(streets, road_by_street, roadway, [disc for disc, _ in rings])
     if islands or medians:
         roadway = roadway.difference(shapely.union_all(islands + medians))
 

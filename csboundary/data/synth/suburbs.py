@@ -10,7 +10,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from csboundary.data.synth.centrelines import Street, _unit
+from csboundary.data.synth.centrelines import Street, unit_vector
 from csboundary.data.synth.config import SynthConfig
 
 
@@ -62,7 +62,7 @@ def _curvy_branch(rng: np.random.Generator, start: np.ndarray, heading: np.ndarr
     points, p = [start.copy()], start.copy()
     for _ in range(int(length // 5)):
         angle += turn * 5
-        p = p + 5 * _unit(angle)
+        p = p + 5 * unit_vector(angle)
         points.append(p)
     return LineString(points)
 

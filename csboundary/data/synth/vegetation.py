@@ -10,21 +10,23 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from csboundary.data.synth.materials import Colour, _jitter
+from csboundary.data.synth.materials import Colour, jitter_colour
 from csboundary.data.synth.objects import Scene, Tree
 
 
-def _tree(rng: np.random.Generator, x: float, y: float, radius: float, lobes: int = 5) -> Tree:
+def make_tree(rng: np.random.Generator, x: float, y: float, radius: float, lobes: int = 5) -> Tree:
+    """A tree at (``x``, ``y``) with a random crown colour and its own crown-shape seed."""
     return Tree(float(x), float(y), radius, _tree_colour(rng), int(rng.integers(2**31)), lobes)
 
 
 def _tree_colour(rng: np.random.Generator) -> Colour:
     if rng.random() < 0.3:  # leafless or autumn crowns, as in the spring NYC imagery
-        return _jitter(rng, (118, 106, 92, 120), 0.12)
-    return _jitter(rng, (58, 86, 44, 190), 0.15)
+        return jitter_colour(rng, (118, 106, 92, 120), 0.12)
+    return jitter_colour(rng, (58, 86, 44, 190), 0.15)
 
 
-def _add_trees_in(rng: np.random.Generator, scene: Scene, area: Polygon, density: float, lobes: int = 5) -> None:
+def scatter_trees(rng: np.random.Generator, scene: Scene, area: Polygon, density: float, lobes: int = 5) -> None:
+    """Trees scattered at random over ``area``, ``density`` per square metre on average."""
     n = rng.poisson(area.area * density)
     if n == 0:
         return
@@ -32,10 +34,10 @@ def _add_trees_in(rng: np.random.Generator, scene: Scene, area: Polygon, density
     xs, ys = rng.uniform(minx, maxx, n), rng.uniform(miny, maxy, n)
     inside = shapely.contains_xy(area, xs, ys)
     for x, y in zip(xs[inside], ys[inside]):
-        scene.trees.append(_tree(rng, x, y, rng.uniform(2.0, 6.0), lobes))
+        scene.trees.append(make_tree(rng, x, y, rng.uniform(2.0, 6.0), lobes))
 
 
-def _add_canopy(rng: np.random.Generator, scene: Scene, area: Polygon, cover: float, lobes: int) -> None:
+def add_canopy(rng: np.random.Generator, scene: Scene, area: Polygon, cover: float, lobes: int) -> None:
     """Clumps of big, touching crowns until their summed crown area reaches ``cover`` of ``area``.
 
     Real suburbs hide much of each yard (and often the curb) under a continuous canopy whose
@@ -52,5 +54,5 @@ def _add_canopy(rng: np.random.Generator, scene: Scene, area: Polygon, cover: fl
         for _ in range(int(rng.integers(2, 9))):
             x, y = centre + rng.normal(0.0, 4.5, 2)
             radius = rng.uniform(3.0, 7.0)
-            scene.trees.append(_tree(rng, x, y, radius, lobes))
+            scene.trees.append(make_tree(rng, x, y, radius, lobes))
             crowns += math.pi * radius**2

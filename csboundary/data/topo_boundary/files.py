@@ -24,7 +24,7 @@ from rasterio.crs import CRS
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from shapely.geometry import LineString
 
-from csboundary.data.raster import BANDS, NIR_FILL_BAND
+from csboundary.data.raster_files import BANDS, NIR_FILL_BAND
 from csboundary.errors import InputError, InputWarning
 
 PATCH_SIZE = 1000

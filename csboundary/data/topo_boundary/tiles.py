@@ -16,7 +16,7 @@ import numpy as np
 from affine import Affine
 from shapely.geometry import LineString
 
-from csboundary.data.raster import BANDS
+from csboundary.data.raster_files import BANDS
 from csboundary.data.topo_boundary.boundaries import Piece, join_pieces, pixels_to_line
 from csboundary.data.topo_boundary.files import (
     LABEL_MARGIN,

@@ -34,6 +34,7 @@ from typing import Callable
 import numpy as np
 
 from csboundary.data.atomic import atomic_path
+from csboundary.pipeline.prediction.options import PredictionOptions
 
 TABLE_METRICS = [
     "precision@2",
@@ -305,7 +306,7 @@ def run_benchmark(
                 mosaic,
                 model,
                 out / "predictions" / method.key,
-                progress=progress,
+                PredictionOptions(progress=progress),
                 settings={"method": method.name},
                 ground_truth=lines,
             )

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -20,7 +21,8 @@ from csboundary.errors import InputError, InputWarning
 from csboundary.graph import BoundaryGraph
 from csboundary.models.checkpoint import file_sha256, shipped_weights
 from csboundary.pipeline.jobs.prediction_run import run_prediction
-from csboundary.pipeline.prediction.city import predict_city
+from csboundary.pipeline.prediction.city import predict_city, run_here
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 from csboundary.viz.labels import draw_patch_labels
 from csboundary.viz.overlay import to_display, write_png
@@ -48,65 +50,51 @@ def predict_to_folder(
     inputs: Sequence[str | Path],
     out: str | Path,
     predictor: PatchPredictor,
+    options: PredictionOptions = PredictionOptions(),
     *,
     weights: str | Path | None = None,
-    gsd: float | None = None,
-    batch_size: int = 1,
-    write_maps: bool = False,
-    lanelet2: bool = False,
-    restart: bool = False,
-    scheduler: str | None = None,
-    workers: int | None = None,
-    threads: int | None = None,
-    progress: bool = True,
     on_plan: Callable[[PatchGrid, ModelInput], None] | None = None,
 ) -> dict:
     """Predict the city that ``inputs`` name (tiles, a folder of tiles, a city directory) into
-    ``out`` and return the run's summary. ``weights`` names the file ``predictor`` came from (None:
-    the shipped one), for the run's manifest; ``gsd`` is the pixel size of imagery without a
-    CRS; ``scheduler`` (a Dask address) or ``workers`` (a local Dask cluster) spread the patches;
-    ``threads`` sets torch threads per process. ``on_plan`` is told the patch grid before any
-    work. An unfinished run in ``out`` is continued unless ``restart``."""
-    if scheduler and workers:
-        raise ValueError("give a scheduler or a number of workers, not both")
+    ``out`` as ``options`` say, and return the run's summary. ``weights`` names the file
+    ``predictor`` came from (None: the shipped one), for the run's manifest. ``on_plan`` is told
+    the patch grid before any work. An unfinished run in ``out`` is continued unless
+    ``options.restart``."""
     mosaic, _ = open_imagery(inputs)
-    view = model_view(mosaic, gsd, predictor.pixel_size_m)
+    view = model_view(mosaic, options.gsd, predictor.pixel_size_m)
     check_output_dir(out, inputs=inputs)
     with contextlib.ExitStack() as stack:
         if Path(out).is_dir():  # a folder in use is refused before the plan is told (run_prediction locks it too)
             stack.enter_context(folder_lock(out))
-        grid = PatchGrid.for_mosaic(view.mosaic)
+        grid = PatchGrid.for_mosaic(view.mosaic, options.grid)
         warn_if_sparse(grid, view.mosaic, inputs)
         if on_plan is not None:
             on_plan(grid, view)
-        if threads and not (scheduler or workers):
-            import torch
-
-            torch.set_num_threads(threads)
-        settings = run_settings(predictor, view, weights, batch_size)
+        settings = run_settings(predictor, view, weights, options.batch_size)
         stack.enter_context(view.mosaic)
-        options = {}
-        if scheduler or workers:
+        executor = run_here
+        if options.distributed:
             from csboundary.pipeline.prediction.distributed import dask_client, dask_executor
 
-            client, worker_threads = stack.enter_context(dask_client(scheduler, workers))
-            options = {"executor": dask_executor(client), "threads": threads or worker_threads}
-            settings["cluster"] = (
-                scheduler or f"local, {workers} workers"
-            )  # not part of the run's manifest: a run may resume elsewhere
+            client, worker_threads = stack.enter_context(dask_client(options.scheduler, options.workers))
+            executor = dask_executor(client)
+            options = replace(options, threads=options.threads or worker_threads)
+            # not part of the run's manifest: a run may resume elsewhere
+            settings["cluster"] = options.scheduler or f"local, {options.workers} workers"
+        elif options.threads:
+            import torch
+
+            torch.set_num_threads(options.threads)  # this process's own: no worker to set them in
+            options = replace(options, threads=None)
         _, summary = run_prediction(
             view.mosaic,
             predictor,
             out,
-            write_maps=write_maps,
-            batch_size=batch_size,
-            progress=progress,
+            options,
             settings=settings,
             units=view.units,
-            restart=restart,
-            lanelet2=lanelet2,
+            executor=executor,
             keep_graphs=False,
-            **options,
         )
     return summary
 
@@ -179,7 +167,7 @@ def predict_patch_to_folder(
                 f"patch)",
             )
         maps = CoreMaps(mosaic.width, mosaic.height)
-        graph = predict_city(mosaic, predictor, progress=False, on_window=maps.add).graph
+        graph = predict_city(mosaic, predictor, PredictionOptions(progress=False), on_window=maps.add).graph
         read = mosaic.read(mosaic.window)
     frame = gpd.GeoDataFrame(
         {

@@ -33,11 +33,10 @@ from typing import Callable
 import rasterio
 
 from csboundary.data.atomic import DiskFull, disk_full_file, naming_full_disk, staging_folder
-from csboundary.data.grid import GridConfig, PatchGrid
+from csboundary.data.grid import PatchGrid
 from csboundary.data.model_view import mosaic_units
 from csboundary.data.raster import Mosaic
 from csboundary.data.units import GroundUnits
-from csboundary.graph.stitching import StitchConfig
 from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.outputs.map_output import write_maps_cog
 from csboundary.pipeline.outputs.pictures import OVERVIEW_PX, write_pictures
@@ -45,6 +44,7 @@ from csboundary.pipeline.outputs.prediction_files import GraphWriter, read_predi
 from csboundary.pipeline.outputs.run_summary import PIXEL_UNITS, SUMMARY, peak_rss_mb, summarize
 from csboundary.pipeline.prediction.city import CityRun, predict_city, run_here
 from csboundary.pipeline.prediction.city_job import GDAL_ENV, CityResult
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.run_folder import run_folder
 from csboundary.viz.overlay import overview_scale
 
@@ -56,21 +56,13 @@ def run_prediction(
     mosaic: Mosaic,
     model: PatchModel,
     out_dir: str | Path,
+    options: PredictionOptions = PredictionOptions(),
     *,
-    write_maps: bool = False,
-    batch_size: int = 1,
-    grid_config: GridConfig = GridConfig(),
-    stitch: StitchConfig = StitchConfig(),
-    progress: bool = True,
     settings: dict | None = None,
     ground_truth=(),
     units: GroundUnits | None = None,
-    restart: bool = False,
     executor: Callable[[CityRun], None] = run_here,
-    threads: int | None = None,
-    lanelet2: bool = False,
     keep_graphs: bool = True,
-    **city,
 ) -> tuple[CityResult, dict]:
     """Predict ``mosaic`` and write every output into ``out_dir``; returns the result and the summary.
 
@@ -81,14 +73,15 @@ def run_prediction(
     the code version they decide whether an unfinished run in ``out_dir`` is resumed or refused.
     The city graph is written block by block as it is made; ``keep_graphs`` also keeps it (and
     the patch graphs) in the result, for scoring: ``predict`` does not, so its memory does not
-    grow with the city. ``city`` passes ``block`` and ``one_pass`` on to :func:`predict_city`.
+    grow with the city. ``options`` (:class:`PredictionOptions`) say how the city is predicted
+    (:func:`predict_city`) and which files beyond the usual are written (maps.tif, Lanelet2).
     """
     if units is None:
         units = mosaic_units(mosaic) or PIXEL_UNITS
-    manifest = run_manifest(mosaic, settings or {}, grid_config, batch_size, write_maps)
+    manifest = run_manifest(mosaic, settings or {}, options)
     try:
         with (
-            run_folder(out_dir, manifest, restart) as (out, store),
+            run_folder(out_dir, manifest, options.restart) as (out, store),
             staging_folder(out) as stage,
             contextlib.ExitStack() as stack,
         ):
@@ -101,31 +94,25 @@ def run_prediction(
                 "graph_json": stage / "graph.json",
             }
             crs = mosaic.crs.to_string() if mosaic.crs is not None else None
-            writer = GraphWriter(files, crs, PatchGrid.for_mosaic(mosaic, grid_config).transform, units)
+            writer = GraphWriter(files, crs, PatchGrid.for_mosaic(mosaic, options.grid).transform, units)
             stack.callback(writer.abort)
             result = predict_city(
                 mosaic,
                 model,
-                grid_config=grid_config,
-                stitch=stitch,
-                batch_size=batch_size,
-                progress=progress,
+                options,
                 store=store,
-                write_cores=write_maps,
                 executor=executor,
-                threads=threads,
                 overview_scale=overview_scale(mosaic.window, OVERVIEW_PX),
                 writer=writer.add,
                 keep_graphs=keep_graphs,
-                **city,
             )
             written_at = time.perf_counter()
             counts = writer.close()
             rss_after_prediction = peak_rss_mb()
             files.update(write_pictures(mosaic, result, stage, files["gpkg"], ground_truth, store))
-            if write_maps:
+            if options.write_maps:
                 files["maps"] = write_maps_cog(stage / "maps.tif", mosaic, result.grid, store)
-            if lanelet2:
+            if options.lanelet2:
                 from csboundary.pipeline.outputs.lanelet2_export import LANELET2_MAP, write_lanelet2
 
                 graph = result.graph if keep_graphs else read_prediction_graph(files["graph_json"])
@@ -155,7 +142,7 @@ def full_output(exc: OSError, out: Path) -> DiskFull | None:
     return DiskFull(errno.ENOSPC, exc.strerror, str(out / Path(written.filename).name))
 
 
-def run_manifest(mosaic: Mosaic, settings: dict, grid_config: GridConfig, batch_size: int, write_maps: bool) -> dict:
+def run_manifest(mosaic: Mosaic, settings: dict, options: PredictionOptions) -> dict:
     """What a run's stored work depends on: a resumed run must match it exactly. Input files are
     identified by path, size and modification time (hashing a city's imagery would take longer
     than a patch's work)."""
@@ -169,8 +156,8 @@ def run_manifest(mosaic: Mosaic, settings: dict, grid_config: GridConfig, batch_
     return {
         "inputs": inputs,
         "settings": settings,
-        "grid": [grid_config.core, grid_config.margin],
-        "batch_size": batch_size,
-        "write_maps": write_maps,
+        "grid": [options.grid.core, options.grid.margin],
+        "batch_size": options.batch_size,
+        "write_maps": options.write_maps,
         "code_version": code_version(),
     }

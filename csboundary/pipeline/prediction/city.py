@@ -31,7 +31,7 @@ import shapely
 from shapely.geometry import LineString
 from tqdm import tqdm
 
-from csboundary.data.grid import GridConfig, Patch, PatchGrid
+from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.raster import Mosaic
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.graph_stream import StreamBoundary, StreamPiece
@@ -50,6 +50,7 @@ from csboundary.pipeline.prediction.city_job import (
 )
 from csboundary.pipeline.prediction.edge_scoring import core_sampler
 from csboundary.pipeline.prediction.map_stitching import Index, WindowSchedule
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.run_store import RunStore
 
 
@@ -284,42 +285,35 @@ def run_here(run: CityRun, drain_workers: int | None = None) -> None:
 def predict_city(
     mosaic: Mosaic,
     model: PatchModel,
+    options: PredictionOptions = PredictionOptions(),
     *,
-    grid_config: GridConfig = GridConfig(),
-    stitch: StitchConfig = StitchConfig(),
-    batch_size: int = 1,
-    progress: bool = True,
     on_window: Callable[[Patch, np.ndarray], None] | None = None,
     store: RunStore | None = None,
-    write_cores: bool = False,
     executor: Callable[[CityRun], None] = run_here,
-    threads: int | None = None,
     overview_scale: float | None = None,
     writer: Callable[[StreamPiece | None, list[StreamBoundary]], None] | None = None,
     keep_graphs: bool = True,
-    block: int = BLOCK,
-    one_pass: bool = False,
 ) -> CityResult:
-    """Predict the whole mosaic. ``on_window(patch, stitched_maps)`` sees every final window
-    (in-process runs only); ``store`` (default: in memory) holds the work done, and a store left
-    by an interrupted run is resumed; ``executor`` does the work (default: this process; see
-    :func:`csboundary.pipeline.prediction.distributed.dask_executor`); ``writer``, ``keep_graphs``,
-    ``block`` and ``one_pass``: see :meth:`CityRun.finish`."""
-    if batch_size < 1:
-        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
-    grid = PatchGrid.for_mosaic(mosaic, grid_config)
+    """Predict the whole mosaic as ``options`` say (the grid, batches, threads, stitching and
+    streaming; with ``write_maps`` every core's stitched maps are kept for maps.tif).
+    ``on_window(patch, stitched_maps)`` sees every final window (in-process runs only); ``store``
+    (default: in memory) holds the work done, and a store left by an interrupted run is resumed;
+    ``executor`` does the work (default: this process; see
+    :func:`csboundary.pipeline.prediction.distributed.dask_executor`); ``writer`` and
+    ``keep_graphs``: see :meth:`CityRun.finish`."""
+    grid = PatchGrid.for_mosaic(mosaic, options.grid)
     job = CityJob(
         mosaic,
         model,
         grid,
         store if store is not None else RunStore(),
-        write_cores or reads_evidence(model),
-        threads,
+        options.write_maps or reads_evidence(model),
+        options.threads,
         overview_scale,
     )
-    run = CityRun(job, batch_size, progress, on_window)
+    run = CityRun(job, options.batch_size, options.progress, on_window)
     executor(run)
-    return run.finish(stitch, progress, writer, keep_graphs, block, one_pass)
+    return run.finish(options.stitch, options.progress, writer, keep_graphs, options.block, options.one_pass)
 
 
 def patch_scale_graph(result: CityResult) -> BoundaryGraph:

@@ -13,11 +13,11 @@ from csboundary.data import city as layout
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import model_view
 from csboundary.errors import InputError, InputWarning
-from csboundary.graph.stitching import StitchConfig
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.prediction.city import predict_city
 from csboundary.pipeline.prediction.city_job import CityResult
+from csboundary.pipeline.prediction.options import PredictionOptions
 
 
 def evaluate_run(
@@ -75,16 +75,14 @@ def set_cities(set_dir: str | Path) -> list[Path]:
 def predicted_city(
     city_dir: str | Path,
     model: PatchModel,
+    options: PredictionOptions = PredictionOptions(progress=False),
     *,
     assume_model_gsd: bool = False,
-    batch_size: int = 1,
-    progress: bool = False,
-    stitch: StitchConfig = StitchConfig(),
 ) -> tuple[CityResult, list]:
     """``model``'s prediction of a labelled city directory, read as ``predict`` reads it, and the
     city's ground-truth lines. ``assume_model_gsd``: imagery without a pixel size is taken to be
     at the model's (imported crops), and RGB is read without warnings (NIR := green is the
-    documented rule); ``stitch``: how patch graphs become the city graph (sweeps vary it)."""
+    documented rule); ``options``: how it is predicted (sweeps vary the stitching)."""
     layout.read_meta(city_dir)
     with warnings.catch_warnings():
         if assume_model_gsd:
@@ -92,7 +90,7 @@ def predicted_city(
         mosaic, lines = open_imagery([city_dir])
         view = model_view(mosaic, model_gsd=model.pixel_size_m, assume_model_gsd=assume_model_gsd)
     with view.mosaic:
-        result = predict_city(view.mosaic, model, batch_size=batch_size, progress=progress, stitch=stitch)
+        result = predict_city(view.mosaic, model, options)
     return result, lines
 
 
@@ -109,7 +107,7 @@ def evaluate_city(
 ) -> dict[str, dict]:
     """Patch-scale (each patch's graph on its core) and city-scale (the stitched graph) scores of
     ``model`` on a city directory with ground truth, without writing the prediction."""
-    result, lines = predicted_city(city_dir, model, batch_size=batch_size, progress=progress)
+    result, lines = predicted_city(city_dir, model, PredictionOptions(batch_size=batch_size, progress=progress))
     scores = evaluate_run(result, lines, seed, metres_per_px=model.pixel_size_m)
     for item in scores.values():
         item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}

@@ -19,6 +19,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.pipeline.evaluation.oracle import OracleModel
 from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.outputs.prediction_files import EDGES_LAYER, read_prediction_graph
+from csboundary.pipeline.prediction.options import PredictionOptions
 
 
 @pytest.fixture(scope="module")
@@ -51,12 +52,14 @@ def test_blocks_give_the_files_of_one_pass(city, tmp_path, block):
     model.settings = dataclasses.replace(
         model.settings, min_fragment_px=60.0, attach_px=40.0
     )  # the city steps that reach beyond an edge
-    one, _ = run_prediction(mosaic, model, tmp_path / "one", progress=False, block=block, one_pass=True)
-    banded, summary = run_prediction(mosaic, model, tmp_path / "blocks", progress=False, block=block)
+    one, _ = run_prediction(
+        mosaic, model, tmp_path / "one", PredictionOptions(progress=False, block=block, one_pass=True)
+    )
+    banded, summary = run_prediction(mosaic, model, tmp_path / "blocks", PredictionOptions(progress=False, block=block))
     assert one.graph.n_edges > 100 and summary["counts"]["boundaries"] > 10
     assert _files(tmp_path / "one") == _files(tmp_path / "blocks")
     # the same edges whatever the block size: only their order may differ
-    whole, _ = run_prediction(mosaic, model, tmp_path / "whole", progress=False, block=8)
+    whole, _ = run_prediction(mosaic, model, tmp_path / "whole", PredictionOptions(progress=False, block=8))
     assert _edge_set(whole.graph) == _edge_set(banded.graph)
 
 
@@ -68,7 +71,7 @@ def _edge_set(graph: BoundaryGraph) -> set:
 def test_the_files_agree_and_read_back(city, tmp_path):
     mosaic, lines = city
     result, summary = run_prediction(
-        mosaic, OracleModel.from_lines(lines, mosaic), tmp_path / "run", progress=False, block=1
+        mosaic, OracleModel.from_lines(lines, mosaic), tmp_path / "run", PredictionOptions(progress=False, block=1)
     )
     folder = tmp_path / "run"
     graph = BoundaryGraph.read_json(folder / "graph.json")

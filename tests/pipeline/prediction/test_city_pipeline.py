@@ -28,6 +28,7 @@ from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.maps import predict_mosaic_maps
 from csboundary.pipeline.evaluation.oracle import OracleModel
 from csboundary.pipeline.prediction.city import patch_scale_graph, predict_city, run_here
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
 
@@ -44,7 +45,7 @@ def city(tmp_path_factory):
 
 def test_ground_truth_maps_and_adjacency_give_back_the_ground_truth(city):
     mosaic, lines = city
-    result = predict_city(mosaic, OracleModel.from_lines(lines, mosaic), progress=False)
+    result = predict_city(mosaic, OracleModel.from_lines(lines, mosaic), PredictionOptions(progress=False))
     gt = BoundaryGraph.from_world_lines(lines, mosaic.transform)
     scores = evaluate(result.graph, gt, scale="city", seed=0)["metrics"]
     assert scores["apls"] >= 0.99
@@ -61,12 +62,12 @@ def test_ground_truth_maps_and_adjacency_give_back_the_ground_truth(city):
 def test_a_model_s_shortest_fragment_is_dropped_from_the_city_graph_only(city):
     mosaic, lines = city
     model = OracleModel.from_lines(lines, mosaic)
-    whole = predict_city(mosaic, model, progress=False)
+    whole = predict_city(mosaic, model, PredictionOptions(progress=False))
     piece, length = fragment_lengths(whole.graph)
     limit = float(np.median(length))
     assert (length < limit).any() and (length >= limit).any()
     model.settings = dataclasses.replace(model.settings, min_fragment_px=limit)
-    kept = predict_city(mosaic, model, progress=False)
+    kept = predict_city(mosaic, model, PredictionOptions(progress=False))
     assert kept.graph.n_edges == int((length[piece] >= limit).sum())
     assert np.isclose(kept.graph.edge_lengths().sum(), length[length >= limit].sum())
     assert all(
@@ -107,9 +108,7 @@ def test_streamed_windows_equal_the_whole_mosaic_average(tmp_path, batch_size):
         result = predict_city(
             mosaic,
             model,
-            grid_config=config,
-            batch_size=batch_size,
-            progress=False,
+            PredictionOptions(grid=config, batch_size=batch_size, progress=False),
             on_window=lambda p, m: windows.__setitem__(p.index, m),
         )
         whole = predict_mosaic_maps(
@@ -132,7 +131,7 @@ def test_the_fpn_sees_the_imagery_mirrored_beyond_the_mosaic_edge_not_zeros(tmp_
     seen, mirrored_rows = [], 0
     model.patch_maps = lambda patches, images: seen.extend(images) or model.predictor.patch_maps(patches, images)
     with Mosaic.open(tiles.directory) as mosaic:
-        result = predict_city(mosaic, model, grid_config=GridConfig(core=64, margin=8), progress=False)
+        result = predict_city(mosaic, model, PredictionOptions(grid=GridConfig(core=64, margin=8), progress=False))
         for patch, image in zip(result.grid, seen):
             read = mosaic.read(patch.expanded)
             assert not read.valid.all()
@@ -166,9 +165,9 @@ def test_the_fpn_runs_in_its_own_thread_and_the_city_graph_is_the_one_of_a_run_w
     model.patch_maps = lambda patches, images: (
         threads.append(threading.current_thread().name) or predict(patches, images)
     )
-    overlapped = predict_city(mosaic, model, progress=False)
+    overlapped = predict_city(mosaic, model, PredictionOptions(progress=False))
     assert len(threads) == 9 and all(name.startswith("csboundary-fpn") for name in threads)
-    serial = predict_city(mosaic, model, progress=False, executor=_one_step_after_another)
+    serial = predict_city(mosaic, model, PredictionOptions(progress=False), executor=_one_step_after_another)
     assert len(threads) == 18 and threads[9:] == [threading.current_thread().name] * 9
     assert np.array_equal(overlapped.graph.vertices, serial.graph.vertices)
     assert np.array_equal(overlapped.graph.edges, serial.graph.edges) and overlapped.graph.n_edges > 50
@@ -187,11 +186,15 @@ def test_the_last_windows_are_connected_side_by_side_with_the_same_graph(city):
         return connect(patch, *rest)
 
     model.connect = connect_and_note_thread
-    side_by_side = predict_city(mosaic, model, progress=False, executor=functools.partial(run_here, drain_workers=2))
+    side_by_side = predict_city(
+        mosaic, model, PredictionOptions(progress=False), executor=functools.partial(run_here, drain_workers=2)
+    )
     threaded = sorted(i for i, name in where.items() if name.startswith("csboundary-window"))
     assert threaded == [(1, 1), (1, 2), (2, 1), (2, 2)] and len(where) == 9
     where.clear()
-    one_by_one = predict_city(mosaic, model, progress=False, executor=functools.partial(run_here, drain_workers=1))
+    one_by_one = predict_city(
+        mosaic, model, PredictionOptions(progress=False), executor=functools.partial(run_here, drain_workers=1)
+    )
     assert not any(name.startswith("csboundary-window") for name in where.values())
     assert np.array_equal(side_by_side.graph.vertices, one_by_one.graph.vertices)
     assert np.array_equal(side_by_side.graph.edges, one_by_one.graph.edges) and one_by_one.graph.n_edges > 50
@@ -212,7 +215,7 @@ def test_skeleton_fill_alone_rebuilds_the_ground_truth_across_seams(city):
     mosaic, lines = city
     model = _SkeletonOnlyOracle.from_lines(lines, mosaic)
     model.settings = dataclasses.replace(model.settings, fill=FillConfig(min_length_px=20))
-    result = predict_city(mosaic, model, progress=False)
+    result = predict_city(mosaic, model, PredictionOptions(progress=False))
     gt = BoundaryGraph.from_world_lines(lines, mosaic.transform)
     scores = evaluate(result.graph, gt, scale="city", seed=0)["metrics"]
     assert set(result.graph.edge_kinds) == {"skeleton"}
@@ -246,6 +249,6 @@ def test_read_batches_are_let_go_once_their_maps_are_stored(tmp_path, monkeypatc
         most_alive.append(sum(ref() is not None for ref in alive)) or predict(patches, images)
     )
     with Mosaic.open(tiles.directory) as mosaic:
-        result = predict_city(mosaic, model, grid_config=GridConfig(core=16, margin=4), progress=False)
+        result = predict_city(mosaic, model, PredictionOptions(grid=GridConfig(core=16, margin=4), progress=False))
     assert len(result.grid) == 60 and len(alive) == 60
     assert max(most_alive) <= 4  # the batch being predicted, the two read ahead, the one being stored

@@ -17,6 +17,7 @@ from csboundary.data.geotiff import write_geotiff
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.pipeline.jobs.predict import predict_patch_to_folder, predict_to_folder
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.patch import load_predictor
 
 
@@ -49,7 +50,7 @@ def graph_json(folder) -> dict:
 @pytest.mark.parametrize("width, height", [(700, 700), (1050, 700), (1100, 1100)])
 def test_predict_patch_writes_the_graph_predict_writes(tile, predictor, tmp_path, width, height):
     image = top_left(tile, tmp_path / f"image-{width}x{height}.tif", width, height)
-    predict_to_folder([image], tmp_path / "predict", predictor, progress=False)
+    predict_to_folder([image], tmp_path / "predict", predictor, PredictionOptions(progress=False))
     predict_patch_to_folder(image, tmp_path / "patch", predictor)
     assert len(graph_json(tmp_path / "predict")["edges"]) > 10  # a graph worth comparing
     # vertices, edges, kinds, scores, polylines, patches, georeference

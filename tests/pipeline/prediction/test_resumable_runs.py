@@ -17,6 +17,7 @@ import pytest
 
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.graph_arrays import graph_arrays, graph_from_arrays
+from csboundary.pipeline.prediction.options import PredictionOptions
 from csboundary.pipeline.prediction.run_store import STORE_DIR, RunMismatch, RunStore
 from helpers import run_cli
 
@@ -211,7 +212,12 @@ def test_two_dask_workers_write_the_local_graph(city, reference, tmp_path):
     ):
         settings = {"weights_sha256": file_sha256(shipped_weights())}
         _, summary = run_prediction(
-            mosaic, predictor, out, progress=False, settings=settings, executor=dask_executor(client), threads=1
+            mosaic,
+            predictor,
+            out,
+            PredictionOptions(progress=False, threads=1),
+            settings=settings,
+            executor=dask_executor(client),
         )
         assert len(client.nthreads()) == 2
     assert summary["work"]["windows_connected"] == 9

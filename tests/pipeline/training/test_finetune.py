@@ -21,9 +21,9 @@ from csboundary.metrics.compare import paired_bootstrap
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.fpn import fpn_loss
+from csboundary.pipeline.evaluation.finetune_cv import folds_of
 from csboundary.pipeline.outputs.prediction_files import write_graph_outputs
 from csboundary.pipeline.outputs.review import apply_review
-from csboundary.pipeline.evaluation.finetune_cv import folds_of
 from csboundary.pipeline.training.labelled_inputs import labelled_cities
 
 SIZE = 600
