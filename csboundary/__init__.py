@@ -6,8 +6,8 @@ High-definition Maps", RA-L 2022. The layers, each importing only those below it
 its settings, stitching); ``labels``, ``metrics``, ``viz``; ``models`` (the FPN, AfANet, baselines,
 training); ``pipeline`` (running a city, its outputs, training workflows, evaluation); ``api``
 and ``cli`` on top. The Python API (docs/api.md) is importable from here: ``csboundary.predict``,
-``csboundary.load_model`` and the rest of ``csboundary.api.__all__``, loaded on first use so that
-``import csboundary`` stays light.
+``csboundary.load_model`` and the rest of :data:`__all__` (the one list of the API's names, which
+``csboundary.api`` shares), loaded on first use so that ``import csboundary`` stays light.
 """
 
 __version__ = "0.1.0"
@@ -15,6 +15,7 @@ __version__ = "0.1.0"
 __all__ = [
     "GraphOverrides",
     "GraphSettings",
+    "PredictionOptions",
     "adapt",
     "evaluate",
     "evaluate_model",

@@ -15,26 +15,15 @@ import dataclasses
 from pathlib import Path
 from typing import Sequence
 
+import csboundary
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
-from csboundary.graph.settings import GraphOverrides, GraphSettings
-from csboundary.pipeline.prediction.options import PredictionOptions
+from csboundary.graph.settings import GraphOverrides as GraphOverrides
+from csboundary.graph.settings import GraphSettings as GraphSettings
+from csboundary.pipeline.prediction.options import PredictionOptions as PredictionOptions
 from csboundary.pipeline.prediction.patch import PatchPredictor
 
-__all__ = [
-    "GraphOverrides",
-    "GraphSettings",
-    "PredictionOptions",
-    "adapt",
-    "evaluate",
-    "evaluate_model",
-    "evaluate_set",
-    "finetune",
-    "load_model",
-    "predict",
-    "predict_patch",
-    "read_prediction",
-]
+__all__ = csboundary.__all__  # the API's names, listed once (csboundary/__init__.py)
 
 
 def load_model(
@@ -145,6 +134,6 @@ def adapt(imagery: Sequence[str | Path], out: str | Path, **options) -> dict:
 
 def read_prediction(source: str | Path) -> BoundaryGraph:
     """A prediction (its folder, graph.json or boundaries.gpkg) as a graph in its CRS."""
-    from csboundary.pipeline.outputs.prediction_files import read_prediction_graph
+    from csboundary.pipeline.outputs.prediction_reader import read_prediction_graph
 
     return read_prediction_graph(source)

@@ -36,7 +36,7 @@ from csboundary.models.fpn import FPN, FPNConfig
 from csboundary.models.maps import image_tensor
 from csboundary.models.training.config import TrainConfig, model_config_with
 from csboundary.models.training.data import TrainingCity
-from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
+from csboundary.models.training.loop import RunLog, TrainingRun, optimize, seed_everything
 
 KIND = "orientation-refine"
 IGNORE = -100
@@ -180,12 +180,12 @@ def train(
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_batch(valid_city, valid_rng, config, options, False) for _ in range(config.validation_samples)]
-    step, history = resume_run(resume, KIND, model, optimizer, rng)
+    run = TrainingRun(KIND, model, model.config, config, out_dir, optimizer, rng, log).resumed(resume)
     stage2_from = round(config.steps * (1 - options.refine_fraction))
     log.write(
         event="start",
         model=KIND,
-        step=step,
+        step=run.step,
         parameters=sum(p.numel() for p in model.parameters()),
         config=config.to_dict(),
     )
@@ -204,9 +204,7 @@ def train(
     def check(step: int) -> dict:  # the refiner is judged once it has been trained
         return validate(model.stage1, model.refiner if step > stage2_from else None, valid_batches, device)
 
-    return optimize(
-        KIND, model, model.config, config, out_dir, optimizer, rng, step, history, log, loss_at, check, progress
-    )
+    return optimize(run, loss_at, check, progress)
 
 
 @dataclass

@@ -50,7 +50,7 @@ from csboundary.models.fpn import FPN, FPNConfig, fpn_for_weights
 from csboundary.models.maps import image_tensor, unit_bands
 from csboundary.models.training.config import TrainConfig, model_config_with
 from csboundary.models.training.data import TrainingCity, augment
-from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
+from csboundary.models.training.loop import RunLog, TrainingRun, optimize, seed_everything
 
 KIND = "sat2graph"
 SLOTS = 6
@@ -318,11 +318,11 @@ def train(
     valid_batches = [
         _batch(valid_city, valid_rng, config, options, train=False) for _ in range(config.validation_samples)
     ]
-    step, history = resume_run(resume, KIND, model, optimizer, rng)
+    run = TrainingRun(KIND, model, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
     log.write(
         event="start",
         model=KIND,
-        step=step,
+        step=run.step,
         parameters=sum(p.numel() for p in model.parameters()),
         config=config.to_dict(),
     )
@@ -331,21 +331,7 @@ def train(
         image, target, mask, _ = _batch(train_city, rng, config, options, train=True)
         return sat2graph_loss(model(image.to(device)), target.to(device), mask.to(device), options), {}
 
-    return optimize(
-        KIND,
-        model,
-        model_config,
-        config,
-        out_dir,
-        optimizer,
-        rng,
-        step,
-        history,
-        log,
-        loss_at,
-        lambda step: validate(model, valid_batches, device, options),
-        progress,
-    )
+    return optimize(run, loss_at, lambda step: validate(model, valid_batches, device, options), progress)
 
 
 # -- inference ------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from csboundary.models.checkpoint import file_sha256, load_afanet, load_fpn
 from csboundary.models.maps import predict_mosaic_maps
 from csboundary.models.training.config import TrainConfig, extra_parts, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity, city_probabilities
-from csboundary.models.training.loop import RunLog, optimize, resume_run, run_code_version, seed_everything
+from csboundary.models.training.loop import RunLog, TrainingRun, optimize, run_code_version, seed_everything
 
 
 def adjacency_loss(logits: torch.Tensor, label: torch.Tensor, max_pos_weight: float) -> torch.Tensor:
@@ -124,12 +124,12 @@ def train_afanet(
         for stage in ("gt", "pred")
     }
     rng = np.random.default_rng(config.seed)
-    step, history = resume_run(resume, "afanet", model, optimizer, rng)
+    run = TrainingRun("afanet", model, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
     init = {"init_afanet_sha256": file_sha256(config.init_afanet)} if config.init_afanet else {}
     log.write(
         event="start",
         model="afanet",
-        step=step,
+        step=run.step,
         code_version=run_code_version(),
         parameters=sum(p.numel() for p in model.parameters()),
         config=config.to_dict(),
@@ -167,21 +167,7 @@ def train_afanet(
         return metrics
 
     try:
-        return optimize(
-            "afanet",
-            model,
-            model_config,
-            config,
-            out_dir,
-            optimizer,
-            rng,
-            step,
-            history,
-            log,
-            loss_at,
-            validate,
-            progress,
-        )
+        return optimize(run, loss_at, validate, progress)
     finally:
         for city in (*train_cities, cities["valid"]):
             city.close()

@@ -16,7 +16,7 @@ from csboundary.models.style_mixing import add_style_mixing
 from csboundary.models.training.config import TrainConfig, extra_parts, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.feature_distance import FeatureAnchor
-from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
+from csboundary.models.training.loop import RunLog, TrainingRun, autocast, optimize, run_code_version, seed_everything
 
 
 def fpn_parameter_groups(model, config: TrainConfig) -> list[dict]:
@@ -202,12 +202,12 @@ def train_fpn(
         _fpn_batch([valid_city], valid_rng, config, None, with_surface) for _ in range(config.validation_samples)
     ]
     augmentation = model_config_with(AugmentConfig, config.augment)
-    step, history = resume_run(resume, "fpn", model, optimizer, rng)
+    run = TrainingRun("fpn", model, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
     init = {"init_fpn_sha256": file_sha256(config.init_fpn)} if config.init_fpn else {}
     log.write(
         event="start",
         model="fpn",
-        step=step,
+        step=run.step,
         code_version=run_code_version(),
         parameters=sum(p.numel() for p in model.parameters()),
         config=config.to_dict(),
@@ -229,21 +229,7 @@ def train_fpn(
         return loss + config.feature_distance_weight * distance, {"feature_distance": float(distance)}
 
     try:
-        return optimize(
-            "fpn",
-            model,
-            model_config,
-            config,
-            out_dir,
-            optimizer,
-            rng,
-            step,
-            history,
-            log,
-            loss_at,
-            lambda step: validate_fpn(model, valid_batches, device, config),
-            progress,
-        )
+        return optimize(run, loss_at, lambda step: validate_fpn(model, valid_batches, device, config), progress)
     finally:
         if anchor is not None:
             anchor.close()

@@ -7,6 +7,7 @@ import json
 import math
 import random
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -54,50 +55,95 @@ class RunLog:
         tqdm.write(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in record.items()))
 
 
-def optimize(
-    kind: str,
-    model,
-    model_config,
-    config: TrainConfig,
-    out_dir: Path,
-    optimizer,
-    rng: np.random.Generator,
-    step: int,
-    history: list,
-    log: RunLog,
-    loss_at,
-    validate,
-    progress: bool = True,
-) -> Path:
+@dataclass
+class TrainingRun:
+    """One run's state, as the shared loop carries it: what is trained (``kind`` names its files and
+    checkpoint keys; ``model`` and its ``model_config``), how (``config``, ``optimizer``, ``rng``),
+    where it writes (``out_dir``, ``log``) and how far it has got (``step``, the validation
+    ``history``)."""
+
+    kind: str
+    model: torch.nn.Module
+    model_config: Any
+    config: TrainConfig
+    out_dir: Path
+    optimizer: torch.optim.Optimizer
+    rng: np.random.Generator
+    log: RunLog
+    step: int = 0
+    history: list = field(default_factory=list)
+
+    def resumed(self, checkpoint: str | None) -> "TrainingRun":
+        """This run continued exactly from the checkpoint ``checkpoint`` (weights, optimizer and
+        every random stream restored; its step and history taken); unchanged without one."""
+        self.step, self.history = resume_run(checkpoint, self.kind, self.model, self.optimizer, self.rng)
+        return self
+
+    def record(self, metrics: dict) -> None:
+        """Log one validation and write the resumable ``<kind>-last.pt`` (and a snapshot when asked)."""
+        self.history.append(metrics)
+        self.log.write(event="validate", **metrics)
+        self.save(self.out_dir / f"{self.kind}-last.pt", resumable=True)
+        if self.config.snapshots:
+            self.save(self.out_dir / f"{self.kind}-step{self.step}.pt", resumable=False)
+
+    def finish(self) -> Path:
+        """Write the final ``<kind>.pt`` (no optimizer state) and log its path."""
+        final = self.out_dir / f"{self.kind}.pt"
+        self.save(final, resumable=False)
+        self.log.write(event="done", step=self.step, weights=str(final))
+        return final
+
+    def save(self, path: Path, resumable: bool) -> None:
+        """The weights, their configs and the run's progress; ``resumable`` adds the optimizer and
+        every random stream, so the run can continue exactly."""
+        content = {
+            self.kind: self.model.state_dict(),
+            f"{self.kind}_config": self.model_config.to_dict(),
+            "train_config": self.config.to_dict(),
+            "step": self.step,
+            "validation": self.history,
+            "code_version_at_start": _RUN_CODE_VERSION.get("at_start", code_version()),
+        }
+        if resumable:
+            content["optimizer"] = self.optimizer.state_dict()
+            content["torch_rng"] = torch.get_rng_state()
+            content["numpy_rng"] = self.rng.bit_generator.state
+            if torch.cuda.is_available():
+                content["cuda_rng"] = torch.cuda.get_rng_state_all()
+        save_checkpoint(path, self.kind, **content)
+
+
+def optimize(run: TrainingRun, loss_at, validate, progress: bool = True) -> Path:
     """The loop every trainer shares (the FPN, AfANet, the dense baselines): cosine learning
     rate, one optimizer step per ``loss_at(step) -> (loss, extras)`` (a ``None`` loss, e.g. an
     AfANet window with fewer than two vertices, counts the step without an update), a validation
     (``validate(step) -> dict``, logged with the extras) and a resumable checkpoint every
     ``validate_every`` steps, the final weights at the end."""
-    model.train()
-    bar = tqdm(total=config.steps, initial=step, desc=f"train {kind}", unit="step", disable=not progress)
+    config, optimizer = run.config, run.optimizer
+    run.model.train()
+    bar = tqdm(total=config.steps, initial=run.step, desc=f"train {run.kind}", unit="step", disable=not progress)
     last = None
-    while step < config.steps:
-        lr = _cosine_lr(config, step)
+    while run.step < config.steps:
+        lr = _cosine_lr(config, run.step)
         for group in optimizer.param_groups:
             group["lr"] = lr * group.get("lr_scale", 1.0)
-        loss, extras = loss_at(step)
+        loss, extras = loss_at(run.step)
         if loss is not None:
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
             last = loss.item()
-        step += 1
+        run.step += 1
         bar.update(1)
         if last is not None:
             bar.set_postfix(
                 loss=f"{last:.4f}", **{k: f"{v:.3g}" if isinstance(v, float) else v for k, v in extras.items()}
             )
-        if step % config.validate_every == 0 or step == config.steps:
-            metrics = {"step": step, "train_loss": last, "lr": lr, **extras, **validate(step)}
-            _record(out_dir, kind, metrics, model, model_config, config, step, history, optimizer, rng, log)
+        if run.step % config.validate_every == 0 or run.step == config.steps:
+            run.record({"step": run.step, "train_loss": last, "lr": lr, **extras, **validate(run.step)})
     bar.close()
-    return _finish(out_dir, kind, model, model_config, config, step, history, log)
+    return run.finish()
 
 
 def _cosine_lr(config: TrainConfig, step: int) -> float:
@@ -107,45 +153,6 @@ def _cosine_lr(config: TrainConfig, step: int) -> float:
         return config.lr * (step + 1) / warm
     t = (step - warm) / max(1, config.steps - warm)
     return config.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, t))))
-
-
-def _record(
-    out_dir: Path, kind: str, metrics: dict, model, model_config, config, step, history, optimizer, rng, log: RunLog
-) -> None:
-    """Log one validation and write the resumable ``<kind>-last.pt``."""
-    history.append(metrics)
-    log.write(event="validate", **metrics)
-    _save(out_dir / f"{kind}-last.pt", kind, model, model_config, config, step, history, optimizer, rng)
-    if config.snapshots:
-        _save(out_dir / f"{kind}-step{step}.pt", kind, model, model_config, config, step, history, None)
-
-
-def _finish(out_dir: Path, kind: str, model, model_config, config, step, history, log: RunLog) -> Path:
-    """Write the final ``<kind>.pt`` (no optimizer state) and log its path."""
-    final = out_dir / f"{kind}.pt"
-    _save(final, kind, model, model_config, config, step, history, None)
-    log.write(event="done", step=step, weights=str(final))
-    return final
-
-
-def _save(
-    path: Path, kind: str, model, model_config, config: TrainConfig, step: int, history: list, optimizer, rng=None
-) -> None:
-    content = {
-        kind: model.state_dict(),
-        f"{kind}_config": model_config.to_dict(),
-        "train_config": config.to_dict(),
-        "step": step,
-        "validation": history,
-        "code_version_at_start": _RUN_CODE_VERSION.get("at_start", code_version()),
-    }
-    if optimizer is not None:
-        content["optimizer"] = optimizer.state_dict()
-        content["torch_rng"] = torch.get_rng_state()
-        content["numpy_rng"] = rng.bit_generator.state if rng is not None else None
-        if torch.cuda.is_available():
-            content["cuda_rng"] = torch.cuda.get_rng_state_all()
-    save_checkpoint(path, kind, **content)
 
 
 def resume_run(resume: str | None, kind: str, model, optimizer, rng: np.random.Generator) -> tuple[int, list]:

@@ -44,7 +44,7 @@ from csboundary.models.style_mixing import add_style_mixing
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity
 from csboundary.models.training.fpn import _fpn_batch, fpn_loss, fpn_parameter_groups, starting_fpn, validate_fpn
-from csboundary.models.training.loop import RunLog, autocast, optimize, resume_run, run_code_version, seed_everything
+from csboundary.models.training.loop import RunLog, TrainingRun, autocast, optimize, run_code_version, seed_everything
 from csboundary.models.training.unlabelled import UnlabelledImagery
 
 
@@ -215,11 +215,11 @@ def train_adapt(
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_batches = [_fpn_batch([valid_city], valid_rng, config, None, True) for _ in range(config.validation_samples)]
     augmentation = model_config_with(AugmentConfig, config.augment)
-    step, history = resume_run(resume, "adapt", model, optimizer, rng)
+    run = TrainingRun("adapt", model, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
     log.write(
         event="start",
         model="adapt",
-        step=step,
+        step=run.step,
         code_version=run_code_version(),
         config=config.to_dict(),
         init_fpn_sha256=file_sha256(config.init_fpn),
@@ -267,16 +267,7 @@ def train_adapt(
 
     try:
         optimize(
-            "adapt",
-            model,
-            model_config,
-            config,
-            out_dir,
-            optimizer,
-            rng,
-            step,
-            history,
-            log,
+            run,
             loss_at,
             lambda step: validate_fpn(getattr(model, settings.export), valid_batches, device, config),
             progress,
@@ -293,7 +284,7 @@ def train_adapt(
         fpn_config=model_config.to_dict(),
         train_config=config.to_dict(),
         step=config.steps,
-        validation=history,
+        validation=run.history,
         code_version_at_start=run_code_version(),
     )
     return final

@@ -40,7 +40,8 @@ from csboundary.data.units import GroundUnits
 from csboundary.models.patch_model import PatchModel
 from csboundary.pipeline.outputs.map_output import write_maps_cog
 from csboundary.pipeline.outputs.pictures import OVERVIEW_PX, write_pictures
-from csboundary.pipeline.outputs.prediction_files import GraphWriter, read_prediction_graph
+from csboundary.pipeline.outputs.prediction_files import GraphWriter
+from csboundary.pipeline.outputs.prediction_reader import read_prediction_graph
 from csboundary.pipeline.outputs.run_summary import PIXEL_UNITS, SUMMARY, peak_rss_mb, summarize
 from csboundary.pipeline.prediction.city import CityRun, predict_city, run_here
 from csboundary.pipeline.prediction.city_job import GDAL_ENV, CityResult

@@ -24,7 +24,8 @@ from csboundary.data.user_city import make_city
 from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.training.data import covers_imagery
-from csboundary.pipeline.outputs.review import REVIEW_LOG, prediction_inputs, read_log
+from csboundary.pipeline.outputs.review import REVIEW_LOG, prediction_inputs
+from csboundary.pipeline.outputs.review_apply import read_log
 from csboundary.pipeline.prediction.city_scores import set_cities
 
 REVIEWED_GROUND_TRUTH = "boundaries.gpkg"  # the prediction's GeoPackage, rewritten by apply-review

@@ -18,7 +18,8 @@ from csboundary.data.synth.config import SynthConfig
 from csboundary.graph import BoundaryGraph
 from csboundary.pipeline.evaluation.oracle import OracleModel
 from csboundary.pipeline.jobs.prediction_run import run_prediction
-from csboundary.pipeline.outputs.prediction_files import EDGES_LAYER, read_prediction_graph
+from csboundary.pipeline.outputs.prediction_files import EDGES_LAYER
+from csboundary.pipeline.outputs.prediction_reader import read_prediction_graph
 from csboundary.pipeline.prediction.options import PredictionOptions
 
 

@@ -23,7 +23,7 @@ from csboundary.models.training.data import TrainingCity, city_probabilities
 from csboundary.models.training.fpn import fpn_loss
 from csboundary.pipeline.evaluation.finetune_cv import folds_of
 from csboundary.pipeline.outputs.prediction_files import write_graph_outputs
-from csboundary.pipeline.outputs.review import apply_review
+from csboundary.pipeline.outputs.review_apply import apply_review
 from csboundary.pipeline.training.labelled_inputs import labelled_cities
 
 SIZE = 600

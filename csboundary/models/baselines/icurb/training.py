@@ -19,7 +19,7 @@ from csboundary.models.baselines.icurb.tracing import rollout
 from csboundary.models.maps import predict_mosaic_maps, unit_bands
 from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.data import TrainingCity
-from csboundary.models.training.loop import RunLog, optimize, resume_run, seed_everything
+from csboundary.models.training.loop import RunLog, TrainingRun, optimize, seed_everything
 
 
 class ReplayBuffer:
@@ -120,12 +120,12 @@ def train(
     valid_rng = np.random.default_rng(config.seed + 1)
     valid_windows = [cities["valid"].random_window(valid_rng, opts["window"]) for _ in range(config.validation_samples)]
     rng = np.random.default_rng(config.seed)
-    step, history = resume_run(resume, KIND, agent, optimizer, rng)
+    run = TrainingRun(KIND, agent, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
     buffer = ReplayBuffer(opts["buffer"], model_config.roi)  # not checkpointed: rebuilt after a resume
     log.write(
         event="start",
         model=KIND,
-        step=step,
+        step=run.step,
         parameters=sum(p.numel() for p in agent.parameters()),
         config=config.to_dict(),
     )
@@ -153,17 +153,5 @@ def train(
         return _imitation_loss(agent, x, offset, stop, opts["stop_pos_weight"]), {"beta": beta, "buffer": buffer.size}
 
     return optimize(
-        KIND,
-        agent,
-        model_config,
-        config,
-        out_dir,
-        optimizer,
-        rng,
-        step,
-        history,
-        log,
-        loss_at,
-        lambda step: validate(agent, cities["valid"], valid_windows, model_config, opts, device),
-        progress,
+        run, loss_at, lambda step: validate(agent, cities["valid"], valid_windows, model_config, opts, device), progress
     )
