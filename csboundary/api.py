@@ -21,7 +21,7 @@ from csboundary.graph import BoundaryGraph
 from csboundary.graph.settings import GraphOverrides as GraphOverrides
 from csboundary.graph.settings import GraphSettings as GraphSettings
 from csboundary.pipeline.prediction.options import PredictionOptions as PredictionOptions
-from csboundary.pipeline.prediction.patch import PatchPredictor
+from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 
 __all__ = csboundary.__all__  # the API's names, listed once (csboundary/__init__.py)
 
@@ -38,8 +38,6 @@ def load_model(
     ``graph`` over them (the command line's graph options); ``device`` auto|cpu|cuda, ``engine``
     auto|torch|onnx, ``precision`` auto|float32|bfloat16|int8, as the commands take them. Its
     ``settings`` (a frozen :class:`GraphSettings`) say what every prediction with it does."""
-    from csboundary.pipeline.prediction.patch import load_predictor
-
     return load_predictor(weights, device, graph, engine=engine, precision=precision)
 
 

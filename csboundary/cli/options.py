@@ -13,7 +13,7 @@ from typing import Annotated, Callable, Optional, Sequence
 import typer
 
 from csboundary.errors import InputError
-from csboundary.graph.settings import OPTIONS, SETTINGS
+from csboundary.graph.settings import OPTIONS, SETTINGS, GraphOverrides
 
 SUPPORT_HELP = "Mean boundary probability an AfANet edge needs along its length (0 = no check)."
 LENGTH_HELP = "Longest AfANet edge kept, in pixels (0 = no limit)."
@@ -140,8 +140,6 @@ if tuple(GRAPH_HELP) != OPTIONS:
 def with_graph_options(command: Callable) -> Callable:
     """``command`` with its ``graph: GraphOverrides`` parameter shown to the command line as the
     graph options (:data:`GRAPH_OPTIONS`, one help panel) and handed back to it as one object."""
-    from csboundary.graph.settings import GraphOverrides
-
     signature = inspect.signature(command, eval_str=True)
     if set(GRAPH_OPTIONS) != {f.name for f in dataclasses.fields(GraphOverrides)}:
         raise RuntimeError("GRAPH_OPTIONS and GraphOverrides name different options")

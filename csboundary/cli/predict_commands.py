@@ -187,7 +187,7 @@ def export_lanelet2(
     map_projector_info.yaml beside it). With --bounds, one district of the city; with
     --min-confidence, only the edges at least that sure."""
     from csboundary.pipeline.outputs.lanelet2_export import write_lanelet2
-    from csboundary.pipeline.outputs.prediction_files import read_prediction_graph
+    from csboundary.pipeline.outputs.prediction_reader import read_prediction_graph
 
     source = prediction / "graph.json" if prediction.is_dir() and bounds is None else prediction
     box = district_bounds(bounds)
@@ -301,7 +301,7 @@ def apply_review(
     """Merge a reviewer's edits into the prediction: rewrites graph.json, the GeoPackage, the
     GeoJSON and map.osm (when present), and appends what a person changed, and the areas marked
     complete (labels for csboundary finetune), to review.json."""
-    from csboundary.pipeline.outputs.review import apply_review as merge
+    from csboundary.pipeline.outputs.review_apply import apply_review as merge
 
     done = merge(prediction, edits)
     if "already_applied" in done:

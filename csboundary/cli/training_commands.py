@@ -18,7 +18,7 @@ from csboundary.cli.options import (
     positive,
     with_graph_options,
 )
-from csboundary.graph.settings import GraphOverrides
+from csboundary.graph.settings import GraphOverrides, GraphSettings
 
 
 def train(
@@ -89,7 +89,6 @@ def bundle_weights(
     """Bundle a trained FPN and AfANet (weights + provenance) into one weights file. Its graph
     settings are the graph options given (each one not given: off, edge threshold 0.5, at most 2
     edges per vertex)."""
-    from csboundary.graph.settings import GraphSettings
     from csboundary.models.training.bundle import afanet_checkpoint, make_bundle, trained_vertex_threshold
 
     if graph.min_confidence is not None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import geopandas as gpd
 import pyogrio
 import shapely
-from shapely.geometry import LineString, MultiLineString
+from shapely.geometry import LineString, MultiLineString, box
 
 from csboundary.data.atomic import atomic_path
 from csboundary.errors import InputError
@@ -101,7 +101,5 @@ def read_ground_truth(
     if bad.any():
         raise InputError(path, f"{int(bad.sum())} geometries are not LineStrings (road boundaries are lines)")
     if bbox is not None:
-        from shapely.geometry import box
-
         frame = frame[frame.intersects(box(*bbox))].reset_index(drop=True)
     return frame

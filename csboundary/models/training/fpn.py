@@ -121,7 +121,7 @@ def starting_fpn(config: TrainConfig, device: torch.device):
     return model, model_config
 
 
-def _fpn_batch(
+def fpn_batch(
     cities: list[TrainingCity],
     rng: np.random.Generator,
     config: TrainConfig,
@@ -199,7 +199,7 @@ def train_fpn(
             "the surface head needs cities with a road_surface layer (synthetic cities built by this version)"
         )
     valid_batches = [
-        _fpn_batch([valid_city], valid_rng, config, None, with_surface) for _ in range(config.validation_samples)
+        fpn_batch([valid_city], valid_rng, config, None, with_surface) for _ in range(config.validation_samples)
     ]
     augmentation = model_config_with(AugmentConfig, config.augment)
     run = TrainingRun("fpn", model, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
@@ -219,7 +219,7 @@ def train_fpn(
             for name, module in model.named_modules():
                 if isinstance(module, torch.nn.BatchNorm2d) and not name.startswith("surface_head."):
                     module.eval()
-        image, target, valid = _fpn_batch(train_cities, rng, config, augmentation, with_surface)
+        image, target, valid = fpn_batch(train_cities, rng, config, augmentation, with_surface)
         with autocast(config, device):
             logits = model(image.to(device))
         loss = fpn_loss(logits.float(), target.to(device), valid.to(device), config, image.to(device))

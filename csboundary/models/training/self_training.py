@@ -43,7 +43,7 @@ from csboundary.models.checkpoint import file_sha256, save_checkpoint
 from csboundary.models.style_mixing import add_style_mixing
 from csboundary.models.training.config import TrainConfig, model_config_with, training_cities
 from csboundary.models.training.data import TrainingCity
-from csboundary.models.training.fpn import _fpn_batch, fpn_loss, fpn_parameter_groups, starting_fpn, validate_fpn
+from csboundary.models.training.fpn import fpn_batch, fpn_loss, fpn_parameter_groups, starting_fpn, validate_fpn
 from csboundary.models.training.loop import RunLog, TrainingRun, autocast, optimize, run_code_version, seed_everything
 from csboundary.models.training.unlabelled import UnlabelledImagery
 
@@ -213,7 +213,7 @@ def train_adapt(
     optimizer = torch.optim.Adam(fpn_parameter_groups(student, config), lr=config.lr, weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     valid_rng = np.random.default_rng(config.seed + 1)
-    valid_batches = [_fpn_batch([valid_city], valid_rng, config, None, True) for _ in range(config.validation_samples)]
+    valid_batches = [fpn_batch([valid_city], valid_rng, config, None, True) for _ in range(config.validation_samples)]
     augmentation = model_config_with(AugmentConfig, config.augment)
     run = TrainingRun("adapt", model, model_config, config, out_dir, optimizer, rng, log).resumed(resume)
     log.write(
@@ -232,7 +232,7 @@ def train_adapt(
         model.update_teacher(settings.ema_decay if step > 0 else 0.0)
         loss = torch.zeros((), device=device)
         if settings.source_batch > 0:
-            image, target, valid = _fpn_batch(source_cities, rng, source_config, augmentation, True)
+            image, target, valid = fpn_batch(source_cities, rng, source_config, augmentation, True)
             image = image.to(device)
             with autocast(config, device):
                 logits = student(image)

@@ -17,9 +17,9 @@ from csboundary.data.atomic import atomic_path
 from csboundary.data.folder_lock import locked_folder
 from csboundary.errors import InputError
 from csboundary.metrics.compare import paired_bootstrap
-from csboundary.models.checkpoint import shipped_weights
+from csboundary.models.checkpoint import load_checkpoint, shipped_weights
 from csboundary.pipeline.prediction.city_scores import evaluate_city_dir, score_value, set_cities
-from csboundary.pipeline.prediction.patch import load_predictor
+from csboundary.pipeline.prediction.patch import PatchPredictor, load_predictor
 from csboundary.pipeline.training.finetune import FinetuneBudget, finetune
 
 COMPARED = ("precision@5", "recall@5", "f1@5", "apls", "tlts")
@@ -92,10 +92,8 @@ def _held_out_confidence(cities: list[Path], tuned: Path, base: Path, device: st
     to the same edges, so the two tables are compared on identical evidence."""
     import numpy as np
 
-    from csboundary.models.checkpoint import load_checkpoint
     from csboundary.models.confidence_model import EdgeConfidence
     from csboundary.models.device import resolve_device
-    from csboundary.pipeline.prediction.patch import PatchPredictor
     from csboundary.pipeline.training.confidence_fit import city_edges
 
     predictor = PatchPredictor.load(tuned, resolve_device(device))

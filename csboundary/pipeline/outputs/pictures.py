@@ -13,7 +13,7 @@ from csboundary.data.raster import Mosaic
 from csboundary.data.windows import pixel_to_world
 from csboundary.pipeline.prediction.city_job import CityResult
 from csboundary.pipeline.prediction.run_store import RunStore
-from csboundary.viz.overlay import overview_scale
+from csboundary.viz.overlay import draw_world_lines, overview_from_thumbs, overview_scale, render_window, write_png
 
 ORANGE = (255, 140, 0)
 
@@ -29,8 +29,6 @@ def write_pictures(
     read back from ``gpkg`` a chunk at a time, so drawing a city's lines holds one chunk. The
     overview is PNG-encoded in a second thread while this one draws the detail (encoding leaves
     the GIL)."""
-    from csboundary.viz.overlay import draw_world_lines, overview_from_thumbs, render_window, write_png
-
     base = (
         None
         if store is None

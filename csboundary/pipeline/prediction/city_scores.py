@@ -15,7 +15,7 @@ from csboundary.data.model_view import model_view
 from csboundary.errors import InputError, InputWarning
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.patch_model import PatchModel
-from csboundary.pipeline.prediction.city import predict_city
+from csboundary.pipeline.prediction.city import patch_scale_graph, predict_city
 from csboundary.pipeline.prediction.city_job import CityResult
 from csboundary.pipeline.prediction.options import PredictionOptions
 
@@ -33,7 +33,6 @@ def evaluate_run(
     the city scale's review effort per km."""
     from csboundary.graph import BoundaryGraph
     from csboundary.metrics import evaluate
-    from csboundary.pipeline.prediction.city import patch_scale_graph
 
     gt = BoundaryGraph.from_world_lines(list(ground_truth), result.grid.transform)
     score = {

@@ -37,18 +37,16 @@ from csboundary.models.batchnorm_folding import fold_batch_norms
 from csboundary.models.checkpoint import load_afanet, load_checkpoint, load_fpn, shipped_weights
 from csboundary.models.confidence_model import EdgeConfidence
 from csboundary.models.decoding import graph_from_adjacency
-from csboundary.models.device import bfloat16_hardware
+from csboundary.models.device import bfloat16_hardware, resolve_device
 from csboundary.models.fpn import FPN, SURFACE
 from csboundary.models.maps import PRECISIONS, bands_and_maps, predict_probabilities, unit_bands
-from csboundary.models.onnx_engine import OnnxNetworks
+from csboundary.models.onnx_engine import OnnxNetworks, cache_dir
 from csboundary.models.onnx_session import WINDOW, onnxruntime_available
 
 
 def export_cache_usable() -> bool:
     """Whether the ONNX export cache can be made and written; when not, ``--engine auto`` runs
     torch and says why in a warning (``--engine onnx`` stops with the cache's one line)."""
-    from csboundary.models.onnx_engine import cache_dir
-
     try:
         cache_dir()
     except InputError as exc:
@@ -341,8 +339,6 @@ def load_predictor(
     """The predictor of a weights bundle (the shipped one by default) with the command line's
     ``graph`` options over its settings, on the chosen engine (``auto``: ONNX Runtime on a CPU
     when installed) and device (``auto``: CUDA if present)."""
-    from csboundary.models.device import resolve_device
-
     predictor = PatchPredictor.load(weights, resolve_device(device), fpn_weights)
     predictor.override(graph)
     predictor.use_precision(precision)

@@ -27,16 +27,16 @@ from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
-from csboundary.models.training.self_training import AdaptConfig
+from csboundary.models.training.self_training import AdaptConfig, train_adapt
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.outputs.review import prediction_inputs
 from csboundary.pipeline.prediction.city_scores import set_cities
 from csboundary.pipeline.training.finetune import (
     FinetuneBudget,
-    _train,
     check_budget,
     checked_base,
     locked_work,
+    train_or_resume,
     training_configs,
 )
 
@@ -165,8 +165,6 @@ def _adapt(
     write the adapted bundle ``out``. ``work`` keeps the runs (default ``OUT-adapt/``), ``cache``
     the synthetic cities (default: in ``work``); ``gsd`` is the pixel size of imagery without a
     CRS. Returns what was done and how long each stage took."""
-    from csboundary.models.training.self_training import train_adapt
-
     out, base_path = Path(out), Path(weights) if weights else shipped_weights()
     work = Path(work) if work else default_work(out)
     base = checked_base(base_path)
@@ -214,7 +212,7 @@ def _adapt(
         resolved = resolve_device(device)
         seconds = {}
         start = time.perf_counter()
-        fpn = _train(
+        fpn = train_or_resume(
             "adapt",
             fpn_config,
             work / "fpn",
@@ -229,7 +227,9 @@ def _adapt(
             mosaic.close()
     afanet_config.fpn_weights = str(fpn.resolve())
     start = time.perf_counter()
-    afanet = _train("afanet", afanet_config, work / "afanet", resolved, progress) if budget.afanet_steps else None
+    afanet = (
+        train_or_resume("afanet", afanet_config, work / "afanet", resolved, progress) if budget.afanet_steps else None
+    )
     seconds["afanet"] = time.perf_counter() - start
     adapted_fpn = load_checkpoint(fpn, ("fpn",))
     adapted_afanet = (

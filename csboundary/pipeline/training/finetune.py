@@ -29,7 +29,7 @@ from csboundary.errors import InputError
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
 from csboundary.models.training.config import TrainConfig
-from csboundary.models.training.data import CitySpec
+from csboundary.models.training.data import CitySpec, WorldsConfig
 from csboundary.pipeline.training.labelled_inputs import labelled_cities
 
 
@@ -153,7 +153,7 @@ def checked_base(path: Path) -> dict:
     return load_checkpoint(path, ("bundle",))
 
 
-def _train(
+def train_or_resume(
     kind: str, config: TrainConfig, run: Path, device, progress: bool, trainer=None, final_name: str | None = None
 ) -> Path:
     """One training run in ``run`` (``trainer(config, run, device, resume, progress)``, by
@@ -258,11 +258,11 @@ def _finetune(
     resolved = resolve_device(device)
     seconds = {}
     start = time.perf_counter()
-    fpn = _train("fpn", fpn_config, work / "fpn", resolved, progress)
+    fpn = train_or_resume("fpn", fpn_config, work / "fpn", resolved, progress)
     seconds["fpn"] = time.perf_counter() - start
     afanet_config.fpn_weights = str(fpn.resolve())
     start = time.perf_counter()
-    afanet = _train("afanet", afanet_config, work / "afanet", resolved, progress)
+    afanet = train_or_resume("afanet", afanet_config, work / "afanet", resolved, progress)
     seconds["afanet"] = time.perf_counter() - start
     tuned_fpn, tuned_afanet = load_checkpoint(fpn, ("fpn",)), load_checkpoint(afanet, ("afanet",))
     record = {
@@ -311,7 +311,6 @@ def refit_tuned_confidence(
     synthetic cities the FPN mixed in, when they hold enough edges
     (:func:`csboundary.pipeline.training.confidence_fit.refit_for_tuned`); the outcome goes into the
     bundle's provenance either way."""
-    from csboundary.models.training.data import WorldsConfig
     from csboundary.pipeline.training.confidence_fit import refit_for_tuned
 
     synthetic = [
