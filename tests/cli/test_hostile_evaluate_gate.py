@@ -140,6 +140,6 @@ def test_a_200_px_surface_gate_is_computed_once_per_patch_in_a_few_hundred_passe
     )
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "gate" / "summary.json").read_text())
-    assert summary["settings"]["surface_gate"][0] == 200 and summary["counts"]["edges"] > 0
+    assert summary["settings"]["graph"]["surface_gate"] == 200 and summary["counts"]["edges"] > 0
     core = summary["core_seconds_per_patch"]  # thread seconds: what the machine's other work does not inflate
     assert core["vertex_extraction"] + core["afanet"] < 3.0, core

@@ -10,6 +10,7 @@ from csboundary.data.inputs import open_imagery
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
 from csboundary.metrics.report import write_scores
+from csboundary.pipeline.jobs.predict import model_settings
 from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.prediction.city_scores import evaluate_run
 from csboundary.pipeline.prediction.patch import PatchPredictor
@@ -26,17 +27,7 @@ def run_demo(out: str | Path, predictor: PatchPredictor, seed: int = 0) -> dict:
     city_dir = out / "city"
     meta = synthesize_city(city_dir, seed, "test", TILES, SynthConfig(tile_size=TILE_SIZE))
     mosaic, lines = open_imagery([city_dir])
-    settings = {
-        "weights": "shipped",
-        "edge_threshold": predictor.settings.edge_threshold,
-        "device": str(predictor.device),
-        "engine": predictor.engine,
-    }
-    if predictor.precision != "float32":  # recorded only then, as in predict
-        settings["precision"] = predictor.precision
-    settings["precision_choice"] = (
-        predictor.precision_choice or predictor.precision
-    )  # --precision auto: what it chose, and why
+    settings = model_settings(predictor)
     with mosaic:
         result, summary = run_prediction(mosaic, predictor, out / "prediction", settings=settings, ground_truth=lines)
     scores = evaluate_run(result, lines, seed=0)

@@ -19,6 +19,7 @@ from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import ModelInput, model_view
 from csboundary.errors import InputError, InputWarning
 from csboundary.graph import BoundaryGraph
+from csboundary.graph.settings import SETTINGS, setting_value
 from csboundary.models.checkpoint import file_sha256, shipped_weights
 from csboundary.pipeline.jobs.prediction_run import run_prediction
 from csboundary.pipeline.prediction.city import predict_city, run_here
@@ -99,51 +100,33 @@ def predict_to_folder(
     return summary
 
 
-def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Path | None, batch_size: int) -> dict:
-    """The model and how it is run, for the run's manifest (JSON-ready)."""
-    graph = predictor.settings
-    settings = {
+def model_settings(predictor: PatchPredictor, weights: str | Path | None = None) -> dict:
+    """The model and how it runs, for a run's manifest and summary.json (JSON-ready): the weights,
+    every graph setting by its name (:data:`~csboundary.graph.settings.SETTINGS`), and the engine
+    and arithmetic (and why ``auto`` chose it)."""
+    return {
         "weights": str(weights or "shipped"),
         "weights_sha256": file_sha256(weights or shipped_weights()),
-        "edge_threshold": graph.edge_threshold,
-        "support": [graph.support.min_support, graph.support.max_length_px],
-        "max_gap": [graph.support.max_gap_px, graph.support.gap_level],
-        "min_fragment_px": graph.min_fragment_px,
-        "fill_min_length_px": graph.fill.min_length_px,
-        "batch_size": batch_size,
+        "graph": {name: setting_value(predictor.settings, name) for name in SETTINGS},
+        # without a confidence the scores are the networks' own: --min-confidence later never filters them
+        "edge_confidence": predictor.confidence is not None,
         "device": str(predictor.device),
         "engine": predictor.engine,
+        "precision": predictor.precision,
+        "precision_choice": predictor.precision_choice or predictor.precision,  # --precision auto: what, and why
+    }
+
+
+def run_settings(predictor: PatchPredictor, view: ModelInput, weights: str | Path | None, batch_size: int) -> dict:
+    """:func:`model_settings`, the batch size, and how the imagery was read (its pixel size, whether
+    it was resampled, its stretch)."""
+    return {
+        **model_settings(predictor, weights),
+        "batch_size": batch_size,
         "input_pixel_m": [round(v, 5) for v in view.source_pixel_m],
         "resampled": view.resampled,
         "stretch": None if view.stretch is None else {"low": view.stretch.low, "high": view.stretch.high},
     }
-    if graph.join.active:  # only then: a run interrupted before end joining existed still resumes
-        settings["join_ends"] = graph.join.max_px
-        if graph.join.attach_px > 0:
-            settings["attach_backed"] = graph.join.attach_px
-    if graph.attach_px > 0:  # likewise
-        settings["attach_ends"] = graph.attach_px
-    if predictor.precision != "float32":  # likewise
-        settings["precision"] = predictor.precision
-    settings["precision_choice"] = (
-        predictor.precision_choice or predictor.precision
-    )  # --precision auto: what it chose, and why
-    if graph.surface.active:  # only then: a run interrupted before the check existed still resumes
-        settings["surface_check"] = [graph.surface.strong, graph.surface.weak, graph.surface.offset_px]
-        if graph.surface.both_sides > 0:  # likewise
-            settings["surface_both_sides"] = graph.surface.both_sides
-    if graph.gate.active:  # likewise
-        settings["surface_gate"] = [graph.gate.radius_px, graph.gate.full_change, graph.gate.min_piece_px]
-    if graph.outline.active:  # likewise
-        settings["roadway_outline"] = [
-            graph.outline.sure,
-            graph.outline.support,
-            graph.outline.min_length_px,
-            graph.outline.max_unsure,
-        ]
-    if predictor.confidence is None:  # likewise; said so that --min-confidence later never filters raw network scores
-        settings["edge_confidence"] = False
-    return settings
 
 
 def predict_patch_to_folder(

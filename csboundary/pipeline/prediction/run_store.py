@@ -6,7 +6,7 @@ average the overlaps). The store keeps both as one file per patch, each written 
 temporary name and renamed into place, so a file that exists is complete whatever killed the
 process (SIGKILL included) and the files themselves are the progress record:
 
-* ``maps/R_C.npy``: the patch's FPN maps (float16, as the averaging has always stored them), or
+* ``maps/R_C.npy``: the patch's FPN maps (float16, as the averaging stores them), or
   ``maps/R_C.empty`` when the window has no valid pixel (the FPN was not run);
 * ``graphs/R_C.npz``: the window's graph in mosaic pixels (arrays only, read without pickle);
 * ``images/R_C.npy``: the patch's image as the FPN read it, until its window is connected (AfANet

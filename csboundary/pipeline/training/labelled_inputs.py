@@ -40,7 +40,7 @@ def complete_areas(prediction: Path) -> list[list[list[float]]]:
 def reviewed_areas(prediction: Path) -> gpd.GeoDataFrame:
     """The areas marked complete in a reviewed prediction folder, checked to cover some of its
     imagery; InputError when none is marked (nothing in it is known to be a label) or none
-    covers the imagery (a review log from before apply-review checked that)."""
+    covers the imagery (apply-review checks it; a review log edited by other means may not)."""
     areas = complete_areas(prediction)
     if not areas:
         raise InputError(
