@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.metrics.report import format_rows, write_scores
@@ -39,8 +39,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
 
-    with Mosaic.open(layout.tiles_dir(args.city)) as mosaic:
-        lines = list(read_ground_truth(layout.ground_truth_path(args.city), mosaic.crs).geometry)
+    with Mosaic.open(city_layout.tiles_dir(args.city)) as mosaic:
+        lines = list(read_ground_truth(city_layout.ground_truth_path(args.city), mosaic.crs).geometry)
         model = (
             OracleModel.from_lines(lines, mosaic)
             if args.oracle

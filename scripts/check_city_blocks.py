@@ -21,7 +21,7 @@ import pyogrio
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from csboundary.data import city as layout  # noqa: E402
+from csboundary.data import city_layout  # noqa: E402
 from csboundary.data.model_view import mosaic_units  # noqa: E402
 from csboundary.data.raster import Mosaic  # noqa: E402
 from csboundary.graph.stitching import StitchConfig  # noqa: E402
@@ -77,7 +77,7 @@ def main() -> None:
     model = load_predictor(args.weights, "cpu")
     failed = 0
     for city in args.cities:
-        with Mosaic.open(layout.tiles_dir(city)) as mosaic:
+        with Mosaic.open(city_layout.tiles_dir(city)) as mosaic:
             store = RunStore()
             result = predict_city(mosaic, model, PredictionOptions(progress=False), store=store)
             store.mosaic = mosaic

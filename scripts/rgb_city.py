@@ -9,15 +9,15 @@ from pathlib import Path
 
 import rasterio
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.geotiff import write_geotiff
 
 src, dst = Path(sys.argv[1]), Path(sys.argv[2])
-layout.begin_city(dst)
-for tile in sorted(layout.tiles_dir(src).glob("*.tif")):
+city_layout.begin_city(dst)
+for tile in sorted(city_layout.tiles_dir(src).glob("*.tif")):
     with rasterio.open(tile) as ds:
-        write_geotiff(layout.tiles_dir(dst) / tile.name, ds.read([1, 2, 3]), ds.transform, ds.crs.to_string())
-shutil.copy(layout.ground_truth_path(src), layout.ground_truth_path(dst))
-meta = layout.read_meta(src)
+        write_geotiff(city_layout.tiles_dir(dst) / tile.name, ds.read([1, 2, 3]), ds.transform, ds.crs.to_string())
+shutil.copy(city_layout.ground_truth_path(src), city_layout.ground_truth_path(dst))
+meta = city_layout.read_meta(src)
 meta["notes"] = f"RGB copy of {src} (NIR dropped) made by scripts/rgb_city.py"
-layout.write_meta(dst, meta)
+city_layout.write_meta(dst, meta)

@@ -130,7 +130,7 @@ def fit_confidence(
     """Fit the edge confidence, the calibrated probability that an edge is a true boundary, on
     labelled cities predicted with WEIGHTS, and write it into a copy of the bundle
     (docs/confidence.md). Fit on cities the networks never trained on."""
-    from csboundary.data import city as layout
+    from csboundary.data import city_layout
     from csboundary.metrics.confidence_quality import confidence_report
     from csboundary.models.checkpoint import shipped_weights
     from csboundary.pipeline.prediction.city_scores import set_cities
@@ -140,7 +140,7 @@ def fit_confidence(
     out_file(out, (".pt",))
     found: list[Path] = []
     for path in cities:
-        found += [path] if layout.is_city_dir(path) else set_cities(path)
+        found += [path] if city_layout.is_city_dir(path) else set_cities(path)
     source = weights or shipped_weights()
     predictor = load_predictor(source, device, engine=engine)
     model, per_city = fit_bundle_confidence(

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 
@@ -18,14 +18,14 @@ def open_imagery(inputs: Sequence[str | Path], ground_truth: str | Path | None =
     is given, its own ground truth. Raises InputError naming a file that cannot be read."""
     inputs = [Path(p) for p in inputs]
     looks_like_city = len(inputs) == 1 and (
-        layout.tiles_dir(inputs[0]).is_dir() or layout.ground_truth_path(inputs[0]).exists()
+        city_layout.tiles_dir(inputs[0]).is_dir() or city_layout.ground_truth_path(inputs[0]).exists()
     )
     if looks_like_city:
-        layout.read_meta(inputs[0])  # a city without a readable city.json is an interrupted write, not input
-    if len(inputs) == 1 and layout.is_city_dir(inputs[0]):
-        mosaic = Mosaic.open(layout.tiles_dir(inputs[0]))
-        if ground_truth is None and layout.ground_truth_path(inputs[0]).exists():
-            ground_truth = layout.ground_truth_path(inputs[0])
+        city_layout.read_meta(inputs[0])  # a city without a readable city.json is an interrupted write, not input
+    if len(inputs) == 1 and city_layout.is_city_dir(inputs[0]):
+        mosaic = Mosaic.open(city_layout.tiles_dir(inputs[0]))
+        if ground_truth is None and city_layout.ground_truth_path(inputs[0]).exists():
+            ground_truth = city_layout.ground_truth_path(inputs[0])
     else:
         mosaic = Mosaic.open(inputs)
     lines = []

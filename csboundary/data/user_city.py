@@ -1,6 +1,6 @@
 """A city directory from a user's own GeoTIFF tiles and vector road boundaries.
 
-The training, evaluation and benchmark commands read cities (:mod:`csboundary.data.city`). A
+The training, evaluation and benchmark commands read cities (:mod:`csboundary.data.city_layout`). A
 user with labelled imagery of their own (tiles plus curbs digitised in a GIS) gets one with
 ``csboundary make-city``: the tiles are checked as one mosaic (same CRS, pixel size, grid) and
 linked, not copied (a city's imagery can be gigabytes), and the boundaries are reprojected into
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from shapely.geometry import box
 
-from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, write_meta
+from csboundary.data.city_layout import begin_city, ground_truth_path, tiles_dir, write_meta
 from csboundary.data.ground_truth import read_ground_truth, write_ground_truth
 from csboundary.data.model_view import mosaic_units
 from csboundary.data.raster import Mosaic

@@ -2,7 +2,7 @@
 
 Most public road datasets label with pictures, not vectors: an image plus a mask of the road
 edge (lines 1-2 px wide) or of the road surface. This module turns each (image, mask) pair into a
-city directory (:mod:`csboundary.data.city`) with vector ground truth, resampled to the model's
+city directory (:mod:`csboundary.data.city_layout`) with vector ground truth, resampled to the model's
 pixel size, so ``evaluate-set``, ``evaluate-model`` and ``train`` (``extra_train_cities``) read it
 like any other city.
 
@@ -42,7 +42,7 @@ from shapely.geometry import LineString
 from tqdm import tqdm
 
 from csboundary.data.atomic import atomic_path
-from csboundary.data.city import begin_city, ground_truth_path, tile_name, tiles_dir, write_meta
+from csboundary.data.city_layout import begin_city, ground_truth_path, tile_name, tiles_dir, write_meta
 from csboundary.data.folder_lock import locked_folder
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.atomic import atomic_path
 from csboundary.data.grid import Patch, PatchGrid
 from csboundary.data.ground_truth import read_ground_truth
@@ -116,11 +116,11 @@ def write_city_labels(
 ) -> dict:
     """Compute and write the labels of every patch of ``city_dir``; returns the manifest."""
     city_dir, out_dir = Path(city_dir), Path(out_dir)
-    layout.read_meta(city_dir)  # fails clearly if this is not a city
+    city_layout.read_meta(city_dir)  # fails clearly if this is not a city
     (out_dir / MANIFEST).unlink(missing_ok=True)
     start = time.perf_counter()
-    with Mosaic.open(layout.tiles_dir(city_dir)) as mosaic:
-        gt = read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs)
+    with Mosaic.open(city_layout.tiles_dir(city_dir)) as mosaic:
+        gt = read_ground_truth(city_layout.ground_truth_path(city_dir), mosaic.crs)
         labels = CityLabels.build(list(gt.geometry), mosaic, config)
         prepared = time.perf_counter() - start
         counts = {"patches": 0, "vertices": 0, "edges": 0, "corner_edges": 0}

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from affine import Affine
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.grid import PatchGrid
 from csboundary.data.units import geometric_mean, ground_units, pixel_size_m
 from csboundary.data.windows import pixel_to_world, world_to_pixel
@@ -78,8 +78,8 @@ def read_source(path: str | Path) -> Source:
     if not path.exists():
         raise InputError(path, "file not found")
     if path.is_dir():
-        if layout.is_city_dir(path) and layout.ground_truth_path(path).exists():
-            return Source(path, lines=read_ground_truth(layout.ground_truth_path(path)))
+        if city_layout.is_city_dir(path) and city_layout.ground_truth_path(path).exists():
+            return Source(path, lines=read_ground_truth(city_layout.ground_truth_path(path)))
         if (path / "graph.json").is_file():  # a prediction folder: its graph
             return read_source(path / "graph.json")
         raise InputError(
@@ -119,7 +119,7 @@ def frame_from_raster(path: str | Path) -> Frame:
     from csboundary.data.raster import Mosaic
 
     path = Path(path)
-    source = layout.tiles_dir(path) if layout.is_city_dir(path) else path
+    source = city_layout.tiles_dir(path) if city_layout.is_city_dir(path) else path
     with Mosaic.open(source) as mosaic:
         crs = mosaic.crs.to_string() if mosaic.crs is not None else None
         transform = mosaic.transform if mosaic.crs is not None else None
@@ -139,7 +139,7 @@ def resolve_frame(
     if raster is not None:
         return frame_from_raster(raster)
     for src in (gt, pred):
-        if src.path.is_dir() and layout.is_city_dir(src.path) and layout.tiles_dir(src.path).is_dir():
+        if src.path.is_dir() and city_layout.is_city_dir(src.path) and city_layout.tiles_dir(src.path).is_dir():
             return frame_from_raster(src.path)
     for src in (gt, pred):
         if src.graph is not None and src.graph.transform is not None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics import apls_paper_pairs
 from csboundary.metrics.apls import pair_costs
@@ -51,7 +51,7 @@ def main() -> None:
     predictor = PatchPredictor.load(args.weights, torch.device("cpu"))
     print(f"{'city':28s} " + " ".join(f"{c:>12s}" for c in COLUMNS) + "         APLS")
     for s in args.sets:
-        cities = [Path(s)] if layout.is_city_dir(s) else set_cities(s)
+        cities = [Path(s)] if city_layout.is_city_dir(s) else set_cities(s)
         rows = []
         for c in cities:
             run, lines = predicted_city(c, predictor, assume_model_gsd=True)

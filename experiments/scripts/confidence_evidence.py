@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.pipeline.prediction.city_scores import set_cities
 from csboundary.pipeline.prediction.patch import load_predictor
 from csboundary.pipeline.training.confidence_fit import city_edges
@@ -32,7 +32,7 @@ def main() -> None:
     predictor = load_predictor(args.weights, "cpu")
     found: list[Path] = []
     for path in args.cities:
-        found += [path] if layout.is_city_dir(path) else set_cities(path)
+        found += [path] if city_layout.is_city_dir(path) else set_cities(path)
     for city in found:
         target = args.out / f"{args.prefix}{city.name}.npz"
         if target.exists():

@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import model_view
 from csboundary.graph.chains import edge_line
@@ -149,7 +149,7 @@ def named_cities(items: list[str]) -> dict[str, list[Path]]:
         name, paths = item.split("=", 1)
         cities = []
         for path in map(Path, sum((glob.glob(p) for p in paths.split(",")), [])):
-            cities += [path] if layout.is_city_dir(path) else set_cities(path)
+            cities += [path] if city_layout.is_city_dir(path) else set_cities(path)
         sets[name] = cities
     return sets
 

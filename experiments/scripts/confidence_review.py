@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.metrics.confidence_quality import confidence_report
 from csboundary.models.checkpoint import load_checkpoint, shipped_weights
 from csboundary.models.confidence_model import EdgeConfidence
@@ -45,7 +45,7 @@ def main() -> None:
     for item in args.sets:
         name, path = item.split("=", 1)
         path = Path(path)
-        cities = [path] if layout.is_city_dir(path) else set_cities(path)
+        cities = [path] if city_layout.is_city_dir(path) else set_cities(path)
         found = [city_edges(c, predictor, assume_model_gsd=True) for c in cities]
         found = [e for e in found if e.graph.n_edges]
         p = np.concatenate([table.probability(e.evidence) for e in found])

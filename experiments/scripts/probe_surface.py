@@ -22,7 +22,7 @@ from affine import Affine
 from PIL import Image
 from torch import nn
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.raster import Mosaic
 from csboundary.data.synth.city import plan_city, synthesize_city
 from csboundary.data.synth.styles import STYLES, style_config
@@ -37,7 +37,7 @@ SIZE = 2500
 def city_and_surface(cache: Path, style: str, seed: int) -> tuple[Path, np.ndarray]:
     config = style_config(style, tile_size=SIZE)
     path = cache / f"train-{style}-s{seed}-1x1-{SIZE}"
-    if not layout.is_city_dir(path):
+    if not city_layout.is_city_dir(path):
         synthesize_city(path, seed, "train", (1, 1), config, progress=False)
     plan = plan_city(config, "train", seed, (1, 1))
     frame = plan.frame(0, 0)
@@ -81,7 +81,7 @@ def main() -> None:
     for i in range(args.cities):
         style = styles[i % len(styles)]
         path, mask = city_and_surface(Path("data/cities"), style, 2000 + i)
-        mosaic = Mosaic.open(layout.tiles_dir(path))
+        mosaic = Mosaic.open(city_layout.tiles_dir(path))
         cities.append((mosaic, mask))
         print(f"city {i} {style} road share {mask.mean():.2f}", flush=True)
     fpn = load_fpn(shipped_weights(), "cpu").float()

@@ -18,7 +18,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).parent))
 from probe_surface import SurfaceHead, fused_features  # noqa: E402
 
-from csboundary.data import city as layout  # noqa: E402
+from csboundary.data import city_layout  # noqa: E402
 from csboundary.models.maps import unit_bands  # noqa: E402
 from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
 from csboundary.pipeline.prediction.city_scores import evaluate_city_dir
@@ -109,7 +109,7 @@ def main() -> None:
         STATE["threshold"] = t
         row = []
         for s in args.sets:
-            if layout.is_city_dir(s):
+            if city_layout.is_city_dir(s):
                 m = evaluate_city_dir(Path(s), predictor, 0)["metrics"]
             else:
                 m = evaluate_set(Path(s), predictor, seed=0, progress=False)["mean"]

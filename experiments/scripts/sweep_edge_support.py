@@ -21,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.pipeline.evaluation.evaluate_set import evaluate_set
 from csboundary.pipeline.prediction.city_scores import evaluate_city_dir
 from csboundary.pipeline.prediction.patch import PatchPredictor
@@ -33,7 +33,7 @@ def score_row(sets: list[str], predictor: PatchPredictor) -> list[str]:
     for s in sets:
         m = (
             evaluate_city_dir(Path(s), predictor)["metrics"]
-            if layout.is_city_dir(s)
+            if city_layout.is_city_dir(s)
             else evaluate_set(s, predictor, progress=False)["mean"]
         )
         row.append(f"{m['f1@5']:.3f}/{m['apls']:.3f}/{m['tlts']:.3f}")

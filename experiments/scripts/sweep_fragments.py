@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.fragments import drop_short_fragments
 from csboundary.metrics import evaluate
@@ -35,7 +35,7 @@ def main() -> None:
     lengths = [float(v) for v in args.lengths.split(",")]
     table = {}
     for s in args.sets:
-        cities = [Path(s)] if layout.is_city_dir(s) else set_cities(s)
+        cities = [Path(s)] if city_layout.is_city_dir(s) else set_cities(s)
         runs = [predicted_city(c, predictor, assume_model_gsd=True) for c in cities]
         for length in lengths:
             metrics = [

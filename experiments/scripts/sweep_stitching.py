@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.stitching import StitchConfig
 from csboundary.metrics import evaluate
@@ -50,7 +50,7 @@ def main() -> None:
     print("setting (" + ",".join(FIELDS) + ")  then per city F1@5 / APLS / TLTS")
     rows: dict[str, list[np.ndarray]] = {s: [] for s in args.settings.split(";")}
     for given in args.cities:
-        is_city = (Path(given) / "city.json").exists() and layout.ground_truth_path(Path(given)).exists()
+        is_city = (Path(given) / "city.json").exists() and city_layout.ground_truth_path(Path(given)).exists()
         for city in [Path(given)] if is_city else set_cities(given):
             run, lines = predicted_city(city, predictor, assume_model_gsd=True)
             gt = BoundaryGraph.from_world_lines(lines, run.grid.transform)

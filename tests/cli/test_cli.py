@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from helpers import run_cli
 
 run = run_cli
@@ -54,10 +54,13 @@ def test_every_command_has_help():
 
 
 def test_synth_writes_a_city(small_city):
-    meta = layout.read_meta(small_city)
+    meta = city_layout.read_meta(small_city)
     assert meta["split"] == "valid" and meta["tile_grid"] == [1, 2]
-    assert sorted(p.name for p in layout.tiles_dir(small_city).iterdir()) == ["tile_r00_c00.tif", "tile_r00_c01.tif"]
-    assert layout.ground_truth_path(small_city).exists()
+    assert sorted(p.name for p in city_layout.tiles_dir(small_city).iterdir()) == [
+        "tile_r00_c00.tif",
+        "tile_r00_c01.tif",
+    ]
+    assert city_layout.ground_truth_path(small_city).exists()
 
 
 def test_show_writes_png_of_window(small_city, tmp_path):
@@ -88,7 +91,7 @@ def test_missing_file_is_reported(tmp_path):
 def test_bad_tiles_argument_is_rejected(tmp_path):
     result = run("synth", str(tmp_path / "c"), "--tiles", "two")
     assert result.returncode != 0 and "ROWSxCOLS" in result.stderr
-    assert not (tmp_path / "c" / layout.META_FILE).exists()
+    assert not (tmp_path / "c" / city_layout.META_FILE).exists()
 
 
 @pytest.mark.parametrize(
@@ -105,7 +108,7 @@ def test_a_smaller_rewrite_does_not_keep_old_tiles(tmp_path):
     out = tmp_path / "c"
     assert run("synth", str(out), "--tiles", "1x2", "--tile-size", "200", "--gsd", "1.0", "--quiet").returncode == 0
     assert run("synth", str(out), "--tiles", "1x1", "--tile-size", "200", "--gsd", "1.0", "--quiet").returncode == 0
-    assert [p.name for p in layout.tiles_dir(out).iterdir()] == ["tile_r00_c00.tif"]
+    assert [p.name for p in city_layout.tiles_dir(out).iterdir()] == ["tile_r00_c00.tif"]
 
 
 def test_demo_predicts_and_scores_a_city_with_the_shipped_weights(tmp_path):

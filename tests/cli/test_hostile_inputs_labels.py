@@ -15,7 +15,7 @@ import rasterio
 from affine import Affine
 from shapely.geometry import LineString, box
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.units import ground_units, pixel_size_m
@@ -45,7 +45,7 @@ def _synth(out: Path, *extra: str):
 
 def _tiles(city: Path) -> list[tuple[np.ndarray, Affine, object]]:
     out = []
-    for path in sorted(layout.tiles_dir(city).glob("*.tif")):
+    for path in sorted(city_layout.tiles_dir(city).glob("*.tif")):
         with rasterio.open(path) as src:
             out.append((src.read(), src.transform, src.crs))
     return out
@@ -55,7 +55,7 @@ def _pixel_lines(city: Path, transform: Affine) -> list[np.ndarray]:
     """The city's ground truth in the pixel frame of ``transform``."""
     return [
         np.array([(~transform) @ xy for xy in line.coords])
-        for line in read_ground_truth(layout.ground_truth_path(city)).geometry
+        for line in read_ground_truth(city_layout.ground_truth_path(city)).geometry
     ]
 
 
@@ -81,9 +81,9 @@ def test_synth_gsd_is_metres_per_pixel_in_any_crs(utm_city, tmp_path, crs):
     assert len(lines) == len(same_lines) > 0
     for line, same in zip(lines, same_lines, strict=True):  # the ground truth lies on the same pixels
         assert np.abs(line - same).max() < 0.05
-    meta = layout.read_meta(tmp_path / "city")
-    assert meta["pixel_m"] == 0.5 and layout.pixel_metres(meta) == 0.5
-    assert meta["counts"]["boundary_km"] == layout.read_meta(utm_city)["counts"]["boundary_km"]
+    meta = city_layout.read_meta(tmp_path / "city")
+    assert meta["pixel_m"] == 0.5 and city_layout.pixel_metres(meta) == 0.5
+    assert meta["counts"]["boundary_km"] == city_layout.read_meta(utm_city)["counts"]["boundary_km"]
 
 
 def test_synth_from_python_in_feet_keeps_gsd_in_metres(tmp_path):
@@ -98,7 +98,7 @@ def test_synth_from_python_in_feet_keeps_gsd_in_metres(tmp_path):
     assert (
         meta["units"] == "US survey foot"
         and meta["gsd"] == pytest.approx(0.5 / 0.3048006)
-        and layout.pixel_metres(meta) == 0.5
+        and city_layout.pixel_metres(meta) == 0.5
     )
 
 
@@ -152,7 +152,7 @@ def test_import_masks_takes_a_gsd_that_agrees_and_uses_the_crs_size(tmp_path):
     _pair(src, "a", Affine(0.3, 0, 500000, 0, -0.3, 4400000))
     done = _import(src, tmp_path / "out", "--gsd", "0.303", "--target-gsd", "0.3")  # 1 % off: the same size, rounded
     assert done.returncode == 0 and not done.stderr.strip(), done.stderr
-    meta = layout.read_meta(tmp_path / "out" / "a")
+    meta = city_layout.read_meta(tmp_path / "out" / "a")
     assert meta["source_gsd"] == pytest.approx(0.3) and (meta["width"], meta["height"]) == (64, 64)
     assert json.loads((tmp_path / "out" / "set.json").read_text())["cities"][0]["source_gsd"] == pytest.approx(0.3)
 
@@ -168,7 +168,7 @@ def test_import_masks_reads_a_gsd_in_metres_not_in_the_crs_units(tmp_path):
     assert not (tmp_path / "out" / "a").exists()
     done = _import(src, tmp_path / "out", "--gsd", "0.152")
     assert done.returncode == 0, done.stderr
-    assert layout.read_meta(tmp_path / "out" / "a")["source_gsd"] == pytest.approx(0.1524, rel=1e-3)
+    assert city_layout.read_meta(tmp_path / "out" / "a")["source_gsd"] == pytest.approx(0.1524, rel=1e-3)
 
 
 # -- a reviewed area without a single boundary is a label -----------------------------------------------
@@ -188,7 +188,7 @@ def reviewed_empty(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("reviewed")
     city = root / "city"
     synthesize_city(city, seed=3, split="valid", config=style_config("classic", tile_size=SIZE), progress=False)
-    tiles = sorted(layout.tiles_dir(city).glob("*.tif"))
+    tiles = sorted(city_layout.tiles_dir(city).glob("*.tif"))
     with Mosaic.open(tiles) as mosaic:
         transform, crs = mosaic.transform, mosaic.crs.to_string()
     graph = BoundaryGraph(
@@ -233,7 +233,7 @@ def test_a_reviewed_area_without_boundaries_is_a_label_of_negatives(reviewed_emp
     from csboundary.pipeline.training.labelled_inputs import labelled_cities
 
     [city] = labelled_cities([reviewed_empty], tmp_path / "work")
-    assert read_ground_truth(layout.ground_truth_path(city)).empty
+    assert read_ground_truth(city_layout.ground_truth_path(city)).empty
     with TrainingCity(city) as training:
         assert (
             len(training.labels.boundaries) == 0

@@ -9,7 +9,7 @@ import pytest
 import shapely
 from shapely.geometry import LineString, Point, box
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.synth.city import plan_city, synthesize_city
@@ -132,13 +132,13 @@ def test_some_curbs_are_occluded_by_trees_and_cars(small_city):
 
 def test_written_city_round_trips(tmp_path):
     meta = synthesize_city(tmp_path / "c", seed=1, split="valid", tiles=(1, 2), config=SMALL, progress=False)
-    gt = read_ground_truth(layout.ground_truth_path(tmp_path / "c"))
+    gt = read_ground_truth(city_layout.ground_truth_path(tmp_path / "c"))
     assert gt.crs.to_epsg() == 32618
     planned = plan_city(SMALL, "valid", 1, (1, 2)).ground_truth()
     assert len(gt) == len(planned) == meta["counts"]["boundaries"]
     for a, b in zip(gt.geometry, planned.geometry):
         assert a.equals_exact(b, 1e-6)
-    with Mosaic.open(layout.tiles_dir(tmp_path / "c")) as mosaic:
+    with Mosaic.open(city_layout.tiles_dir(tmp_path / "c")) as mosaic:
         assert (mosaic.width, mosaic.height) == (1200, 600)
         assert mosaic.crs.to_epsg() == 32618
         minx, miny, maxx, maxy = mosaic.bounds
@@ -151,7 +151,7 @@ def test_written_city_round_trips(tmp_path):
 def test_interrupted_rewrite_leaves_no_finished_city(tmp_path, monkeypatch):
     out = tmp_path / "c"
     synthesize_city(out, seed=1, split="train", tiles=(1, 1), config=SMALL, progress=False)
-    assert layout.is_city_dir(out)
+    assert city_layout.is_city_dir(out)
 
     import csboundary.data.synth.city as city_module
 
@@ -161,7 +161,7 @@ def test_interrupted_rewrite_leaves_no_finished_city(tmp_path, monkeypatch):
     monkeypatch.setattr(city_module, "write_ground_truth", crash)
     with pytest.raises(KeyboardInterrupt):
         synthesize_city(out, seed=2, split="train", tiles=(1, 1), config=SMALL, progress=False)
-    assert not layout.is_city_dir(out)  # the old city.json is gone: nothing claims to be complete
+    assert not city_layout.is_city_dir(out)  # the old city.json is gone: nothing claims to be complete
     assert not [p for p in out.rglob("*") if "partial" in p.name]
 
 
@@ -172,13 +172,13 @@ def test_written_road_surface_lies_between_the_boundaries(tmp_path):
     from csboundary.models.training.data import TrainingCity
 
     synthesize_city(tmp_path / "c", seed=1, split="valid", tiles=(1, 2), config=SMALL, progress=False)
-    polygons = read_road_surface(layout.ground_truth_path(tmp_path / "c"))
+    polygons = read_road_surface(city_layout.ground_truth_path(tmp_path / "c"))
     assert polygons and all(p.geom_type == "Polygon" for p in polygons)
     city = TrainingCity(tmp_path / "c")
     try:
         surface = city.surface_target(city.mosaic.window)
         assert 0.05 < (surface == 1).mean() < 0.6 and (surface >= 0).all()
-        gt = read_ground_truth(layout.ground_truth_path(tmp_path / "c"))
+        gt = read_ground_truth(city_layout.ground_truth_path(tmp_path / "c"))
         differs, total = 0, 0
         for line in gt.geometry:
             for t in np.arange(2.0, line.length - 2.0, 5.0):  # metres along the boundary
@@ -206,7 +206,7 @@ def test_a_city_without_a_road_surface_layer_has_an_unknown_surface(tmp_path):
     from csboundary.models.training.data import TrainingCity
 
     synthesize_city(tmp_path / "c", seed=1, split="valid", tiles=(1, 1), config=SMALL, progress=False)
-    path = layout.ground_truth_path(tmp_path / "c")
+    path = city_layout.ground_truth_path(tmp_path / "c")
     write_ground_truth(path, read(path))  # boundaries only, as an imported city has
     with TrainingCity(tmp_path / "c") as city:
         assert city.surface is None and (city.surface_target(city.mosaic.window) == -1).all()

@@ -12,7 +12,7 @@ import rasterio
 from affine import Affine
 from rasterio.errors import NotGeoreferencedWarning
 
-from csboundary.data.city import ground_truth_path, read_meta, tiles_dir
+from csboundary.data.city_layout import ground_truth_path, read_meta, tiles_dir
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
 from csboundary.data.topo_boundary import (

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from affine import Affine
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.errors import InputError
 from csboundary.labels.mask_import import MaskRule, import_masks, mask_polylines, surface_outline
@@ -56,10 +56,10 @@ def test_import_resamples_image_and_ground_truth_to_the_target_pixel_size(tmp_pa
         tmp_path / "src", tmp_path / "out", gsd=0.3, target_gsd=0.15, rule=MaskRule(channel=1), progress=False
     )
     city = tmp_path / "out" / "a"
-    assert layout.is_city_dir(city) and report["cities"][0]["size"] == [128, 128]
-    meta = layout.read_meta(city)
+    assert city_layout.is_city_dir(city) and report["cities"][0]["size"] == [128, 128]
+    meta = city_layout.read_meta(city)
     assert meta["gsd"] == 0.15 and meta["source_gsd"] == 0.3 and meta["georeferenced"] is False
-    (line,) = read_ground_truth(layout.ground_truth_path(city)).geometry
+    (line,) = read_ground_truth(city_layout.ground_truth_path(city)).geometry
     # row 20 of the 0.3 m picture: centre y = 20.5 px * 0.3 m = 6.15 m below the origin
     assert np.allclose(np.asarray(line.coords)[:, 1], -6.15, atol=1e-6)
     assert line.length == pytest.approx(63 * 0.3, abs=0.31)
@@ -82,7 +82,7 @@ def test_georeferenced_input_keeps_its_crs_and_origin(tmp_path, write_tif):
         target_gsd=0.3,
         progress=False,
     )
-    (line,) = read_ground_truth(layout.ground_truth_path(tmp_path / "out" / "t")).geometry
+    (line,) = read_ground_truth(city_layout.ground_truth_path(tmp_path / "out" / "t")).geometry
     assert np.allclose(np.asarray(line.coords)[:, 0], 500000.0 + 8.5 * 0.3)
 
 
@@ -119,9 +119,9 @@ def test_feet_and_degrees_are_resampled_by_their_size_in_metres(tmp_path, write_
         "--quiet",
     )
     assert done.returncode == 0, done.stderr
-    meta = layout.read_meta(tmp_path / "out" / "t")
+    meta = city_layout.read_meta(tmp_path / "out" / "t")
     assert (meta["width"], meta["height"]) == (size, size) and meta["pixel_m"] == float(target)
-    (line,) = read_ground_truth(layout.ground_truth_path(tmp_path / "out" / "t")).geometry
+    (line,) = read_ground_truth(city_layout.ground_truth_path(tmp_path / "out" / "t")).geometry
     assert np.allclose(np.asarray(line.coords)[:, 0], transform.c + 8.5 * transform.a, atol=0.02 * transform.a)
 
 
@@ -195,7 +195,7 @@ def test_make_city_links_tiles_and_reprojects_the_ground_truth(tiles, tmp_path):
     assert meta["boundaries"] == 1 and meta["width"] == 120 and meta["height"] == 80
     linked = sorted((tmp_path / "city" / "tiles").iterdir())
     assert len(linked) == 4 and all(p.is_symlink() for p in linked)
-    (back,) = read_ground_truth(layout.ground_truth_path(tmp_path / "city")).geometry
+    (back,) = read_ground_truth(city_layout.ground_truth_path(tmp_path / "city")).geometry
     assert np.allclose(np.asarray(back.coords), np.asarray(line.coords), atol=1e-3)
 
 

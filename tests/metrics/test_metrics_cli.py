@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.metrics.io import load_pair
@@ -43,7 +43,7 @@ def city(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def broken_prediction(city, tmp_path_factory) -> Path:
     """The ground truth in the city's pixel frame with every 7th edge cut out, as graph JSON."""
-    _, gt, _ = load_pair(layout.ground_truth_path(city), city)
+    _, gt, _ = load_pair(city_layout.ground_truth_path(city), city)
     keep = np.arange(gt.n_edges) % 7 != 3
     pred = BoundaryGraph(gt.vertices, gt.edges[keep], transform=gt.transform, crs=gt.crs)
     return pred.write_json(tmp_path_factory.mktemp("pred") / "pred.json")
@@ -63,7 +63,7 @@ def test_help_lists_evaluate():
 
 def test_ground_truth_against_its_city_scores_one(city, tmp_path):
     out = tmp_path / "scores.json"
-    result = run("evaluate", str(layout.ground_truth_path(city)), str(city), "--json", str(out))
+    result = run("evaluate", str(city_layout.ground_truth_path(city)), str(city), "--json", str(out))
     assert result.returncode == 0, result.stderr
     assert "APLS" in result.stdout and "TLTS" in result.stdout and "tau=2" in result.stdout
     data = json.loads(out.read_text())
@@ -148,10 +148,10 @@ def test_bad_inputs_raise_input_error_naming_the_file(city, broken_prediction, t
         load_pair(far, city)
     assert err.value.path == str(far)
     with pytest.raises(InputError, match="does not overlap") as err:
-        load_pair(far, layout.ground_truth_path(city), gsd=0.5)
+        load_pair(far, city_layout.ground_truth_path(city), gsd=0.5)
     assert err.value.path == str(far)
     with pytest.raises(InputError, match="--raster or --gsd"):
-        load_pair(layout.ground_truth_path(city), layout.ground_truth_path(city))
+        load_pair(city_layout.ground_truth_path(city), city_layout.ground_truth_path(city))
 
 
 def test_wrong_option_value_is_refused(city, broken_prediction):

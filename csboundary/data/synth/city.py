@@ -21,7 +21,7 @@ from affine import Affine
 from tqdm import tqdm
 
 from csboundary import __version__
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.folder_lock import locked_folder
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
@@ -35,7 +35,7 @@ from csboundary.data.units import GroundUnits, ground_units
 
 @dataclass
 class SyntheticCity:
-    """The geometry of a city before rendering: its scene (network inside) and tile layout."""
+    """The geometry of a city before rendering: its scene (network inside) and tile city_layout."""
 
     config: SynthConfig
     split: str
@@ -199,7 +199,7 @@ def synthesize_city(
 def _synthesize_city(
     out_dir: str | Path, seed: int, split: str, tiles: tuple[int, int], config: SynthConfig, progress: bool
 ) -> dict:
-    out_dir = layout.begin_city(out_dir)
+    out_dir = city_layout.begin_city(out_dir)
     start = time.perf_counter()
     city = plan_city(config, split, seed, tiles)
     planned = time.perf_counter() - start
@@ -211,9 +211,9 @@ def _synthesize_city(
         t0 = time.perf_counter()
         image = city.render(row, col)
         render_seconds.append(time.perf_counter() - t0)
-        name = layout.tile_name(row, col)
+        name = city_layout.tile_name(row, col)
         write_geotiff(
-            layout.tiles_dir(out_dir) / name,
+            city_layout.tiles_dir(out_dir) / name,
             image,
             city.transform(row, col),
             config.crs,
@@ -225,9 +225,9 @@ def _synthesize_city(
                 "tile_col": str(col),
             },
         )
-        records.append({"path": f"{layout.TILES_DIR}/{name}", "row": row, "col": col})
+        records.append({"path": f"{city_layout.TILES_DIR}/{name}", "row": row, "col": col})
     gt = city.ground_truth()
-    write_ground_truth(layout.ground_truth_path(out_dir), gt, city.road_surface())
+    write_ground_truth(city_layout.ground_truth_path(out_dir), gt, city.road_surface())
     meta = {
         "source": "synthetic",
         "generator": f"csboundary {__version__}",
@@ -256,5 +256,5 @@ def _synthesize_city(
         },
         "seconds": {"plan": round(planned, 2), "render_per_tile": [round(s, 2) for s in render_seconds]},
     }
-    layout.write_meta(out_dir, meta)
+    city_layout.write_meta(out_dir, meta)
     return meta

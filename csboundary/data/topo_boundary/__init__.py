@@ -4,7 +4,7 @@ The benchmark cuts every 5000x5000 orthophoto tile into 25 patches ``TTTTTT_RC.t
 tile id, R = row block from the top, C = column block) with per-patch boundary labels
 ``labels/dense_seq/{id}.json`` in patch pixels ``[row, col]``. csBoundary works on whole tiles and
 vector ground truth, so this package puts the patches back together, re-joins the boundaries that
-the cut split at patch borders, and writes each tile as a city (see :mod:`csboundary.data.city`).
+the cut split at patch borders, and writes each tile as a city (see :mod:`csboundary.data.city_layout`).
 
 One module per job: :mod:`.files` reads the dataset's files, :mod:`.placement` puts a tile on
 the map, :mod:`.boundaries` joins and smooths boundary pixel chains, :mod:`.tiles` assembles

@@ -1,7 +1,7 @@
 """Writing Topo-boundary tiles as csBoundary cities: one city per tile, one per benchmark split
 of the placed tiles, and the import that drives both and reports what was missing.
 
-The only part of the package that writes files (see :mod:`csboundary.data.city` for the layout).
+The only part of the package that writes files (see :mod:`csboundary.data.city_layout` for the layout).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 from rasterio.crs import CRS
 from tqdm import tqdm
 
-from csboundary.data.city import begin_city, ground_truth_path, tiles_dir, write_meta
+from csboundary.data.city_layout import begin_city, ground_truth_path, tiles_dir, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
 from csboundary.data.topo_boundary.files import PATCH_SIZE, SPLITS, TopoBoundaryIndex, _check_grid, patch_id, scan

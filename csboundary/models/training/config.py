@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from csboundary.config import Config
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.errors import InputError
 from csboundary.models.training.data import CitySpec, TrainingCity, WorldsConfig
 
@@ -118,9 +118,9 @@ def training_pixel_size(config: dict) -> float | None:
         paths += [spec.path(cfg.cache) for spec in WorldsConfig.from_dict(cfg.worlds).specs()]
     sizes = set()
     for path in [*paths, *map(Path, cfg.extra_train_cities)]:
-        if layout.is_city_dir(path):
-            metres = layout.pixel_metres(
-                layout.read_meta(path)
+        if city_layout.is_city_dir(path):
+            metres = city_layout.pixel_metres(
+                city_layout.read_meta(path)
             )  # not city.json's gsd: that is in CRS units (feet in NYC)
             if metres is not None:
                 sizes.add(round(metres, 6))
@@ -139,7 +139,7 @@ def training_cities(config: TrainConfig, progress: bool = True) -> list[Training
         config.extra_train_cities
     )
     for path in config.extra_train_cities:
-        if not layout.is_city_dir(path):
+        if not city_layout.is_city_dir(path):
             raise InputError(
                 path, "not a city directory (tiles/, ground_truth.gpkg and city.json; see csboundary import-masks)"
             )

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.config import Config
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.folder_lock import folder_lock
 from csboundary.data.footprint import draw_window, union_area
 from csboundary.data.ground_truth import read_complete_area, read_ground_truth, read_road_surface
@@ -58,10 +58,10 @@ class CitySpec:
         from csboundary.data.synth.styles import style_config
 
         path = self.path(cache)
-        if not layout.is_city_dir(path):
+        if not city_layout.is_city_dir(path):
             path.mkdir(parents=True, exist_ok=True)
             with folder_lock(path, wait=True):  # a training building this city now: wait for it, then use its city
-                if not layout.is_city_dir(path):
+                if not city_layout.is_city_dir(path):
                     synthesize_city(
                         path,
                         self.seed,
@@ -170,14 +170,14 @@ class TrainingCity:
     def __init__(self, city_dir: str | Path, config: LabelConfig = LabelConfig(), mosaic: Mosaic | None = None):
         self.path = Path(city_dir)
         # ``mosaic``: the city's imagery already open, or one group of its scattered tiles (:meth:`parts`)
-        self.mosaic = mosaic if mosaic is not None else Mosaic.open(layout.tiles_dir(city_dir))
-        gt = read_ground_truth(layout.ground_truth_path(city_dir), self.mosaic.crs)
+        self.mosaic = mosaic if mosaic is not None else Mosaic.open(city_layout.tiles_dir(city_dir))
+        gt = read_ground_truth(city_layout.ground_truth_path(city_dir), self.mosaic.crs)
         self.labels = CityLabels.build(list(gt.geometry), self.mosaic, config)
         self.surface = _polygon_raster(
-            read_road_surface(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic
+            read_road_surface(city_layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic
         )
         self.complete = _polygon_raster(
-            read_complete_area(layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic
+            read_complete_area(city_layout.ground_truth_path(city_dir), self.mosaic.crs), self.mosaic
         )
         if self.complete is not None and not self.complete.any():
             self.close()
@@ -191,7 +191,7 @@ class TrainingCity:
         scattered over a city, data/footprint.py), one per group of touching tiles, so that no
         raster of the city (complete area, road surface, AfANet's maps) spans the gaps. A group
         that the complete area misses is left out; the city is refused when all are."""
-        whole = Mosaic.open(layout.tiles_dir(city_dir))  # opened once: each group is a crop of it
+        whole = Mosaic.open(city_layout.tiles_dir(city_dir))  # opened once: each group is a crop of it
         if len(whole.footprint) == 1:
             return [cls(city_dir, config, whole)]
         found, refused = [], None

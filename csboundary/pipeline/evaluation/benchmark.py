@@ -286,7 +286,7 @@ def run_benchmark(
     city_dir: Path, out: Path, weights_dir: Path, device, methods=None, seed: int = 0, progress: bool = True
 ) -> dict:
     """Predict ``city_dir`` with every method, score it, write the tables; returns the results."""
-    from csboundary.data import city as layout
+    from csboundary.data import city_layout
     from csboundary.data.ground_truth import read_ground_truth
     from csboundary.data.raster import Mosaic
     from csboundary.pipeline.jobs.prediction_run import run_prediction
@@ -294,8 +294,8 @@ def run_benchmark(
 
     chosen = [m for m in METHODS if methods is None or m.key in methods]
     results: dict[str, dict] = {}
-    with Mosaic.open(layout.tiles_dir(city_dir)) as mosaic:
-        lines = list(read_ground_truth(layout.ground_truth_path(city_dir), mosaic.crs).geometry)
+    with Mosaic.open(city_layout.tiles_dir(city_dir)) as mosaic:
+        lines = list(read_ground_truth(city_layout.ground_truth_path(city_dir), mosaic.crs).geometry)
         for method in chosen:
             try:
                 model = method.loader(weights_dir, device)

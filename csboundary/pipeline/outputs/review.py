@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.atomic import atomic_path
 from csboundary.data.folder_lock import locked_folder
 from csboundary.data.ground_truth import read_ground_truth
@@ -64,8 +64,8 @@ def city_ground_truth(inputs: list[Path]) -> Path | None:
     if not inputs:
         return None
     city_dir = inputs[0].parent.parent
-    path = layout.ground_truth_path(city_dir)
-    return path if layout.is_city_dir(city_dir) and path.exists() else None
+    path = city_layout.ground_truth_path(city_dir)
+    return path if city_layout.is_city_dir(city_dir) and path.exists() else None
 
 
 def write_review(

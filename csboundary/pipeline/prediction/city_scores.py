@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.inputs import open_imagery
 from csboundary.data.model_view import model_view
 from csboundary.errors import InputError, InputWarning
@@ -62,8 +62,8 @@ def set_cities(set_dir: str | Path) -> list[Path]:
             raise InputError(listing, f"not a set listing ({exc})") from exc
         cities = [set_dir / n for n in names]
     else:
-        cities = sorted(p for p in set_dir.iterdir() if layout.is_city_dir(p))
-    missing = [c for c in cities if not layout.is_city_dir(c)]
+        cities = sorted(p for p in set_dir.iterdir() if city_layout.is_city_dir(p))
+    missing = [c for c in cities if not city_layout.is_city_dir(c)]
     if missing:
         raise InputError(missing[0], "listed in the set but not a city directory")
     if not cities:
@@ -82,7 +82,7 @@ def predicted_city(
     city's ground-truth lines. ``assume_model_gsd``: imagery without a pixel size is taken to be
     at the model's (imported crops), and RGB is read without warnings (NIR := green is the
     documented rule); ``options``: how it is predicted (sweeps vary the stitching)."""
-    layout.read_meta(city_dir)
+    city_layout.read_meta(city_dir)
     with warnings.catch_warnings():
         if assume_model_gsd:
             warnings.simplefilter("ignore", InputWarning)
@@ -109,7 +109,7 @@ def evaluate_city(
     result, lines = predicted_city(city_dir, model, PredictionOptions(batch_size=batch_size, progress=progress))
     scores = evaluate_run(result, lines, seed, metres_per_px=model.pixel_size_m)
     for item in scores.values():
-        item["inputs"] = {"gt": str(layout.ground_truth_path(city_dir))}
+        item["inputs"] = {"gt": str(city_layout.ground_truth_path(city_dir))}
     return scores
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from csboundary.config import Config
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.model_view import model_view
 from csboundary.data.raster import Mosaic
 from csboundary.data.units import MODEL_GSD
@@ -77,12 +77,12 @@ def imagery_groups(paths: list[Path]) -> list[list[Path]]:
             if path.suffix.lower() not in RASTER_SUFFIXES:
                 raise InputError(path, "not a GeoTIFF (.tif), a folder of them, a city, a set or a prediction folder")
             groups.append([path])
-        elif layout.is_city_dir(path):
-            groups.append(sorted(layout.tiles_dir(path).glob("*.tif")))
+        elif city_layout.is_city_dir(path):
+            groups.append(sorted(city_layout.tiles_dir(path).glob("*.tif")))
         elif (path / "summary.json").exists():
             groups.append(prediction_inputs(path))
-        elif (path / SET_FILE).exists() or any(layout.is_city_dir(p) for p in path.iterdir()):
-            groups += [sorted(layout.tiles_dir(c).glob("*.tif")) for c in set_cities(path)]
+        elif (path / SET_FILE).exists() or any(city_layout.is_city_dir(p) for p in path.iterdir()):
+            groups += [sorted(city_layout.tiles_dir(c).glob("*.tif")) for c in set_cities(path)]
         else:
             rasters = sorted(p for p in path.iterdir() if p.suffix.lower() in RASTER_SUFFIXES)
             if not rasters:

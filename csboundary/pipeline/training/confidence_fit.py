@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.errors import InputError
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.edge_evidence import FEATURES, MAP_FEATURES
@@ -110,7 +110,9 @@ def fit_bundle_confidence(
         "weights_sha256": file_sha256(weights),
         "seed": seed,
         "code_version": code_version(),
-        "cities": [{"dir": str(c), "ground_truth_sha256": file_sha256(layout.ground_truth_path(c))} for c in cities],
+        "cities": [
+            {"dir": str(c), "ground_truth_sha256": file_sha256(city_layout.ground_truth_path(c))} for c in cities
+        ],
         "map_features": [f for f in features if f in MAP_FEATURES],
     }
     mostly_true = np.concatenate([c.truth_share >= TREE_SHARE for c in per_city])

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from csboundary.config import Config
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.atomic import atomic_path
 from csboundary.data.folder_lock import LOCK_FILE, locked_folder
 from csboundary.errors import InputError
@@ -182,8 +182,8 @@ def labelled_record(city: Path) -> dict:
     """A labelled input as provenance: its name, its ground truth's and its tiles' sha256."""
     return {
         "city": str(Path(city).resolve()),
-        "ground_truth_sha256": file_sha256(layout.ground_truth_path(city)),
-        "tiles_sha256": {p.name: file_sha256(p) for p in sorted(layout.tiles_dir(city).glob("*.tif"))},
+        "ground_truth_sha256": file_sha256(city_layout.ground_truth_path(city)),
+        "tiles_sha256": {p.name: file_sha256(p) for p in sorted(city_layout.tiles_dir(city).glob("*.tif"))},
     }
 
 

@@ -17,7 +17,7 @@ import geopandas as gpd
 import pyogrio
 from shapely.geometry import Polygon
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.ground_truth import LAYER, read_complete_area
 from csboundary.data.raster import Mosaic
 from csboundary.data.user_city import make_city
@@ -71,8 +71,8 @@ def reviewed_city(prediction: Path, out: Path, complete: gpd.GeoDataFrame) -> Pa
 
 def check_complete_area(city: Path) -> None:
     """A labelled city with a complete area must have some of its imagery inside it."""
-    with Mosaic.open(layout.tiles_dir(city)) as mosaic:
-        areas = read_complete_area(layout.ground_truth_path(city), mosaic.crs)
+    with Mosaic.open(city_layout.tiles_dir(city)) as mosaic:
+        areas = read_complete_area(city_layout.ground_truth_path(city), mosaic.crs)
         if areas is not None and not covers_imagery(areas, mosaic):
             raise InputError(city, "its complete area does not cover any of its imagery")
 
@@ -89,13 +89,13 @@ def labelled_cities(paths: list[Path], work: Path) -> list[Path]:
     reviewed: dict[Path, tuple[Path, gpd.GeoDataFrame]] = {}  # city to make -> (prediction, its complete areas)
     for path in paths:
         path = Path(path)
-        if layout.is_city_dir(path):
+        if city_layout.is_city_dir(path):
             found.append(path)
         elif is_reviewed_prediction(path):
             digest = hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:8]
             found.append(work / "labelled" / f"{path.name}-{digest}")
             reviewed[found[-1]] = (path, reviewed_areas(path))
-        elif (path / SET_FILE).exists() or (path.is_dir() and any(layout.is_city_dir(p) for p in path.iterdir())):
+        elif (path / SET_FILE).exists() or (path.is_dir() and any(city_layout.is_city_dir(p) for p in path.iterdir())):
             found += set_cities(path)
         elif (path / "summary.json").exists():
             raise InputError(

@@ -103,7 +103,7 @@ def test_benchmark_writes_every_table_and_the_figure(weights, tmp_path):
 
     # Table II reports the scores of the prediction it wrote: re-scored here from graph.json and
     # the city's ground truth, independently of the benchmark's own bookkeeping
-    from csboundary.data import city as layout
+    from csboundary.data import city_layout
     from csboundary.data.ground_truth import read_ground_truth
     from csboundary.data.raster import Mosaic
     from csboundary.graph import BoundaryGraph
@@ -111,9 +111,9 @@ def test_benchmark_writes_every_table_and_the_figure(weights, tmp_path):
     from csboundary.pipeline.evaluation.benchmark import TABLE_METRICS
 
     predicted = BoundaryGraph.read_json(out / "predictions" / "csboundary" / "graph.json")
-    with Mosaic.open(layout.tiles_dir(city)) as mosaic:
+    with Mosaic.open(city_layout.tiles_dir(city)) as mosaic:
         gt = BoundaryGraph.from_world_lines(
-            list(read_ground_truth(layout.ground_truth_path(city), mosaic.crs).geometry), mosaic.transform
+            list(read_ground_truth(city_layout.ground_truth_path(city), mosaic.crs).geometry), mosaic.transform
         )
         again = evaluate(predicted, gt, scale="city", seed=0, extent=(0, 0, mosaic.width, mosaic.height))["metrics"]
     table2 = {row[0]: row[1:] for row in list(csv.reader(open(out / "tableII.csv")))[1:]}

@@ -12,7 +12,7 @@ import torch
 from conftest import make_tileset
 from scipy.spatial.distance import pdist
 
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.grid import GridConfig, PatchGrid
 from csboundary.data.ground_truth import read_ground_truth
 from csboundary.data.raster import Mosaic
@@ -37,8 +37,8 @@ def city(tmp_path_factory):
     """A 2x2-tile test-split city of 3000 x 3000 px: 3 x 3 patches, boundaries across every seam."""
     out = tmp_path_factory.mktemp("city")
     synthesize_city(out, seed=3, split="test", tiles=(2, 2), config=SynthConfig(tile_size=1500), progress=False)
-    mosaic = Mosaic.open(layout.tiles_dir(out))
-    lines = list(read_ground_truth(layout.ground_truth_path(out), mosaic.crs).geometry)
+    mosaic = Mosaic.open(city_layout.tiles_dir(out))
+    lines = list(read_ground_truth(city_layout.ground_truth_path(out), mosaic.crs).geometry)
     yield mosaic, lines
     mosaic.close()
 

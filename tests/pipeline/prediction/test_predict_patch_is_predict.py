@@ -12,7 +12,7 @@ from rasterio.windows import Window
 from typer.testing import CliRunner
 
 from csboundary.cli.main import app
-from csboundary.data import city as layout
+from csboundary.data import city_layout
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.synth.city import synthesize_city
 from csboundary.data.synth.config import SynthConfig
@@ -26,7 +26,7 @@ def tile(tmp_path_factory):
     """One 1100 x 1100 px test-split tile at the shipped model's 0.152 m."""
     out = tmp_path_factory.mktemp("one-tile") / "city"
     synthesize_city(out, seed=3, split="test", tiles=(1, 1), config=SynthConfig(tile_size=1100), progress=False)
-    return next(layout.tiles_dir(out).glob("*.tif"))
+    return next(city_layout.tiles_dir(out).glob("*.tif"))
 
 
 @pytest.fixture(scope="module")
