@@ -172,14 +172,22 @@ def module_name(path: Path, root: Path = PACKAGE) -> str:
 
 def import_cycles(root: Path = PACKAGE) -> list[list[str]]:
     """Groups of modules that import each other in a circle, directly or through others (every
-    import counts, also one inside a function): sorted names of each strongly connected group."""
+    import counts, also one inside a function): sorted names of each strongly connected group.
+    An import of the root package itself (``import csboundary`` for its ``__all__``) is no edge:
+    Python imports a package before any of its modules, so every module depends on it anyway."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     modules = {module_name(p, root): p for p in sorted(root.rglob("*.py"))}
     names = sorted(modules)
     index = {n: i for i, n in enumerate(names)}
-    pairs = [(index[n], index[m]) for n, p in modules.items() for _, m in imports_of(p) if m in index and m != n]
+    root_package = module_name(root / "__init__.py", root)
+    pairs = [
+        (index[n], index[m])
+        for n, p in modules.items()
+        for _, m in imports_of(p)
+        if m in index and m != n and m != root_package
+    ]
     rows, cols = zip(*pairs) if pairs else ((), ())
     graph = csr_matrix(([1] * len(pairs), (rows, cols)), shape=(len(names), len(names)))
     _, labels = connected_components(graph, directed=True, connection="strong")
