@@ -19,7 +19,7 @@ from tqdm import tqdm
 from csboundary.data.city_layout import begin_city, ground_truth_path, tiles_dir, write_meta
 from csboundary.data.geotiff import write_geotiff
 from csboundary.data.ground_truth import write_ground_truth
-from csboundary.data.topo_boundary.files import PATCH_SIZE, SPLITS, TopoBoundaryIndex, _check_grid, patch_id, scan
+from csboundary.data.topo_boundary.files import PATCH_SIZE, SPLITS, TopoBoundaryIndex, check_grid, patch_id, scan
 from csboundary.data.topo_boundary.placement import FALLBACK_CRS, FALLBACK_GSD
 from csboundary.data.topo_boundary.seams import border_continuity, join_tiles
 from csboundary.data.topo_boundary.tiles import AssembledTile, assemble_tile
@@ -103,7 +103,7 @@ def import_topo_boundary(
     Missing patches and missing label files are reported, not fatal; a broken file raises an
     InputError naming it. Returns a JSON-serialisable report.
     """
-    _check_grid(patch_size, splits)
+    check_grid(patch_size, splits)
     index = scan(root)
     if not index.patches:
         raise InputError(root, "no Topo-boundary patches (TTTTTT_RC.tiff) found under this folder")

@@ -50,7 +50,7 @@ def parse_patch_id(text: str) -> tuple[str, int, int] | None:
     return match.group(1), int(match.group(2)), int(match.group(3))
 
 
-def _check_grid(patch_size: int, splits: int) -> None:
+def check_grid(patch_size: int, splits: int) -> None:
     if patch_size < 1:
         raise ValueError(f"patch_size must be >= 1, got {patch_size}")
     if not 1 <= splits <= 10:
@@ -234,7 +234,7 @@ def read_dense_seq(path: str | Path) -> list[np.ndarray]:
 LABEL_MARGIN = 2.0  # px a label point may lie outside its patch (annotation on the border) before it is clipped
 
 
-def _inside_patch(seq: np.ndarray, patch_size: int) -> np.ndarray:
+def inside_patch(seq: np.ndarray, patch_size: int) -> np.ndarray:
     return ((seq >= -LABEL_MARGIN) & (seq <= patch_size + LABEL_MARGIN)).all(axis=1)
 
 
@@ -242,7 +242,7 @@ def clip_to_patch(seq: np.ndarray, patch_size: int) -> list[np.ndarray]:
     """The parts of a ``[row, col]`` label inside its patch (plus :data:`LABEL_MARGIN`): a point
     thousands of pixels away is an annotation error, and kept it would make every later raster
     of the tile as large as its coordinates."""
-    if _inside_patch(seq, patch_size).all():
+    if inside_patch(seq, patch_size).all():
         return [seq]
     if len(seq) == 1:
         return []

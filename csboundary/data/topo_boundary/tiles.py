@@ -24,9 +24,9 @@ from csboundary.data.topo_boundary.files import (
     SPLITS,
     Patch,
     TopoBoundaryIndex,
-    _check_grid,
-    _inside_patch,
+    check_grid,
     clip_to_patch,
+    inside_patch,
     parse_patch_id,
     patch_id,
     read_dense_seq,
@@ -77,7 +77,7 @@ def assemble_tile(
 ) -> AssembledTile:
     """Reassemble tile ``tile_id``: patch (R, C) goes to rows R*ps.., cols C*ps..; boundaries re-joined.
     Without a georeference in the files, ``placement`` puts it on the map from its id."""
-    _check_grid(patch_size, splits)
+    check_grid(patch_size, splits)
     found = index.patches.get(tile_id, {})
     for (row, col), path in found.items():
         if row >= splits or col >= splits:
@@ -117,7 +117,7 @@ def assemble_tile(
             offset = np.array([row * patch_size, col * patch_size], dtype=float)
             seqs = read_dense_seq(index.labels[pid])
             kept = [part for seq in seqs if len(seq) for part in clip_to_patch(seq, patch_size)]
-            outside = sum(int((~_inside_patch(seq, patch_size)).sum()) for seq in seqs)
+            outside = sum(int((~inside_patch(seq, patch_size)).sum()) for seq in seqs)
             if outside:
                 warnings.warn(
                     f"{index.labels[pid]}: {outside} label point(s) lie more than {LABEL_MARGIN:g} px outside the "
