@@ -133,23 +133,34 @@ def onnx_cache(tmp_path_factory):
     if os.environ.get(CACHE_ENV):
         yield Path(os.environ[CACHE_ENV])
         return
-    base = tmp_path_factory.getbasetemp()
-    folder = (
-        base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    ) / "onnx-cache"  # the run's folder, above the workers'
+    folder = run_folder(tmp_path_factory) / "onnx-cache"
     folder.mkdir(parents=True, exist_ok=True)
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(CACHE_ENV, str(folder))
         yield folder
 
 
+def run_folder(tmp_path_factory) -> Path:
+    """The folder of the whole test run, above the pytest-xdist workers' own (theirs alone
+    without xdist): what is made there once is shared by every worker."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory) -> Path:
-    """``csboundary demo`` run once per session (the shipped model on the demo city): its folder
-    holds ``city/`` and ``prediction/``. Read-only: copy what a test changes."""
+    """``csboundary demo`` run once per test run (the shipped model on the demo city), by the
+    first worker that needs it while the others wait on a lock: its folder holds ``city/`` and
+    ``prediction/``. Read-only: copy what a test changes."""
+    import fcntl
+
     from helpers import run_cli
 
-    out = tmp_path_factory.mktemp("demo") / "demo"
-    done = run_cli("demo", "--out", str(out), "--device", "cpu", timeout=600)
-    assert done.returncode == 0, done.stderr
+    shared = run_folder(tmp_path_factory)
+    out = shared / "demo-run" / "demo"
+    with open(shared / "demo-run.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (out / "scores.json").exists():
+            done = run_cli("demo", "--out", str(out), "--device", "cpu", timeout=600)
+            assert done.returncode == 0, done.stderr
     return out

@@ -274,16 +274,7 @@ def apply_checked(
     vertices = graph.vertices.copy()
     for i, place in edits.moves:
         vertices[i] = place
-    n = graph.n_edges
-    edges = [tuple(int(x) for x in e) for e in graph.edges]
-    polylines = _follow_moves(list(graph.edge_polylines or [None] * n), edges, vertices, {i for i, _ in edits.moves})
-    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(n, np.nan), float)
-    patches = np.asarray(graph.edge_patches if graph.edge_patches is not None else np.full((n, 2), -1), np.int64)
-    kinds = list(graph.edge_kinds or ["normal"] * n)
-    kept = {k: new for new, k in enumerate(k for k in range(n) if k not in edits.deleted)}
-    new_edges = [edges[k] for k in kept]
-    new_kinds, new_lines = [kinds[k] for k in kept], [polylines[k] for k in kept]
-    new_scores, new_patches = [scores[k] for k in kept], [patches[k] for k in kept]
+    kept, (new_edges, new_kinds, new_lines, new_scores, new_patches) = _kept_edges(graph, vertices, edits)
     record = ReviewRecord(
         deleted=sorted(edits.deleted),
         accepted=sorted(kept[k] for k in edits.accepted if k in kept),
@@ -312,6 +303,19 @@ def apply_checked(
         crs=graph.crs,
     )
     return result, record
+
+
+def _kept_edges(graph: BoundaryGraph, vertices: np.ndarray, edits: CheckedEdits) -> tuple[dict[int, int], list[list]]:
+    """The edges not deleted, in their old order: old -> new index, and their (u, v) pairs,
+    kinds, polylines (whose ends follow moved ``vertices``), scores and patches."""
+    n = graph.n_edges
+    edges = [tuple(int(x) for x in e) for e in graph.edges]
+    polylines = _follow_moves(list(graph.edge_polylines or [None] * n), edges, vertices, {i for i, _ in edits.moves})
+    scores = np.asarray(graph.edge_scores if graph.edge_scores is not None else np.full(n, np.nan), float)
+    patches = np.asarray(graph.edge_patches if graph.edge_patches is not None else np.full((n, 2), -1), np.int64)
+    kinds = list(graph.edge_kinds or ["normal"] * n)
+    kept = {k: new for new, k in enumerate(k for k in range(n) if k not in edits.deleted)}
+    return kept, [[column[k] for k in kept] for column in (edges, kinds, polylines, scores, patches)]
 
 
 def _with_ends(line: object, start: np.ndarray, end: np.ndarray) -> np.ndarray:
