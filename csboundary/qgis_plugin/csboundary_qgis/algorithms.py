@@ -1,6 +1,7 @@
 """The Processing algorithms: each one a csboundary command, its options as parameters, its
 output files loaded as layers. The work is done by the command (runner.py), so an algorithm
-here only builds the command line and says what to load."""
+here only builds the command line and says what to load; what they share is in base.py, the
+layers they load in layers.py."""
 
 import json
 import os
@@ -10,8 +11,6 @@ from qgis.core import (
     QgsCoordinateReferenceSystem,
     QgsCoordinateTransform,
     QgsProcessing,
-    QgsProcessingAlgorithm,
-    QgsProcessingContext,
     QgsProcessingException,
     QgsProcessingOutputFile,
     QgsProcessingOutputFolder,
@@ -23,176 +22,16 @@ from qgis.core import (
     QgsProcessingParameterFileDestination,
     QgsProcessingParameterFolderDestination,
     QgsProcessingParameterMultipleLayers,
-    QgsProcessingParameterNumber,
     QgsProcessingParameterVectorLayer,
-    QgsProcessingUtils,
     QgsProject,
     QgsVectorFileWriter,
     QgsVectorLayer,
 )
 
-from . import runner
-from .command import configured_command
-from .styles import Styler
+from .base import CsboundaryAlgorithm, imagery_files
+from .layers import BOUNDARIES_LAYER, COMPLETE_LAYER, DRAFT_LAYER, HELD_BACK_LAYER, REVIEW_GPKG, load, load_review
 
 ENGINES = ("auto", "torch", "onnx")
-DEVICES = ("auto", "cpu", "cuda")
-BOUNDARIES_LAYER = "road_boundaries"  # in the prediction's boundaries.gpkg
-DRAFT_LAYER = "boundaries"  # the review draft's boundaries, in the review GeoPackage
-HELD_BACK_LAYER = "held_back"  # the boundaries not worth a look, in the review GeoPackage (loaded hidden)
-COMPLETE_LAYER = "complete"  # polygons a reviewer marks checked, in the review GeoPackage
-REVIEW_GPKG = "review.gpkg"  # the boundaries that a reviewer edits, beside the prediction
-
-
-class CsboundaryAlgorithm(QgsProcessingAlgorithm):
-    """What every algorithm shares: the command's run with QGIS's progress bar and cancel."""
-
-    NAME = ""
-    TITLE = ""
-    HELP = ""
-
-    def createInstance(self):  # noqa: N802 (QGIS's names throughout)
-        return type(self)()
-
-    def name(self):
-        return self.NAME
-
-    def displayName(self):  # noqa: N802
-        return self.TITLE
-
-    def shortHelpString(self):  # noqa: N802
-        return self.HELP + (
-            "<p>Runs the csboundary command of the environment named under Settings > Options > "
-            "Processing > Providers > csboundary (or $CSBOUNDARY_COMMAND, or the one on PATH).</p>"
-        )
-
-    def csboundary(self, args, feedback):
-        """Run ``csboundary args``: its bars in QGIS's progress bar, its lines in the log, cancel
-        stops it; a failure is one QgsProcessingException line."""
-        try:
-            command = runner.find_command(configured_command())
-            feedback.pushInfo(f"{runner.check_command(command)} ({command})")
-            feedback.pushCommandInfo(" ".join([command, *args]))
-            progress = runner.Progress(
-                stage=feedback.setProgressText,
-                percent=feedback.setProgress,
-                line=feedback.pushConsoleInfo,
-                canceled=feedback.isCanceled,
-            )
-            return runner.run(command, list(args), progress)
-        except runner.Canceled:
-            raise QgsProcessingException(
-                "canceled: csboundary was stopped (a prediction keeps its finished patches: "
-                "run it again into the same folder to continue)"
-            ) from None
-        except runner.CommandError as exc:
-            raise QgsProcessingException(f"csboundary: {exc}") from None
-
-    def engine_parameters(self):
-        self.addParameter(
-            QgsProcessingParameterFile(
-                "WEIGHTS", "Weights bundle (empty: the shipped weights)", extension="pt", optional=True
-            )
-        )
-        self.addParameter(QgsProcessingParameterEnum("DEVICE", "Device", options=list(DEVICES), defaultValue=0))
-
-    def engine_args(self, parameters, context):
-        args = ["--device", DEVICES[self.parameterAsEnum(parameters, "DEVICE", context)]]
-        weights = self.parameterAsFile(parameters, "WEIGHTS", context)
-        return args + (["--weights", weights] if weights else [])
-
-    def folder(self, parameters, name, context):
-        path = self.parameterAsFile(parameters, name, context)
-        if not path or not os.path.isdir(path):
-            raise QgsProcessingException(f"{path or name}: not a folder")
-        return path
-
-    def min_confidence_parameter(self):
-        self.addParameter(
-            QgsProcessingParameterNumber(
-                "MIN_CONFIDENCE",
-                "Leave out edges less sure than",
-                QgsProcessingParameterNumber.Double,
-                0.0,
-                minValue=0.0,
-                maxValue=1.0,
-            )
-        )
-
-    def min_confidence_args(self, parameters, context):
-        min_confidence = self.parameterAsDouble(parameters, "MIN_CONFIDENCE", context)
-        return ["--min-confidence", repr(min_confidence)] if min_confidence > 0 else []
-
-    def training_parameters(self, fpn_steps, afanet_steps, afanet_label, afanet_min, output_label):
-        """Fine-tune's and Adapt's budget, engine, optional work folder and weights to write."""
-        self.addParameter(
-            QgsProcessingParameterNumber(
-                "FPN_STEPS", "FPN steps", QgsProcessingParameterNumber.Integer, fpn_steps, minValue=1
-            )
-        )
-        self.addParameter(
-            QgsProcessingParameterNumber(
-                "AFANET_STEPS", afanet_label, QgsProcessingParameterNumber.Integer, afanet_steps, minValue=afanet_min
-            )
-        )
-        self.engine_parameters()
-        self.addParameter(
-            QgsProcessingParameterFolderDestination(
-                "WORK", "Work folder (training runs; empty: beside the weights)", optional=True, createByDefault=False
-            )
-        )
-        self.addParameter(QgsProcessingParameterFileDestination("OUTPUT", output_label, "Weights bundle (*.pt)"))
-
-    def training_args(self, parameters, context):
-        work = self.parameterAsString(parameters, "WORK", context) if parameters.get("WORK") else ""
-        return [
-            *(["--work", work] if work else []),
-            "--fpn-steps",
-            str(self.parameterAsInt(parameters, "FPN_STEPS", context)),
-            "--afanet-steps",
-            str(self.parameterAsInt(parameters, "AFANET_STEPS", context)),
-            *self.engine_args(parameters, context),
-        ]
-
-    def kept(self, path, what, feedback):
-        """Warn when ``path`` is in QGIS's temporary folder: deleted when QGIS closes, and a new
-        one each run, so a canceled run could not be continued there."""
-        temporary = os.path.normcase(os.path.realpath(QgsProcessingUtils.tempFolder()))
-        if os.path.normcase(os.path.realpath(path)).startswith(temporary + os.sep):
-            feedback.reportError(
-                f"{what} is in QGIS's temporary folder ({path}): it is deleted when QGIS closes, and a canceled "
-                "run can only be continued in the same folder; give a folder of your own to keep it",
-                False,
-            )
-        return path
-
-    def prediction(self, parameters, context):
-        """A predict output folder (its graph.json must be there)."""
-        path = self.folder(parameters, "PREDICTION", context)
-        if not os.path.isfile(os.path.join(path, "graph.json")):
-            raise QgsProcessingException(
-                f"{path}: not a csboundary prediction (no graph.json): choose a Detect output folder"
-            )
-        return path
-
-
-def load(context, source, name, output, kind):
-    """Have Processing load ``source`` into the project when the algorithm ends, styled as ``kind``."""
-    if context.project() is None:
-        return
-    details = QgsProcessingContext.LayerDetails(name, context.project(), output, QgsProcessingUtils.LayerHint.Vector)
-    details.forceName = (
-        True  # our name, not the GeoPackage layer's ("Prefer output filename for layer names" is on by default)
-    )
-    details.setPostProcessor(Styler.make(kind))
-    context.addLayerToLoadOnCompletion(source, details)
-
-
-def load_review(context, review, boundaries_output, held_output, complete_output):
-    """The review GeoPackage's three layers: the draft's boundaries, those held back (hidden) and the areas checked."""
-    load(context, f"{review}|layername={DRAFT_LAYER}", "boundaries to review", boundaries_output, "review")
-    load(context, f"{review}|layername={HELD_BACK_LAYER}", "held back from the review", held_output, "held")
-    load(context, f"{review}|layername={COMPLETE_LAYER}", "areas checked", complete_output, "complete")
 
 
 def prediction_crs(prediction):
@@ -202,22 +41,6 @@ def prediction_crs(prediction):
             return QgsCoordinateReferenceSystem(str(json.load(file).get("crs") or ""))
     except (OSError, ValueError):
         return QgsCoordinateReferenceSystem()
-
-
-def imagery_files(algorithm, parameters, name, context):
-    """The files behind raster layers; a layer that is not a local raster file is refused, with the way out."""
-    layers = algorithm.parameterAsLayerList(parameters, name, context)
-    if not layers:
-        raise QgsProcessingException("no imagery given")
-    files = []
-    for layer in layers:
-        path = layer.source().split("|")[0]
-        if layer.providerType() != "gdal" or not os.path.isfile(path):
-            raise QgsProcessingException(
-                f"{layer.name()}: not a local raster file; save it as a GeoTIFF first (Raster > Conversion > Translate)"
-            )
-        files.append(path)
-    return files
 
 
 class Detect(CsboundaryAlgorithm):
