@@ -8,6 +8,7 @@ See :mod:`csboundary.metrics.sampling` for how chains are cut and why paths run 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -142,108 +143,245 @@ def resample(seg: Segments, spacing: float) -> SampledGraph:
     """Resample every chain of ``seg`` into pieces of equal length at most ``spacing``."""
     if spacing <= 0:
         raise ValueError(f"spacing must be > 0, got {spacing}")
-    pts, edges = seg.points, seg.edges
-    found = find_chains(len(pts), edges)
-    chains, anchor = found.vertices, found.anchor
-    anchor_ids = np.flatnonzero(anchor)
-    key_id = np.full(len(pts), -1, dtype=np.int64)
-    key_id[anchor_ids] = np.arange(len(anchor_ids))
+    pts = seg.points
+    found = find_chains(len(pts), seg.edges)
+    anchor_ids = np.flatnonzero(found.anchor)
     n_keys = len(anchor_ids)
-    n_chains = len(chains)
-
-    if n_chains:
-        lens = np.fromiter((len(c) for c in chains), dtype=np.int64, count=n_chains)
-        flat = np.fromiter((v for c in chains for v in c), dtype=np.int64, count=int(lens.sum()))
-        seq_off = np.concatenate([[0], np.cumsum(lens)])
-        P = pts[flat]
-        inner = np.ones(len(flat) - 1, dtype=bool)
-        inner[seq_off[1:-1] - 1] = False  # the step from one chain's last vertex to the next's first
-        seg_a = P[:-1][inner]
-        seg_b = P[1:][inner]
-        seg_len = np.linalg.norm(seg_b - seg_a, axis=1)
-        seg_chain = np.repeat(np.arange(n_chains), lens - 1)
-        seg_first = np.concatenate([[0], np.cumsum(lens - 1)])[:-1]
-        before = np.cumsum(seg_len) - seg_len
-        seg_arc = before - before[seg_first][seg_chain]
-        chain_length = np.bincount(seg_chain, weights=seg_len, minlength=n_chains)
-        pieces = np.maximum(1, np.ceil(chain_length / spacing - 1e-9)).astype(np.int64)
-        if pieces.sum() > MAX_SAMPLES:
-            raise RasterTooLarge(
-                f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points)"
-            )
-        step = chain_length / pieces
-        # interior samples j * step, j = 1 .. pieces - 1, located on their segment
-        n_inner = pieces - 1
-        s_chain = np.repeat(np.arange(n_chains), n_inner)
-        j = np.arange(int(n_inner.sum())) - np.repeat(np.concatenate([[0], np.cumsum(n_inner)])[:-1], n_inner)
-        s_arc = (j + 1) * step[s_chain]
-        k = np.searchsorted(before, before[seg_first][s_chain] + s_arc, side="right") - 1
-        k = np.clip(k, seg_first[s_chain], seg_first[s_chain] + lens[s_chain] - 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(seg_len[k] > 0, (s_arc - seg_arc[k]) / seg_len[k], 0.0)
-        t = np.clip(t, 0.0, 1.0)
-        inner_pts = seg_a[k] + t[:, None] * (seg_b[k] - seg_a[k])
-        chain_start = key_id[flat[seq_off[:-1]]]
-        chain_end = key_id[flat[seq_off[1:] - 1]]
-        # node sequence of every chain: start key, interior samples, end key
-        node_off = np.concatenate([[0], np.cumsum(pieces + 1)])
-        nodes = np.empty(int(node_off[-1]), dtype=np.int64)
-        first_pos, last_pos = node_off[:-1], node_off[1:] - 1
-        nodes[first_pos] = chain_start
-        nodes[last_pos] = chain_end
-        middle = np.ones(len(nodes), dtype=bool)
-        middle[first_pos] = middle[last_pos] = False
-        nodes[middle] = n_keys + np.arange(int(n_inner.sum()))
-        step_ok = np.ones(len(nodes) - 1, dtype=bool)
-        step_ok[last_pos[:-1]] = False
-        edge_u, edge_v = nodes[:-1][step_ok], nodes[1:][step_ok]
-        edge_w = np.repeat(step, pieces)
-    else:
-        seg_a = seg_b = inner_pts = np.zeros((0, 2))
-        seg_chain = s_chain = chain_start = chain_end = pieces = edge_u = edge_v = np.zeros(0, dtype=np.int64)
-        seg_arc = s_arc = chain_length = edge_w = np.zeros(0)
-
-    # components of the key graph (chains as edges); keys and vertices are numbered by component
-    key_matrix = _adjacency(n_keys, chain_start, chain_end, chain_length)
-    n_comp, key_label = connected_components(key_matrix, directed=False) if n_keys else (0, np.zeros(0, dtype=np.int64))
-    key_order = np.argsort(key_label, kind="stable")
-    new_key = np.empty(n_keys, dtype=np.int64)
-    new_key[key_order] = np.arange(n_keys)
+    key_id = np.full(len(pts), -1, dtype=np.int64)
+    key_id[anchor_ids] = np.arange(n_keys)
+    sampled = _sample_chains(pts, found.vertices, key_id, n_keys, spacing) if found.vertices else _SampledChains.empty()
+    # the keys, then all vertices, numbered component by component of the key graph (chains as its edges)
+    n_comp, key_label = _key_components(n_keys, sampled.chain_start, sampled.chain_end, sampled.chain_length)
+    key_order, new_key = _component_order(key_label)
     key_label = key_label[key_order].astype(np.int64)
-    chain_start, chain_end = new_key[chain_start], new_key[chain_end]
-    key_starts = np.concatenate([[0], np.cumsum(np.bincount(key_label, minlength=n_comp))]).astype(np.int64)
-
-    points = np.concatenate([pts[anchor_ids], inner_pts]).reshape(-1, 2)
-    m = len(points)
-    v_key = np.concatenate([new_key, np.full(len(s_chain), -1, dtype=np.int64)])
-    v_chain = np.concatenate([np.full(n_keys, -1, dtype=np.int64), s_chain]).astype(np.int64)
-    v_arc = np.concatenate([np.zeros(n_keys), s_arc])
-    v_label = np.concatenate([key_label[new_key], key_label[chain_start[s_chain]]]).astype(np.int64)
-    order = np.argsort(v_label, kind="stable")
-    renumber = np.empty(m, dtype=np.int64)
-    renumber[order] = np.arange(m)
-    labels = v_label[order]
+    chain_start, chain_end = new_key[sampled.chain_start], new_key[sampled.chain_end]
+    vertices = _vertices_by_component(pts[anchor_ids], new_key, key_label, chain_start, sampled)
     return SampledGraph(
-        points=points[order],
-        labels=labels,
-        starts=np.concatenate([[0], np.cumsum(np.bincount(labels, minlength=n_comp))]).astype(np.int64),
-        vertex_key=v_key[order],
-        vertex_chain=v_chain[order],
-        vertex_arc=v_arc[order],
+        points=vertices.points,
+        labels=vertices.labels,
+        starts=_block_starts(vertices.labels, n_comp),
+        vertex_key=vertices.key,
+        vertex_chain=vertices.chain,
+        vertex_arc=vertices.arc,
         chain_start=chain_start,
         chain_end=chain_end,
-        chain_length=chain_length,
-        chain_pieces=pieces,
-        key_matrix=_adjacency(n_keys, chain_start, chain_end, chain_length),
-        key_starts=key_starts,
-        edge_u=renumber[edge_u],
-        edge_v=renumber[edge_v],
-        edge_w=edge_w,
-        seg_a=seg_a,
-        seg_b=seg_b,
-        seg_chain=seg_chain,
-        seg_arc=seg_arc,
+        chain_length=sampled.chain_length,
+        chain_pieces=sampled.pieces,
+        key_matrix=_adjacency(n_keys, chain_start, chain_end, sampled.chain_length),
+        key_starts=_block_starts(key_label, n_comp),
+        edge_u=vertices.renumber[sampled.edge_u],
+        edge_v=vertices.renumber[sampled.edge_v],
+        edge_w=sampled.edge_w,
+        seg_a=sampled.seg_a,
+        seg_b=sampled.seg_b,
+        seg_chain=sampled.seg_chain,
+        seg_arc=sampled.seg_arc,
     )
+
+
+class _SampledChains(NamedTuple):
+    """The chains of a graph cut into pieces, keys still in the graph's vertex order.
+
+    ``seg_a``, ``seg_b`` (S, 2) are the input segments chain by chain, on chain ``seg_chain`` (S,)
+    at arc ``seg_arc`` (S,) from its start. Chain c runs from key ``chain_start[c]`` to key
+    ``chain_end[c]`` over ``chain_length[c]`` and is cut into ``pieces[c]`` >= 1 pieces. The
+    interior samples (K,) lie at ``sample_points`` (K, 2), on chain ``sample_chain`` at arc
+    ``sample_arc``; sample i is vertex ``n_keys + i``. The pieces are the edges ``edge_u`` ->
+    ``edge_v`` of length ``edge_w``, chain by chain in walk order.
+    """
+
+    seg_a: np.ndarray
+    seg_b: np.ndarray
+    seg_chain: np.ndarray
+    seg_arc: np.ndarray
+    chain_start: np.ndarray
+    chain_end: np.ndarray
+    chain_length: np.ndarray
+    pieces: np.ndarray
+    sample_chain: np.ndarray
+    sample_arc: np.ndarray
+    sample_points: np.ndarray
+    edge_u: np.ndarray
+    edge_v: np.ndarray
+    edge_w: np.ndarray
+
+    @classmethod
+    def empty(cls) -> "_SampledChains":
+        """A graph without chains (no edges): nothing to cut."""
+        points, ids, lengths = np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0)
+        return cls(points, points, ids, lengths, ids, ids, lengths, ids, ids, lengths, points, ids, ids, lengths)
+
+
+class _ChainSegments(NamedTuple):
+    """The segments of all chains laid end to end: ``a``, ``b`` (S, 2) their ends, ``length`` (S,),
+    ``chain`` (S,) the chain each lies on, ``arc`` (S,) the arc length from its chain's start to
+    its start, ``before`` (S,) the same over all chains laid end to end, and ``first`` (C,) each
+    chain's first segment."""
+
+    a: np.ndarray
+    b: np.ndarray
+    length: np.ndarray
+    chain: np.ndarray
+    arc: np.ndarray
+    before: np.ndarray
+    first: np.ndarray
+
+
+class _Vertices(NamedTuple):
+    """The sampled vertices numbered by component: ``points`` (M, 2), non-decreasing component
+    ``labels`` (M,), ``key`` (M,) key id or -1, ``chain`` (M,) chain id or -1 and ``arc`` (M,) arc
+    position along it; ``renumber`` (M,) maps the keys-then-samples numbering of
+    :class:`_SampledChains` to this one."""
+
+    points: np.ndarray
+    labels: np.ndarray
+    key: np.ndarray
+    chain: np.ndarray
+    arc: np.ndarray
+    renumber: np.ndarray
+
+
+def _sample_chains(
+    points: np.ndarray, chains: list[list[int]], key_id: np.ndarray, n_keys: int, spacing: float
+) -> _SampledChains:
+    """Cut each of ``chains`` (vertex sequences into ``points``, at least one chain) into the
+    fewest pieces of equal length at most ``spacing``.
+
+    ``key_id`` (N,) numbers the chain ends 0 .. ``n_keys`` - 1 (-1 elsewhere). Raises
+    :class:`RasterTooLarge` when the samples would exceed ``MAX_SAMPLES``, before any is made.
+    """
+    lens, flat, seq_off = _laid_end_to_end(chains)
+    segs = _chain_segments(points[flat], lens, seq_off)
+    chain_length = np.bincount(segs.chain, weights=segs.length, minlength=len(chains))
+    pieces = _piece_counts(chain_length, spacing)
+    step = chain_length / pieces
+    samples = _interior_samples(segs, lens, pieces, step)
+    chain_start = key_id[flat[seq_off[:-1]]]
+    chain_end = key_id[flat[seq_off[1:] - 1]]
+    edges = _piece_edges(chain_start, chain_end, pieces, step, n_keys)
+    return _SampledChains(
+        segs.a, segs.b, segs.chain, segs.arc, chain_start, chain_end, chain_length, pieces, *samples, *edges
+    )
+
+
+def _laid_end_to_end(chains: list[list[int]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The vertex sequences of ``chains`` as flat arrays: ``lens`` (C,) each sequence's length,
+    ``flat`` (sum(lens),) the sequences one after another and ``seq_off`` (C + 1,) where each
+    starts in ``flat``."""
+    lens = np.fromiter((len(c) for c in chains), dtype=np.int64, count=len(chains))
+    flat = np.fromiter((v for c in chains for v in c), dtype=np.int64, count=int(lens.sum()))
+    seq_off = np.concatenate([[0], np.cumsum(lens)])
+    return lens, flat, seq_off
+
+
+def _chain_segments(path: np.ndarray, lens: np.ndarray, seq_off: np.ndarray) -> _ChainSegments:
+    """The straight segments of the chains whose vertex positions ``path`` (sum(lens), 2) lie one
+    after another as :func:`_laid_end_to_end` gives them; the step from one chain's last vertex to
+    the next one's first is no segment."""
+    inner = np.ones(len(path) - 1, dtype=bool)
+    inner[seq_off[1:-1] - 1] = False
+    seg_a = path[:-1][inner]
+    seg_b = path[1:][inner]
+    seg_len = np.linalg.norm(seg_b - seg_a, axis=1)
+    seg_chain = np.repeat(np.arange(len(lens)), lens - 1)
+    seg_first = np.concatenate([[0], np.cumsum(lens - 1)])[:-1]
+    before = np.cumsum(seg_len) - seg_len
+    seg_arc = before - before[seg_first][seg_chain]
+    return _ChainSegments(seg_a, seg_b, seg_len, seg_chain, seg_arc, before, seg_first)
+
+
+def _piece_counts(chain_length: np.ndarray, spacing: float) -> np.ndarray:
+    """The fewest pieces (>= 1) of length at most ``spacing`` each chain of ``chain_length`` (C,)
+    is cut into; a length just over a multiple of ``spacing`` by rounding error adds no piece.
+    Raises :class:`RasterTooLarge` above ``MAX_SAMPLES`` pieces in all."""
+    pieces = np.maximum(1, np.ceil(chain_length / spacing - 1e-9)).astype(np.int64)
+    if pieces.sum() > MAX_SAMPLES:
+        raise RasterTooLarge(
+            f"the boundaries are {chain_length.sum():.3g} px long (sampling limit {MAX_SAMPLES:.0e} points)"
+        )
+    return pieces
+
+
+def _interior_samples(
+    segs: _ChainSegments, lens: np.ndarray, pieces: np.ndarray, step: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The interior samples of every chain, at arcs ``j * step`` for j = 1 .. ``pieces`` - 1, each
+    interpolated on the segment it falls on (``lens`` (C,) the chains' vertex counts).
+
+    Returns ``(chain, arc, points)``: (K,) chain ids, (K,) arc positions and (K, 2) positions,
+    chain by chain in walk order.
+    """
+    n_inner = pieces - 1
+    s_chain = np.repeat(np.arange(len(pieces)), n_inner)
+    j = np.arange(int(n_inner.sum())) - np.repeat(np.concatenate([[0], np.cumsum(n_inner)])[:-1], n_inner)
+    s_arc = (j + 1) * step[s_chain]
+    k = np.searchsorted(segs.before, segs.before[segs.first][s_chain] + s_arc, side="right") - 1
+    k = np.clip(k, segs.first[s_chain], segs.first[s_chain] + lens[s_chain] - 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(segs.length[k] > 0, (s_arc - segs.arc[k]) / segs.length[k], 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    return s_chain, s_arc, segs.a[k] + t[:, None] * (segs.b[k] - segs.a[k])
+
+
+def _piece_edges(
+    chain_start: np.ndarray, chain_end: np.ndarray, pieces: np.ndarray, step: np.ndarray, n_keys: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces as edges ``(u, v, w)``: each chain's node sequence is its start key, its
+    interior samples (vertices ``n_keys`` on, in order) and its end key, each step one piece of
+    length ``step`` of its chain."""
+    node_off = np.concatenate([[0], np.cumsum(pieces + 1)])
+    nodes = np.empty(int(node_off[-1]), dtype=np.int64)
+    first_pos, last_pos = node_off[:-1], node_off[1:] - 1
+    nodes[first_pos] = chain_start
+    nodes[last_pos] = chain_end
+    middle = np.ones(len(nodes), dtype=bool)
+    middle[first_pos] = middle[last_pos] = False
+    nodes[middle] = n_keys + np.arange(int((pieces - 1).sum()))
+    step_ok = np.ones(len(nodes) - 1, dtype=bool)
+    step_ok[last_pos[:-1]] = False  # the step from one chain's end key to the next one's start key
+    return nodes[:-1][step_ok], nodes[1:][step_ok], np.repeat(step, pieces)
+
+
+def _key_components(
+    n_keys: int, chain_start: np.ndarray, chain_end: np.ndarray, chain_length: np.ndarray
+) -> tuple[int, np.ndarray]:
+    """The connected components of the key graph (the chains as its edges): their number and each
+    key's component label (n_keys,)."""
+    key_matrix = _adjacency(n_keys, chain_start, chain_end, chain_length)
+    return connected_components(key_matrix, directed=False) if n_keys else (0, np.zeros(0, dtype=np.int64))
+
+
+def _component_order(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``order``, which sorts ``labels`` stably so that each component becomes one block in its
+    earlier order, and its inverse ``renumber``: item i's position in that order."""
+    order = np.argsort(labels, kind="stable")
+    renumber = np.empty(len(labels), dtype=np.int64)
+    renumber[order] = np.arange(len(labels))
+    return order, renumber
+
+
+def _block_starts(labels: np.ndarray, n_comp: int) -> np.ndarray:
+    """The offsets (n_comp + 1,) of each component's block in the sorted ``labels``."""
+    return np.concatenate([[0], np.cumsum(np.bincount(labels, minlength=n_comp))]).astype(np.int64)
+
+
+def _vertices_by_component(
+    key_points: np.ndarray, new_key: np.ndarray, key_label: np.ndarray, chain_start: np.ndarray, sampled: _SampledChains
+) -> _Vertices:
+    """The keys at ``key_points`` then the interior samples of ``sampled``, numbered component by
+    component (stably), so that shortest paths work on small diagonal blocks.
+
+    ``new_key`` (n_keys,) is each key's id in component order, ``key_label`` the component of
+    each key so numbered and ``chain_start`` each chain's start key so numbered.
+    """
+    n_keys = len(new_key)
+    points = np.concatenate([key_points, sampled.sample_points]).reshape(-1, 2)
+    v_key = np.concatenate([new_key, np.full(len(sampled.sample_chain), -1, dtype=np.int64)])
+    v_chain = np.concatenate([np.full(n_keys, -1, dtype=np.int64), sampled.sample_chain]).astype(np.int64)
+    v_arc = np.concatenate([np.zeros(n_keys), sampled.sample_arc])
+    v_label = np.concatenate([key_label[new_key], key_label[chain_start[sampled.sample_chain]]]).astype(np.int64)
+    order, renumber = _component_order(v_label)
+    return _Vertices(points[order], v_label[order], v_key[order], v_chain[order], v_arc[order], renumber)
 
 
 def _adjacency(m: int, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> csr_matrix:

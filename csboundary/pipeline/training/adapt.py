@@ -27,6 +27,7 @@ from csboundary.errors import InputError
 from csboundary.labels.mask_import import SET_FILE
 from csboundary.models.checkpoint import code_version, file_sha256, load_checkpoint, save_checkpoint, shipped_weights
 from csboundary.models.device import resolve_device
+from csboundary.models.training.config import TrainConfig
 from csboundary.models.training.self_training import AdaptConfig, train_adapt
 from csboundary.models.training.unlabelled import DRAWS, UnlabelledImagery
 from csboundary.pipeline.outputs.review import prediction_inputs
@@ -167,60 +168,18 @@ def _adapt(
     CRS. Returns what was done and how long each stage took."""
     out, base_path = Path(out), Path(weights) if weights else shipped_weights()
     work = Path(work) if work else default_work(out)
-    base = checked_base(base_path)
-    if not base["fpn_config"].get("surface") and (method.mix or method.surface_anchor):
-        raise InputError(
-            base_path,
-            "its FPN has no road-surface head, which mixing and the surface anchor need "
-            "(give --no-mix --no-surface-anchor, or a bundle with one)",
-        )
+    base = adaptable_base(base_path, method)
     groups = imagery_groups(imagery)
-    model_gsd = float(base.get("pixel_size_m", MODEL_GSD))
-    views, mosaics = open_imagery_views(groups, gsd, model_gsd)
-    try:
-        target = UnlabelledImagery(views, [str(g[0]) for g in groups])
-        least = 4 * budget.crop**2
-        if target.pixels < least:
-            raise InputError(
-                groups[0][0],
-                f"too little imagery to learn from: {target.pixels} px at the model's pixel size, "
-                f"adapt needs at least {least} (four {budget.crop} px windows)",
-            )
-        try:  # one window before any work: imagery that is all no-data where windows fall is refused here, not mid-training
-            target.sample(np.random.default_rng(seed), budget.crop)
-        except ValueError:
-            raise InputError(
-                groups[0][0],
-                f"{DRAWS} random {budget.crop} px windows of the imagery held no valid pixel: it is all "
-                "no-data where they fall",
-            ) from None
+    views, mosaics = open_imagery_views(groups, gsd, float(base.get("pixel_size_m", MODEL_GSD)))
+    try:  # the mosaics stay open while the FPN draws windows from them, and no longer
+        target = checked_target(views, groups, budget, seed)
         records = [{"path": str(p.resolve()), "sha256": file_sha256(p)} for group in groups for p in group]
-        tune = FinetuneBudget(
-            fpn_steps=budget.fpn_steps,
-            afanet_steps=budget.afanet_steps,
-            user_share=0.5,
-            synthetic_cities=budget.synthetic_cities,
-            fpn_lr=budget.fpn_lr,
-            afanet_lr=budget.afanet_lr,
-            crop=budget.crop,
-            batch=method.source_batch,
-        )
-        fpn_config, afanet_config = training_configs(
-            base, base_path, [], tune, seed, Path(cache) if cache else work / "synthetic"
-        )
-        fpn_config.options = {"method": method.to_dict(), "imagery": records}
+        synthetic = Path(cache) if cache else work / "synthetic"
+        fpn_config, afanet_config = adapt_configs(base, base_path, budget, method, records, seed, synthetic)
         resolved = resolve_device(device)
         seconds = {}
         start = time.perf_counter()
-        fpn = train_or_resume(
-            "adapt",
-            fpn_config,
-            work / "fpn",
-            resolved,
-            progress,
-            final_name="fpn.pt",
-            trainer=lambda config, run, dev, resume, progress: train_adapt(config, target, run, dev, resume, progress),
-        )
+        fpn = self_train_fpn(fpn_config, target, work / "fpn", resolved, progress)
         seconds["fpn"] = time.perf_counter() - start
     finally:
         for mosaic in mosaics:
@@ -232,12 +191,103 @@ def _adapt(
     )
     seconds["afanet"] = time.perf_counter() - start
     adapted_fpn = load_checkpoint(fpn, ("fpn",))
-    adapted_afanet = (
-        load_checkpoint(afanet, ("afanet",))
-        if afanet
-        else {"afanet": base["afanet"], "afanet_config": base["afanet_config"]}
+    adapted_afanet = load_checkpoint(afanet, ("afanet",)) if afanet else None
+    record = adapt_record(base_path, records, budget, method, seed)
+    save_checkpoint(out, "bundle", **adapted_bundle(base, adapted_fpn, adapted_afanet, record))
+    return {
+        "out": out,
+        "images": len(records),
+        "pixels": target.pixels,
+        "work": work,
+        "seconds": seconds,
+        "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps},
+    }
+
+
+def adaptable_base(base_path: Path, method: AdaptConfig) -> dict:
+    """The base bundle's payload (:func:`~csboundary.pipeline.training.finetune.checked_base`),
+    refused before any imagery is opened when ``method`` mixes or anchors through a road-surface
+    head its FPN does not have."""
+    base = checked_base(base_path)
+    if not base["fpn_config"].get("surface") and (method.mix or method.surface_anchor):
+        raise InputError(
+            base_path,
+            "its FPN has no road-surface head, which mixing and the surface anchor need "
+            "(give --no-mix --no-surface-anchor, or a bundle with one)",
+        )
+    return base
+
+
+def checked_target(views: list, groups: list[list[Path]], budget: AdaptBudget, seed: int) -> UnlabelledImagery:
+    """The imagery ``views`` (of the mosaics ``groups``) as self-training draws its windows,
+    refused before any work when it cannot fill four windows or is all no-data where windows fall:
+    such imagery would otherwise fail mid-training."""
+    target = UnlabelledImagery(views, [str(g[0]) for g in groups])
+    least = 4 * budget.crop**2
+    if target.pixels < least:
+        raise InputError(
+            groups[0][0],
+            f"too little imagery to learn from: {target.pixels} px at the model's pixel size, "
+            f"adapt needs at least {least} (four {budget.crop} px windows)",
+        )
+    try:
+        target.sample(np.random.default_rng(seed), budget.crop)
+    except ValueError:
+        raise InputError(
+            groups[0][0],
+            f"{DRAWS} random {budget.crop} px windows of the imagery held no valid pixel: it is all "
+            "no-data where they fall",
+        ) from None
+    return target
+
+
+def adapt_configs(
+    base: dict,
+    base_path: Path,
+    budget: AdaptBudget,
+    method: AdaptConfig,
+    records: list[dict],
+    seed: int,
+    synthetic: Path,
+) -> tuple[TrainConfig, TrainConfig]:
+    """The FPN and AfANet runs as ``finetune`` sets them up with no labelled city, the synthetic
+    cities cached in ``synthetic``. The FPN run's options carry the self-training ``method`` (its
+    trainer reads them there) and the imagery ``records``, so a work folder of other imagery or
+    settings is refused rather than resumed."""
+    tune = FinetuneBudget(
+        fpn_steps=budget.fpn_steps,
+        afanet_steps=budget.afanet_steps,
+        user_share=0.5,
+        synthetic_cities=budget.synthetic_cities,
+        fpn_lr=budget.fpn_lr,
+        afanet_lr=budget.afanet_lr,
+        crop=budget.crop,
+        batch=method.source_batch,
     )
-    record = {
+    fpn_config, afanet_config = training_configs(base, base_path, [], tune, seed, synthetic)
+    fpn_config.options = {"method": method.to_dict(), "imagery": records}
+    return fpn_config, afanet_config
+
+
+def self_train_fpn(config: TrainConfig, target: UnlabelledImagery, run: Path, device, progress: bool) -> Path:
+    """The FPN self-trained on windows of ``target`` beside the synthetic cities
+    (:func:`~csboundary.models.training.self_training.train_adapt`) in ``run``, a stopped run
+    continued and a finished one taken as it is: its final weights."""
+    return train_or_resume(
+        "adapt",
+        config,
+        run,
+        device,
+        progress,
+        final_name="fpn.pt",
+        trainer=lambda config, run, dev, resume, progress: train_adapt(config, target, run, dev, resume, progress),
+    )
+
+
+def adapt_record(base_path: Path, records: list[dict], budget: AdaptBudget, method: AdaptConfig, seed: int) -> dict:
+    """The adapt's own provenance: the base weights and every image by sha256, and the settings,
+    so that the adapted bundle says what it was made from."""
+    return {
         "base_weights": str(base_path.resolve()),
         "base_sha256": file_sha256(base_path),
         "imagery": records,
@@ -247,28 +297,34 @@ def _adapt(
         "code_version": code_version(),
         "edge_confidence": "the base bundle's, fitted on its own predictions (docs/adapt.md: its AUC with the adapted networks)",
     }
+
+
+def adapted_bundle(base: dict, adapted_fpn: dict, adapted_afanet: dict | None, record: dict) -> dict:
+    """The payload of the adapted bundle: the ``base`` bundle's settings and edge confidence with
+    the adapted networks, and AfANet's as the base had it when it was not tuned
+    (``adapted_afanet`` None). The provenance keeps each run's, the base's and the adapt
+    ``record``."""
     keys = ("code_version", "code_version_at_start", "train_config", "step", "validation")
     payload = {k: v for k, v in base.items() if k not in ("format", "kind", "code_version")}
     provenance = {"fpn": {k: adapted_fpn.get(k) for k in keys}, "base": base.get("provenance") or {}, "adapt": record}
     provenance["afanet"] = (
-        {k: adapted_afanet.get(k) for k in keys} if afanet else (base.get("provenance") or {}).get("afanet")
+        {k: adapted_afanet.get(k) for k in keys}
+        if adapted_afanet is not None
+        else (base.get("provenance") or {}).get("afanet")
+    )
+    afanet = (
+        adapted_afanet
+        if adapted_afanet is not None
+        else {"afanet": base["afanet"], "afanet_config": base["afanet_config"]}
     )
     payload.update(
         fpn=adapted_fpn["fpn"],
         fpn_config=adapted_fpn["fpn_config"],
-        afanet=adapted_afanet["afanet"],
-        afanet_config=adapted_afanet["afanet_config"],
+        afanet=afanet["afanet"],
+        afanet_config=afanet["afanet_config"],
         provenance=provenance,
     )
-    save_checkpoint(out, "bundle", **payload)
-    return {
-        "out": out,
-        "images": len(records),
-        "pixels": target.pixels,
-        "work": work,
-        "seconds": seconds,
-        "steps": {"fpn": budget.fpn_steps, "afanet": budget.afanet_steps},
-    }
+    return payload
 
 
 __all__ = ["AdaptBudget", "adapt", "imagery_groups"]
