@@ -163,4 +163,5 @@ def demo_run(tmp_path_factory) -> Path:
         if not (out / "scores.json").exists():
             done = run_cli("demo", "--out", str(out), "--device", "cpu", timeout=600)
             assert done.returncode == 0, done.stderr
+            (shared / "demo-run" / "stdout.txt").write_text(done.stdout)  # what the command printed
     return out

@@ -111,22 +111,21 @@ def test_a_smaller_rewrite_does_not_keep_old_tiles(tmp_path):
     assert [p.name for p in city_layout.tiles_dir(out).iterdir()] == ["tile_r00_c00.tif"]
 
 
-def test_demo_predicts_and_scores_a_city_with_the_shipped_weights(tmp_path):
+def test_demo_predicts_and_scores_a_city_with_the_shipped_weights(demo_run):
     import json
 
-    result = run("demo", "--out", str(tmp_path / "demo"), "--device", "cpu")
-    assert result.returncode == 0, result.stderr
-    scores = json.loads((tmp_path / "demo" / "scores.json").read_text())
+    scores = json.loads((demo_run / "scores.json").read_text())
     assert scores["patch"]["scale"] == "patch" and scores["patch"]["counts"]["patches_scored"] == 9
     assert scores["city"]["scale"] == "city"
     for scale in ("patch", "city"):
         values = [v for v in scores[scale]["metrics"].values() if v is not None]
         assert values and all(0.0 <= v <= 1.0 for v in values)
         assert scores[scale]["metrics"]["f1@5"] > 0.5  # the shipped weights find most curbs of a test city
-    assert "patch" in result.stdout and "city" in result.stdout and "km2/h" in result.stdout
+    printed = (demo_run.parent / "stdout.txt").read_text()
+    assert "patch" in printed and "city" in printed and "km2/h" in printed
     for name in ("overview.png", "detail.png", "boundaries.gpkg", "boundaries.geojson", "graph.json", "summary.json"):
-        assert (tmp_path / "demo" / "prediction" / name).stat().st_size > 0
-    settings = json.loads((tmp_path / "demo" / "prediction" / "summary.json").read_text())["settings"]
+        assert (demo_run / "prediction" / name).stat().st_size > 0
+    settings = json.loads((demo_run / "prediction" / "summary.json").read_text())["settings"]
     # the default precision is chosen on this machine: what it chose and why is recorded
     assert settings["engine"] == "onnx" and settings.get("precision", "float32") in ("int8", "float32")
     assert settings["precision_choice"].startswith(settings.get("precision", "float32") + ": its FPN ran in")
