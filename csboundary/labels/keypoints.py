@@ -190,14 +190,8 @@ def curvature_keypoints(
     run's ends are then refined to the first and last step that actually turns.
     """
     s, turn, step = _turning(boundary)
-    n = len(s)
     width = max(1, int(config.smoothing_px))
-    kernel = np.ones(width) / (width * step)
-    if boundary.closed:
-        padded = np.concatenate([turn[-width:], turn, turn[:width]])
-        rate = np.convolve(padded, kernel, mode="same")[width:-width]
-    else:
-        rate = np.convolve(turn, kernel, mode="same")
+    rate = _turn_rate(turn, boundary.closed, width, step)
     threshold = math.radians(config.turn_rate_deg_per_px)
 
     calm = np.abs(rate) <= threshold
@@ -207,33 +201,14 @@ def curvature_keypoints(
     # On a ring, work in a frame that starts in the middle of the longest calm stretch, so that
     # no corner straddles index 0.
     shift = _middle_of_longest(calm) if boundary.closed else 0
-    order = np.roll(np.arange(n), -shift)
-    turn_o, rate_o = turn[order], rate[order]
-
-    merged: list[list[int]] = []  # (start, end, sign) in the shifted frame
-    gap = config.merge_gap_px / step
-    for sign in (1, -1):  # merged per sign, so a blip of the other sign cannot split a corner
-        for a, b in _true_runs(sign * rate_o > threshold):
-            if merged and merged[-1][2] == sign and a - merged[-1][1] <= gap:
-                merged[-1][1] = b
-            else:
-                merged.append([a, b, sign])
-    merged.sort()
-
+    order = np.roll(np.arange(len(s)), -shift)
+    turn_o = turn[order]
+    merged = _merged_turning_runs(rate[order], threshold, config.merge_gap_px / step)
+    corners = _corners(merged, turn_o, width // 2 + 1, config.min_corner_turn_deg)
     runs: list[tuple[float, float]] = []
     isolated: list[float] = []
-    reach = width // 2 + 1
-    busy = np.zeros(n, dtype=bool)
-    for a, b, sign in merged:
-        lo, hi = max(0, a - reach), min(n - 1, b + reach)
-        idx = np.arange(lo, hi + 1)
-        turning = idx[sign * turn_o[idx] > 1e-6]
-        if len(turning) == 0:
-            continue
-        a, b = int(turning[0]), int(turning[-1])
-        total = float(turn_o[a : b + 1].sum())
-        if abs(total) < math.radians(config.min_corner_turn_deg):
-            continue
+    busy = np.zeros(len(s), dtype=bool)
+    for a, b in corners:
         busy[a : b + 1] = True
         if (b - a) * step >= config.gather_min_length_px:
             runs.append((float(s[order[a]]), float(s[order[b]])))
@@ -241,26 +216,72 @@ def curvature_keypoints(
             w = np.abs(turn_o[a : b + 1])
             centre = float(np.sum((np.arange(a, b + 1)) * w) / w.sum())
             isolated.append(float((s[order[0]] + centre * step) % (boundary.length if boundary.closed else np.inf)))
+    isolated += _gradual_keypoints(boundary, s[order], busy, step, width, config.gradual_turn_deg)
+    return runs, isolated
 
-    # "isolated keypoints locating at curve road boundaries with ... gradual curvature changes":
-    # outside corners, one keypoint each time the boundary's direction (a chord over
-    # +-smoothing_px/2, robust to polygonised or pixel-chain input) has turned gradual_turn_deg
-    # since the last curvature keypoint.
-    limit = math.radians(config.gradual_turn_deg)
+
+def _turn_rate(turn: np.ndarray, closed: bool, width: int, step: float) -> np.ndarray:
+    """The turning per px, averaged over ``width`` steps of ``step`` px (wrapping round a ring)."""
+    kernel = np.ones(width) / (width * step)
+    if closed:
+        padded = np.concatenate([turn[-width:], turn, turn[:width]])
+        return np.convolve(padded, kernel, mode="same")[width:-width]
+    return np.convolve(turn, kernel, mode="same")
+
+
+def _merged_turning_runs(rate: np.ndarray, threshold: float, gap: float) -> list[list[int]]:
+    """(start, end, sign) of the steps turning faster than ``threshold``, sorted; runs of one sign
+    at most ``gap`` steps apart are one, merged per sign so that a blip of the other sign cannot
+    split a corner."""
+    merged: list[list[int]] = []
+    for sign in (1, -1):
+        for a, b in _true_runs(sign * rate > threshold):
+            if merged and merged[-1][2] == sign and a - merged[-1][1] <= gap:
+                merged[-1][1] = b
+            else:
+                merged.append([a, b, sign])
+    merged.sort()
+    return merged
+
+
+def _corners(merged: list[list[int]], turn: np.ndarray, reach: int, min_turn_deg: float) -> list[tuple[int, int]]:
+    """Each merged run's first and last step that truly turns its way (looking ``reach`` steps
+    beyond it, where the averaging smeared it), kept when it turns at least ``min_turn_deg``."""
+    n, corners = len(turn), []
+    for a, b, sign in merged:
+        idx = np.arange(max(0, a - reach), min(n - 1, b + reach) + 1)
+        turning = idx[sign * turn[idx] > 1e-6]
+        if len(turning) == 0:
+            continue
+        a, b = int(turning[0]), int(turning[-1])
+        if not abs(float(turn[a : b + 1].sum())) < math.radians(min_turn_deg):
+            corners.append((a, b))
+    return corners
+
+
+def _gradual_keypoints(
+    boundary: Boundary, s: np.ndarray, busy: np.ndarray, step: float, width: int, turn_deg: float
+) -> list[float]:
+    """ "isolated keypoints locating at curve road boundaries with ... gradual curvature changes":
+    outside corners (``busy`` steps and those whose chord reaches into one), one keypoint each
+    time the boundary's direction (a chord over +-width/2, robust to polygonised or pixel-chain
+    input) has turned ``turn_deg`` since the last curvature keypoint. ``s``: the steps' arc
+    lengths in the order they are walked."""
+    limit = math.radians(turn_deg)
     half = max(1.0, width / 2)
-    heading = _headings(boundary, s[order], half)
+    heading = _headings(boundary, s, half)
     near = int(math.ceil(half / step)) + 1  # chords reaching into a corner still see it turn
     busy = np.convolve(busy.astype(int), np.ones(2 * near + 1, dtype=int), mode="same") > 0
-    reference = None
-    for i in range(n):
+    keypoints, reference = [], None
+    for i in range(len(s)):
         if busy[i]:
             reference = None
         elif reference is None:
             reference = heading[i]
         elif abs(heading[i] - reference) >= limit:
-            isolated.append(float(s[order[i]]))
+            keypoints.append(float(s[i]))
             reference = heading[i]
-    return runs, isolated
+    return keypoints
 
 
 # -- intersections -------------------------------------------------------------------------------
