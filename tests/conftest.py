@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # the suite runs on one worker per core (pytest-xdist): one thread each, in the tests and in
-    # the commands they start, so two workers do not fight over the cores
+    # the commands they start, so two workers do not fight over the cores (a test module that set
+    # torch's threads at import would set them for every test of every worker: each collects all)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 CRS = "EPSG:32618"

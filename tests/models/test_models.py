@@ -13,7 +13,6 @@ from csboundary.models.checkpoint import load_checkpoint, save_checkpoint
 from csboundary.models.device import resolve_device
 from csboundary.models.fpn import FPN, FPNConfig
 
-torch.set_num_threads(2)
 SMALL_AFANET = AfANetConfig(global_size=64, roi=32, encoder_widths=(8, 16, 32), dim=64, layers=2)
 
 
