@@ -75,3 +75,21 @@ def bundle_without(bundle: Path, out: Path, settings: tuple[str, ...]) -> Path:
     older = {k: v for k, v in payload["inference"].items() if k not in settings}
     content = {k: v for k, v in payload.items() if k not in ("format", "kind", "code_version", "inference")}
     return save_checkpoint(out, "bundle", inference=older, **content)
+
+
+def square_graph():
+    """Two edges of a 10 px square's corner, the second a bent polyline, scores 0.3 and 0.9; pixel
+    (col, row) -> world (x, y) = (100 + 0.5 col, 200 - 0.5 row): the review edits' test graph."""
+    import numpy as np
+
+    from csboundary.graph import BoundaryGraph
+
+    return BoundaryGraph(
+        np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]),
+        [[0, 1], [1, 2]],
+        edge_kinds=["normal", "corner"],
+        edge_polylines=[None, np.array([[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]])],
+        edge_scores=np.array([0.3, 0.9]),
+        transform=Affine(0.5, 0, 100, 0, -0.5, 200),
+        crs="EPSG:32618",
+    )

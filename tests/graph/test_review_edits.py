@@ -6,9 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from affine import Affine
 
-from csboundary.graph.boundary_graph import BoundaryGraph
 from csboundary.graph.review_edits import (
     CheckedEdits,
     Edit,
@@ -18,21 +16,9 @@ from csboundary.graph.review_edits import (
     check_edits,
     parse_edit,
 )
+from helpers import square_graph
 
 EXTENT = (0.0, 0.0, 20.0, 20.0)
-
-
-def _square() -> BoundaryGraph:
-    # pixel (col, row) -> world (x, y) = (100 + 0.5 col, 200 - 0.5 row)
-    return BoundaryGraph(
-        np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]),
-        [[0, 1], [1, 2]],
-        edge_kinds=["normal", "corner"],
-        edge_polylines=[None, np.array([[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]])],
-        edge_scores=np.array([0.3, 0.9]),
-        transform=Affine(0.5, 0, 100, 0, -0.5, 200),
-        crs="EPSG:32618",
-    )
 
 
 def _feature(props: dict, kind: str | None = None, coordinates=None) -> dict:
@@ -68,7 +54,7 @@ def test_check_turns_edits_into_indices_and_graph_pixels():
         Edit(3, "add", None, "LineString", [[100.0, 200.0], [101.0, 199.0], [102.0, 200.0]]),
         Edit(4, "complete", None, "Polygon", [[[100.0, 200.0], [104.0, 200.0], [104.0, 196.0]]]),
     ]
-    checked = check_edits(_square(), edits, EXTENT)
+    checked = check_edits(square_graph(), edits, EXTENT)
     assert checked.deleted == {0} and checked.accepted == {1}
     [(vertex, place)] = checked.moves
     assert vertex == 2 and place.tolist() == [12.0, 12.0]
@@ -112,19 +98,19 @@ def test_check_turns_edits_into_indices_and_graph_pixels():
 )
 def test_check_refuses_with_the_message_worked_out_by_hand(edit, message):
     with pytest.raises(EditError) as refused:
-        check_edits(_square(), [edit], EXTENT)
+        check_edits(square_graph(), [edit], EXTENT)
     assert str(refused.value) == message
 
 
 def test_the_first_bad_feature_of_the_log_is_the_one_refused():
     features = [_feature({"action": "delete", "edge": 9}), "not a feature"]
     with pytest.raises(EditError, match="edit 0 \\(delete\\): edge 9"):
-        apply_edits(_square(), features)
+        apply_edits(square_graph(), features)
 
 
 def test_apply_keeps_edges_in_order_then_adds_and_records():
     graph, record = apply_checked(
-        _square(),
+        square_graph(),
         CheckedEdits(
             deleted=frozenset({0}),
             accepted=frozenset({0, 1}),
@@ -146,12 +132,12 @@ def test_apply_keeps_edges_in_order_then_adds_and_records():
         "edge_index_map": {"1": 0},
         "complete_areas": [],
     }
-    assert _square().edge_polylines[1].tolist() == [[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]]
+    assert square_graph().edge_polylines[1].tolist() == [[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]]
 
 
 def test_an_added_edge_whose_ends_join_one_vertex_is_refused():
     with pytest.raises(EditError, match="^an added edge starts and ends on the same vertex$"):
-        apply_checked(_square(), CheckedEdits(added=(np.array([[0.2, 0.0], [0.0, 0.5]]),)))
+        apply_checked(square_graph(), CheckedEdits(added=(np.array([[0.2, 0.0], [0.0, 0.5]]),)))
 
 
 def test_the_steps_composed_are_apply_edits():
@@ -160,7 +146,7 @@ def test_the_steps_composed_are_apply_edits():
         _feature({"action": "move", "vertex": 1}, "Point", [105.5, 200.0]),
         _feature({"action": "add"}, "LineString", [[105.5, 200.0], [101.0, 190.0]]),
     ]
-    graph = _square()
+    graph = square_graph()
     edits = [parse_edit(n, f) for n, f in enumerate(features)]
     stepwise, stepwise_record = apply_checked(graph, check_edits(graph, edits, EXTENT))
     whole, whole_record = apply_edits(graph, features, extent=EXTENT)

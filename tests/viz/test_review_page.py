@@ -13,11 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rasterio.transform import Affine
 
 from csboundary.graph import BoundaryGraph
 from csboundary.graph.review_edits import EditError, apply_edits
-from helpers import run_cli
+from helpers import run_cli, square_graph
 
 CHROMIUM, DRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
 
@@ -183,19 +182,6 @@ def test_mark_the_view_complete_in_the_browser_and_apply_it(reviewed, browser, t
     assert json.loads((reviewed / "review.json").read_text())["reviews"][-1]["complete_areas"] == [ring]
 
 
-def _square() -> BoundaryGraph:
-    # pixel (col, row) -> world (x, y) = (100 + 0.5 col, 200 - 0.5 row)
-    return BoundaryGraph(
-        np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]),
-        [[0, 1], [1, 2]],
-        edge_kinds=["normal", "corner"],
-        edge_polylines=[None, np.array([[10.0, 0.0], [12.0, 5.0], [10.0, 10.0]])],
-        edge_scores=np.array([0.3, 0.9]),
-        transform=Affine(0.5, 0, 100, 0, -0.5, 200),
-        crs="EPSG:32618",
-    )
-
-
 def test_edits_by_hand():
     features = [
         {
@@ -218,7 +204,7 @@ def test_edits_by_hand():
             "geometry": {"type": "LineString", "coordinates": [[100.2, 200.0], [90.0, 190.0]]},
         },
     ]
-    graph, record = apply_edits(_square(), features)
+    graph, record = apply_edits(square_graph(), features)
     assert (
         graph.n_edges == 2
         and record.deleted == [0]
@@ -236,10 +222,13 @@ def test_edits_by_hand():
 def test_a_complete_area_is_recorded_and_changes_nothing():
     square = [[100.0, 200.0], [104.0, 200.0], [104.0, 196.0], [100.0, 196.0]]  # pixels (0, 0)-(8, 8), given unclosed
     graph, record = apply_edits(
-        _square(), [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [square]}}]
+        square_graph(),
+        [{"properties": {"action": "complete"}, "geometry": {"type": "Polygon", "coordinates": [square]}}],
     )
     assert record.complete_areas == [[*square, square[0]]]
-    assert graph.n_edges == 2 and np.array_equal(graph.vertices, _square().vertices) and record.kept == {0: 0, 1: 1}
+    assert (
+        graph.n_edges == 2 and np.array_equal(graph.vertices, square_graph().vertices) and record.kept == {0: 0, 1: 1}
+    )
 
 
 @pytest.mark.parametrize(
@@ -283,7 +272,7 @@ def test_a_complete_area_is_recorded_and_changes_nothing():
 )
 def test_bad_edits_are_refused(feature, message):
     with pytest.raises(EditError, match=message):
-        apply_edits(_square(), [feature])
+        apply_edits(square_graph(), [feature])
 
 
 def test_review_works_from_another_folder_than_predict_ran_in(tmp_path):
