@@ -134,14 +134,14 @@ def onnx_cache(tmp_path_factory):
     if os.environ.get(CACHE_ENV):
         yield Path(os.environ[CACHE_ENV])
         return
-    folder = run_folder(tmp_path_factory) / "onnx-cache"
+    folder = shared_folder(tmp_path_factory) / "onnx-cache"
     folder.mkdir(parents=True, exist_ok=True)
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(CACHE_ENV, str(folder))
         yield folder
 
 
-def run_folder(tmp_path_factory) -> Path:
+def shared_folder(tmp_path_factory) -> Path:
     """The folder of the whole test run, above the pytest-xdist workers' own (theirs alone
     without xdist): what is made there once is shared by every worker."""
     base = tmp_path_factory.getbasetemp()
@@ -157,7 +157,7 @@ def demo_run(tmp_path_factory) -> Path:
 
     from helpers import run_cli
 
-    shared = run_folder(tmp_path_factory)
+    shared = shared_folder(tmp_path_factory)
     out = shared / "demo-run" / "demo"
     with open(shared / "demo-run.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)

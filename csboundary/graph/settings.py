@@ -72,24 +72,6 @@ SETTINGS = {
     "outline_max_unsure": Setting("outline.max_unsure", 0.0, 1.0),
     "min_confidence": Setting("min_confidence", 0.0, 1.0),
 }
-# the settings the command line's graph options set (--NAME); min_confidence is chosen when
-# predicting and never stored in a bundle
-OPTIONS = (
-    "edge_threshold",
-    "min_edge_support",
-    "max_edge_length",
-    "max_edge_gap",
-    "fill_min_length",
-    "join_ends",
-    "attach_ends",
-    "attach_backed",
-    "surface_check",
-    "surface_gate",
-    "roadway_outline",
-    "max_degree",
-    "min_fragment_length",
-    "min_confidence",
-)
 BUNDLE_SETTINGS = tuple(name for name in SETTINGS if name != "min_confidence")
 OLD_KEYS = {old: name for name, setting in SETTINGS.items() for old in setting.old_keys}
 
@@ -146,6 +128,11 @@ class GraphOverrides:
                 raise InputError(flag, f"must be a finite number, got {value!r}")
             if value < low or (high is not None and value > high):
                 raise InputError(flag, f"must be from {low:g} to {high:g}, got {value:g}")
+
+
+# the settings the command line's graph options set (--NAME), in the help's order; min_confidence
+# is chosen when predicting and never stored in a bundle
+OPTIONS = tuple(f.name for f in dataclasses.fields(GraphOverrides))
 
 
 @dataclass(frozen=True)
